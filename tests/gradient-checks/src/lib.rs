@@ -1,0 +1,209 @@
+//! Shared machinery for the workspace's finite-difference gradient checks.
+//!
+//! Every backward pass in the workspace is compared, in f64, against central finite differences of its
+//! forward pass. This module holds the one implementation of the difference quotient and of the
+//! comparison, so that every check states its tolerance the same way and reports every mismatch at
+//! once. It must never loosen a comparison on its own: tolerances are always passed in by the caller,
+//! next to the justification for them.
+
+/// Mixed absolute/relative tolerance: an entry passes when
+/// `|numeric − analytic| ≤ abs + rel · max(|numeric|, |analytic|)`.
+#[derive(Clone, Copy, Debug)]
+pub struct Tolerance {
+    /// Absolute part (same units as the gradient).
+    pub abs: f64,
+    /// Relative part (dimensionless).
+    pub rel: f64,
+}
+
+impl Tolerance {
+    /// A tolerance with the given absolute and relative parts.
+    pub const fn new(abs: f64, rel: f64) -> Self {
+        Self { abs, rel }
+    }
+}
+
+/// Central finite differences `(f(x + h e_i) − f(x − h e_i)) / 2h` of a scalar function for every
+/// coordinate of `x`. Truncation error is O(h²·f'''), rounding error O(ε·|f|/h); with f64 and
+/// `h ≈ 1e-5` both are ~1e-10 relative for well-scaled smooth functions.
+pub fn central_differences(mut f: impl FnMut(&[f64]) -> f64, x: &[f64], h: f64) -> Vec<f64> {
+    let mut probe = x.to_vec();
+    (0..x.len())
+        .map(|i| {
+            let original = probe[i];
+            probe[i] = original + h;
+            let plus = f(&probe);
+            probe[i] = original - h;
+            let minus = f(&probe);
+            probe[i] = original;
+            (plus - minus) / (2.0 * h)
+        })
+        .collect()
+}
+
+/// Summary of one numeric-versus-analytic comparison.
+#[derive(Clone, Debug)]
+pub struct GradientComparison {
+    /// Human-readable name of the checked quantity (used in failure messages).
+    pub name: String,
+    /// One line per entry outside the tolerance.
+    pub mismatches: Vec<String>,
+    /// ‖analytic − numeric‖₂ / max(‖numeric‖₂, tiny).
+    pub relative_l2_error: f64,
+    /// Cosine similarity between the two gradient vectors (1 when both are zero).
+    pub cosine_similarity: f64,
+    /// Largest absolute analytic entry.
+    pub max_abs_analytic: f64,
+    /// Largest absolute numeric entry.
+    pub max_abs_numeric: f64,
+}
+
+impl GradientComparison {
+    /// True when no entry is outside the tolerance.
+    pub fn passed(&self) -> bool {
+        self.mismatches.is_empty()
+    }
+
+    /// A multi-line report of the comparison.
+    pub fn report(&self) -> String {
+        let mut s = format!(
+            "{}: {} mismatches, rel L2 {:.3e}, cosine {:.9}, max|ana| {:.3e}, max|num| {:.3e}",
+            self.name,
+            self.mismatches.len(),
+            self.relative_l2_error,
+            self.cosine_similarity,
+            self.max_abs_analytic,
+            self.max_abs_numeric
+        );
+        for m in self.mismatches.iter().take(40) {
+            s.push_str("\n  ");
+            s.push_str(m);
+        }
+        if self.mismatches.len() > 40 {
+            s.push_str(&format!("\n  ... and {} more", self.mismatches.len() - 40));
+        }
+        s
+    }
+}
+
+/// Compares an analytic gradient with a numeric one entry by entry under `tol`, and also checks the
+/// zero/non-zero pattern: an entry that is exactly zero on one side while the other side is above
+/// `tol.abs` is always a mismatch (a wrongly-zero gradient must not hide inside a loose tolerance).
+pub fn compare(
+    name: &str,
+    numeric: &[f64],
+    analytic: &[f64],
+    tol: Tolerance,
+) -> GradientComparison {
+    assert_eq!(
+        numeric.len(),
+        analytic.len(),
+        "{name}: numeric and analytic gradients differ in length"
+    );
+    let mut mismatches = Vec::new();
+    let (mut diff2, mut num2, mut ana2, mut dot) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let (mut max_ana, mut max_num) = (0.0f64, 0.0f64);
+    for (i, (&n, &a)) in numeric.iter().zip(analytic).enumerate() {
+        let err = (n - a).abs();
+        let bound = tol.abs + tol.rel * n.abs().max(a.abs());
+        let zero_pattern_broken =
+            (a == 0.0 && n.abs() > tol.abs) || (n == 0.0 && a.abs() > tol.abs);
+        if !(err <= bound) || zero_pattern_broken || !a.is_finite() {
+            mismatches.push(format!(
+                "[{i}] numeric {n:+.9e} analytic {a:+.9e} |diff| {err:.3e} > {bound:.3e}"
+            ));
+        }
+        diff2 += (n - a) * (n - a);
+        num2 += n * n;
+        ana2 += a * a;
+        dot += n * a;
+        max_ana = max_ana.max(a.abs());
+        max_num = max_num.max(n.abs());
+    }
+    let cosine_similarity = if num2 == 0.0 && ana2 == 0.0 {
+        1.0
+    } else {
+        dot / (num2.sqrt() * ana2.sqrt()).max(f64::MIN_POSITIVE)
+    };
+    GradientComparison {
+        name: name.to_string(),
+        mismatches,
+        relative_l2_error: diff2.sqrt() / num2.sqrt().max(1e-300),
+        cosine_similarity,
+        max_abs_analytic: max_ana,
+        max_abs_numeric: max_num,
+    }
+}
+
+/// Collects comparisons from many cases and asserts once at the end, so one failing run shows every
+/// mismatch. Also asserts that at least one analytic gradient entry across all cases was non-zero
+/// (a check that passes on all-zero gradients proves nothing).
+#[derive(Default, Debug)]
+pub struct GradientChecker {
+    failures: Vec<String>,
+    cases: usize,
+    nonzero_cases: usize,
+}
+
+impl GradientChecker {
+    /// An empty checker.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds one comparison (see [`compare`]).
+    pub fn check(&mut self, name: &str, numeric: &[f64], analytic: &[f64], tol: Tolerance) {
+        let c = compare(name, numeric, analytic, tol);
+        self.cases += 1;
+        if c.max_abs_analytic > 0.0 {
+            self.nonzero_cases += 1;
+        }
+        if !c.passed() {
+            self.failures.push(c.report());
+        }
+    }
+
+    /// Number of comparisons whose analytic gradient had a non-zero entry.
+    pub fn nonzero_cases(&self) -> usize {
+        self.nonzero_cases
+    }
+
+    /// Panics with every collected failure, or if no case had a non-zero analytic gradient.
+    pub fn finish(self) {
+        assert!(
+            self.failures.is_empty(),
+            "{} of {} gradient comparisons failed:\n{}",
+            self.failures.len(),
+            self.cases,
+            self.failures.join("\n")
+        );
+        assert!(
+            self.cases == 0 || self.nonzero_cases > 0,
+            "all {} gradient comparisons had all-zero analytic gradients",
+            self.cases
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn central_differences_of_a_cubic_are_accurate() {
+        let x = [0.3, -1.2];
+        let g = central_differences(|v| v[0].powi(3) + v[0] * v[1], &x, 1e-5);
+        assert!((g[0] - (3.0 * 0.09 - 1.2)).abs() < 1e-9);
+        assert!((g[1] - 0.3).abs() < 1e-9);
+    }
+
+    #[test]
+    fn compare_flags_a_wrong_sign_and_a_missing_term() {
+        let num = [1.0, 2.0, 0.5];
+        let wrong_sign = [-1.0, 2.0, 0.5];
+        assert!(!compare("sign", &num, &wrong_sign, Tolerance::new(1e-8, 1e-6)).passed());
+        let zero = [1.0, 2.0, 0.0];
+        assert!(!compare("zero", &num, &zero, Tolerance::new(1e-8, 0.5)).passed());
+        assert!(compare("same", &num, &num, Tolerance::new(1e-8, 1e-6)).passed());
+    }
+}
