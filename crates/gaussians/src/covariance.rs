@@ -68,13 +68,16 @@ pub fn rotation_from_quat_backward<T: Float>(q: [T; 4], d_rot: &Mat3<T>) -> [T; 
     let two = T::one() + T::one();
     let four = two + two;
     // dL/d(unit quaternion), from the partial derivatives of each entry of R.
-    let dw = two
-        * (-z * g[0][1] + y * g[0][2] + z * g[1][0] - x * g[1][2] - y * g[2][0] + x * g[2][1]);
-    let dx = two * (y * g[0][1] + z * g[0][2] + y * g[1][0] - w * g[1][2] + z * g[2][0] + w * g[2][1])
+    let dw =
+        two * (-z * g[0][1] + y * g[0][2] + z * g[1][0] - x * g[1][2] - y * g[2][0] + x * g[2][1]);
+    let dx = two
+        * (y * g[0][1] + z * g[0][2] + y * g[1][0] - w * g[1][2] + z * g[2][0] + w * g[2][1])
         - four * (x * g[1][1] + x * g[2][2]);
-    let dy = two * (x * g[0][1] + w * g[0][2] + x * g[1][0] + z * g[1][2] - w * g[2][0] + z * g[2][1])
+    let dy = two
+        * (x * g[0][1] + w * g[0][2] + x * g[1][0] + z * g[1][2] - w * g[2][0] + z * g[2][1])
         - four * (y * g[0][0] + y * g[2][2]);
-    let dz = two * (-w * g[0][1] + x * g[0][2] + w * g[1][0] + y * g[1][2] + x * g[2][0] + y * g[2][1])
+    let dz = two
+        * (-w * g[0][1] + x * g[0][2] + w * g[1][0] + y * g[1][2] + x * g[2][0] + y * g[2][1])
         - four * (z * g[0][0] + z * g[1][1]);
     // Through the normalisation q̂ = q/|q|: dq = (dq̂ − q̂ (q̂·dq̂)) / |q|.
     let dot = w * dw + x * dx + y * dy + z * dz;

@@ -257,7 +257,9 @@ mod tests {
         let a = sh_to_color(0, &coeffs, [0.0f32, 0.0, 1.0]);
         let b = sh_to_color(0, &coeffs, [1.0f32, -3.0, 0.5]);
         assert_eq!(a, b);
-        assert!((a[0] - 0.2).abs() < 1e-6 && (a[1] - 0.6).abs() < 1e-6 && (a[2] - 0.9).abs() < 1e-6);
+        assert!(
+            (a[0] - 0.2).abs() < 1e-6 && (a[1] - 0.6).abs() < 1e-6 && (a[2] - 0.9).abs() < 1e-6
+        );
     }
 
     #[test]
@@ -281,7 +283,11 @@ mod tests {
         for a in 0..16 {
             for c in 0..16 {
                 let want = if a == c { 1.0 } else { 0.0 };
-                assert!((gram[a][c] - want).abs() < 2e-3, "({a},{c}) = {}", gram[a][c]);
+                assert!(
+                    (gram[a][c] - want).abs() < 2e-3,
+                    "({a},{c}) = {}",
+                    gram[a][c]
+                );
             }
         }
     }

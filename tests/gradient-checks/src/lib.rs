@@ -108,7 +108,9 @@ pub fn compare(
         let bound = tol.abs + tol.rel * n.abs().max(a.abs());
         let zero_pattern_broken =
             (a == 0.0 && n.abs() > tol.abs) || (n == 0.0 && a.abs() > tol.abs);
-        if !(err <= bound) || zero_pattern_broken || !a.is_finite() {
+        // Written so that a NaN on either side counts as a mismatch.
+        let within = err <= bound;
+        if !within || zero_pattern_broken || !a.is_finite() {
             mismatches.push(format!(
                 "[{i}] numeric {n:+.9e} analytic {a:+.9e} |diff| {err:.3e} > {bound:.3e}"
             ));
