@@ -89,7 +89,9 @@ proptest! {
 #[test]
 fn clamped_sh_channel_passes_no_gradient() {
     // DC far negative: colour clamps at 0 and neither coefficients nor direction get gradient.
-    let coeffs = [-5.0f64, -5.0, -5.0, 0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let coeffs = [
+        -5.0f64, -5.0, -5.0, 0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+    ];
     let mut d_coeffs = [0.0; 12];
     let d_dir = sh_to_color_backward(1, &coeffs, [0.0, 0.0, 1.0], [1.0, 1.0, 1.0], &mut d_coeffs);
     assert_eq!(sh_to_color(1, &coeffs, [0.0, 0.0, 1.0]), [0.0; 3]);
