@@ -1,1 +1,15 @@
-//! Event-camera streams (read/write), voxel grids, an ESIM-style simulator, flow files and event-only flow
+//! Event-camera streams (read/write), voxel grids, an ESIM-style simulator, flow files and event-only
+//! flow.
+//!
+//! Conventions (DESIGN.md §3): events are `(t: i64 microseconds, x: u16, y: u16, p: ±1)` with pixel
+//! (x, y) = (column, row), row 0 at the top; flow is `(2, H, W)` f32 planar in pixels, forward from
+//! frame k to k+1 (`x_{k+1} = x_k + F(x_k)`). This crate knows nothing of the flow network, of
+//! training or of the synthetic benchmark (it sits below them, DESIGN.md §2).
+
+pub mod error;
+pub mod simulate;
+pub mod stream;
+
+pub use error::{EventsError, Result};
+pub use simulate::{grey_from_rgb, simulate_sequence, EsimConfig, EventSimulator};
+pub use stream::{Event, EventSlice, EventStream, SensorSize};
