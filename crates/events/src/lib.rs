@@ -7,9 +7,11 @@
 //! training or of the synthetic benchmark (it sits below them, DESIGN.md §2).
 
 pub mod error;
+pub mod flowio;
 pub mod simulate;
 pub mod stream;
 
 pub use error::{EventsError, Result};
+pub use flowio::{flow_to_rgb, read_flow, write_flo, write_flow, write_flow_colour_png, Flow};
 pub use simulate::{grey_from_rgb, simulate_sequence, EsimConfig, EventSimulator};
 pub use stream::{Event, EventSlice, EventStream, SensorSize};
