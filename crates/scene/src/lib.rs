@@ -1,1 +1,27 @@
-//! Scene format v1: the on-disk dataset layout (`scene.json` + images, masks, flows, events) written by `synth` and read, with validation, by `train`.
+//! Scene format v1: the on-disk dataset layout (`scene.json` + images, masks, flows, events)
+//! written by `synth` and read, with validation, by `train`.
+//!
+//! A scene is a directory holding `scene.json` and the files it names by relative path
+//! (forward slashes, no `..`): blurred input images, optional sharp references, optional human
+//! masks, optional flow fields to the next frame (`.flo`, with an optional validity mask), optional
+//! raw events (`.npz`). The full specification is `docs/FORMATS.md`, section "Scene format v1".
+//!
+//! [`load`] validates everything (JSON structure, value ranges, time order, every referenced file's
+//! existence, size and pixel format) and reports *every* problem with its JSON path or file path,
+//! never stopping at the first one; [`Scene::write`] writes `scene.json` after the same checks.
+//! [`image_io`] owns the on-disk pixel encoding so writer and reader can never disagree.
+//!
+//! This crate is generic: it knows nothing of the method, of training or of how a scene was made.
+
+pub mod error;
+pub mod image_io;
+pub mod types;
+pub mod validate;
+
+pub use error::{Problem, Result, SceneError};
+pub use image_io::{read_mask, read_rgb, write_mask, write_rgb, Rgb};
+pub use types::{
+    BodySpec, Camera, FlowKind, FlowRef, Frame, ImageEncoding, Scene, Split, Transfer,
+    FORMAT_VERSION, NUM_JOINTS, SCENE_FILE,
+};
+pub use validate::{load, validate_dir};

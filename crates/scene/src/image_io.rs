@@ -1,0 +1,201 @@
+//! The on-disk pixel encoding of scene images and masks, in one place so the writer (`synth`) and
+//! the reader (`train`) can never disagree.
+//!
+//! RGB images are PNG, 8 or 16 bits per channel, with a linear or sRGB transfer function as
+//! declared in `scene.json` ([`ImageEncoding`]); in memory they are planar f32 `(3, H, W)`, linear
+//! intensity in [0, 1] (DESIGN.md §3). Masks are 8-bit single-channel PNG, 255 = set, 0 = unset
+//! (any non-zero value reads as set). Encoding is deterministic: same pixels, same bytes.
+
+use std::io::BufWriter;
+use std::path::Path;
+
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{DynamicImage, ExtendedColorType, ImageEncoder};
+
+use crate::error::{Result, SceneError};
+use crate::types::{ImageEncoding, Transfer};
+
+/// A planar RGB image in memory.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rgb {
+    /// Width (pixels).
+    pub width: u32,
+    /// Height (pixels).
+    pub height: u32,
+    /// Planar `(3, H, W)` linear intensity, nominally in [0, 1].
+    pub data: Vec<f32>,
+}
+
+/// sRGB OETF: linear intensity in [0, 1] to the encoded value in [0, 1].
+pub fn srgb_from_linear(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Inverse sRGB OETF: encoded value in [0, 1] to linear intensity.
+pub fn linear_from_srgb(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    if x <= 0.040_45 {
+        x / 12.92
+    } else {
+        ((x + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn img_err(path: &Path, message: impl Into<String>) -> SceneError {
+    SceneError::Image {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+fn write_png(path: &Path, bytes: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<()> {
+    let file = std::fs::File::create(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let enc = PngEncoder::new_with_quality(
+        BufWriter::new(file),
+        CompressionType::Best,
+        FilterType::Adaptive,
+    );
+    enc.write_image(bytes, w, h, color)
+        .map_err(|e| img_err(path, e.to_string()))
+}
+
+/// Writes a planar linear RGB image as PNG with the given encoding (values clamped to [0, 1]).
+pub fn write_rgb(path: &Path, img: &Rgb, enc: ImageEncoding) -> Result<()> {
+    let n = img.width as usize * img.height as usize;
+    if img.data.len() != 3 * n {
+        return Err(SceneError::Arg {
+            name: "img".into(),
+            message: format!(
+                "{} values for a {}x{} RGB image",
+                img.data.len(),
+                img.width,
+                img.height
+            ),
+        });
+    }
+    let code = |x: f32| match enc.transfer {
+        Transfer::Linear => x.clamp(0.0, 1.0),
+        Transfer::Srgb => srgb_from_linear(x),
+    };
+    match enc.bit_depth {
+        8 => {
+            let mut bytes = Vec::with_capacity(3 * n);
+            for i in 0..n {
+                for c in 0..3 {
+                    bytes.push((code(img.data[c * n + i]) * 255.0).round() as u8);
+                }
+            }
+            write_png(path, &bytes, img.width, img.height, ExtendedColorType::Rgb8)
+        }
+        16 => {
+            let mut bytes = Vec::with_capacity(6 * n);
+            for i in 0..n {
+                for c in 0..3 {
+                    let v = (code(img.data[c * n + i]) * 65535.0).round() as u16;
+                    bytes.extend_from_slice(&v.to_ne_bytes());
+                }
+            }
+            write_png(
+                path,
+                &bytes,
+                img.width,
+                img.height,
+                ExtendedColorType::Rgb16,
+            )
+        }
+        b => Err(SceneError::Arg {
+            name: "bit_depth".into(),
+            message: format!("{b} is not 8 or 16"),
+        }),
+    }
+}
+
+/// Reads an RGB PNG written with `enc` into planar linear f32. The file's bit depth must match
+/// `enc.bit_depth` and it must have exactly three channels.
+pub fn read_rgb(path: &Path, enc: ImageEncoding) -> Result<Rgb> {
+    let img = image::ImageReader::open(path)
+        .map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .decode()
+        .map_err(|e| img_err(path, e.to_string()))?;
+    let (w, h) = (img.width(), img.height());
+    let n = w as usize * h as usize;
+    let decode = |x: f32| match enc.transfer {
+        Transfer::Linear => x,
+        Transfer::Srgb => linear_from_srgb(x),
+    };
+    let mut data = vec![0.0f32; 3 * n];
+    match (&img, enc.bit_depth) {
+        (DynamicImage::ImageRgb8(b), 8) => {
+            for (i, p) in b.pixels().enumerate() {
+                for c in 0..3 {
+                    data[c * n + i] = decode(f32::from(p.0[c]) / 255.0);
+                }
+            }
+        }
+        (DynamicImage::ImageRgb16(b), 16) => {
+            for (i, p) in b.pixels().enumerate() {
+                for c in 0..3 {
+                    data[c * n + i] = decode(f32::from(p.0[c]) / 65535.0);
+                }
+            }
+        }
+        (other, bits) => {
+            return Err(img_err(
+                path,
+                format!("pixel format {:?}, expected {bits}-bit RGB", other.color()),
+            ))
+        }
+    }
+    Ok(Rgb {
+        width: w,
+        height: h,
+        data,
+    })
+}
+
+/// Writes a binary mask (row-major, `true` = set) as an 8-bit greyscale PNG (255 / 0).
+pub fn write_mask(path: &Path, width: u32, height: u32, mask: &[bool]) -> Result<()> {
+    if mask.len() != width as usize * height as usize {
+        return Err(SceneError::Arg {
+            name: "mask".into(),
+            message: format!("{} values for a {width}x{height} mask", mask.len()),
+        });
+    }
+    let bytes: Vec<u8> = mask.iter().map(|&m| if m { 255 } else { 0 }).collect();
+    write_png(path, &bytes, width, height, ExtendedColorType::L8)
+}
+
+/// Reads a single-channel mask PNG (8 or 16 bit): `(width, height, row-major set flags)`, a pixel
+/// being set when its value is non-zero.
+pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
+    let img = image::ImageReader::open(path)
+        .map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .decode()
+        .map_err(|e| img_err(path, e.to_string()))?;
+    let (w, h) = (img.width(), img.height());
+    let data = match &img {
+        DynamicImage::ImageLuma8(b) => b.pixels().map(|p| p.0[0] != 0).collect(),
+        DynamicImage::ImageLuma16(b) => b.pixels().map(|p| p.0[0] != 0).collect(),
+        other => {
+            return Err(img_err(
+                path,
+                format!("pixel format {:?}, expected single-channel", other.color()),
+            ))
+        }
+    };
+    Ok((w, h, data))
+}

@@ -1,0 +1,649 @@
+//! Loading with validation: every problem of a scene directory, each with its JSON path.
+//!
+//! The checker walks the raw JSON value (not the typed structs) so one run reports every problem:
+//! a wrong type, a `null` where a number must be (JSON writers turn NaN and ±Inf into `null`), an
+//! unknown key (a typo such as `shapr`), a non-increasing time, an unknown split or flow kind, a
+//! missing file, an image of the wrong size or pixel format, a `.flo` with a bad header. Only when
+//! nothing is wrong is the value converted to [`Scene`]. It never modifies the directory.
+
+use std::collections::HashSet;
+use std::io::Read;
+use std::path::Path;
+
+use image::ImageDecoder;
+use serde_json::{Map, Value};
+
+use crate::error::{Problem, Result, SceneError};
+use crate::types::{Scene, FORMAT_VERSION, NUM_JOINTS, SCENE_FILE};
+
+/// Largest accepted image side (pixels).
+pub const MAX_SIDE: u64 = 65_536;
+/// `.flo` magic number (the float 202021.25, "PIEH" in little-endian bytes).
+const FLO_MAGIC: f32 = 202_021.25;
+
+/// Reads and validates `dir/scene.json` and every file it names.
+///
+/// Returns the scene, or [`SceneError::Invalid`] listing every problem found (or
+/// [`SceneError::Io`]/[`SceneError::Json`] when `scene.json` cannot be read or parsed at all).
+pub fn load(dir: &Path) -> Result<Scene> {
+    let value = read_value(dir)?;
+    let problems = check_value(&value, Some(dir));
+    if !problems.is_empty() {
+        return Err(SceneError::Invalid {
+            dir: dir.to_path_buf(),
+            problems,
+        });
+    }
+    serde_json::from_value(value).map_err(|e| SceneError::Invalid {
+        dir: dir.to_path_buf(),
+        problems: vec![Problem {
+            path: SCENE_FILE.into(),
+            message: format!("does not match the v1 schema: {e}"),
+        }],
+    })
+}
+
+/// Every problem of the scene in `dir` (empty when it is valid). Errors only when `scene.json`
+/// cannot be read or is not JSON.
+pub fn validate_dir(dir: &Path) -> Result<Vec<Problem>> {
+    let value = read_value(dir)?;
+    Ok(check_value(&value, Some(dir)))
+}
+
+fn read_value(dir: &Path) -> Result<Value> {
+    let path = dir.join(SCENE_FILE);
+    let text = std::fs::read_to_string(&path).map_err(|source| SceneError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|source| SceneError::Json { path, source })
+}
+
+/// Checks a parsed `scene.json`; with `dir`, also every referenced file.
+pub(crate) fn check_value(v: &Value, dir: Option<&Path>) -> Vec<Problem> {
+    let mut c = Checker {
+        problems: Vec::new(),
+        dir,
+    };
+    c.scene(v);
+    c.problems
+}
+
+struct Checker<'a> {
+    problems: Vec<Problem>,
+    dir: Option<&'a Path>,
+}
+
+#[derive(Clone, Copy)]
+enum PngKind {
+    Rgb(u8),
+    Mask,
+}
+
+fn describe(v: &Value) -> String {
+    let s = v.to_string();
+    if s.len() > 40 {
+        format!("{}...", &s[..40])
+    } else {
+        s
+    }
+}
+
+impl Checker<'_> {
+    fn bad(&mut self, path: &str, message: impl Into<String>) {
+        self.problems.push(Problem {
+            path: path.into(),
+            message: message.into(),
+        });
+    }
+
+    fn obj<'v>(
+        &mut self,
+        v: &'v Value,
+        path: &str,
+        required: &[&str],
+        optional: &[&str],
+    ) -> Option<&'v Map<String, Value>> {
+        let Some(m) = v.as_object() else {
+            self.bad(path, format!("expected an object, found {}", describe(v)));
+            return None;
+        };
+        for key in required {
+            if !m.contains_key(*key) {
+                self.bad(path, format!("missing required key \"{key}\""));
+            }
+        }
+        for key in m.keys() {
+            if !required.contains(&key.as_str()) && !optional.contains(&key.as_str()) {
+                self.bad(
+                    &format!("{path}.{key}"),
+                    format!(
+                        "unknown key (expected one of: {})",
+                        required
+                            .iter()
+                            .chain(optional)
+                            .copied()
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                );
+            }
+        }
+        Some(m)
+    }
+
+    fn num(&mut self, v: &Value, path: &str) -> Option<f64> {
+        match v.as_f64() {
+            Some(x) if x.is_finite() => Some(x),
+            _ if v.is_null() => {
+                self.bad(
+                    path,
+                    "is null: not a finite number (NaN/Inf are written as null)",
+                );
+                None
+            }
+            _ => {
+                self.bad(
+                    path,
+                    format!("expected a finite number, found {}", describe(v)),
+                );
+                None
+            }
+        }
+    }
+
+    fn f32(&mut self, v: &Value, path: &str) -> Option<f32> {
+        let x = self.num(v, path)?;
+        if x.abs() > f64::from(f32::MAX) {
+            self.bad(path, format!("{x} does not fit in f32"));
+            return None;
+        }
+        Some(x as f32)
+    }
+
+    fn uint(&mut self, v: &Value, path: &str, max: u64) -> Option<u64> {
+        match v.as_u64() {
+            Some(x) if x <= max => Some(x),
+            _ => {
+                self.bad(
+                    path,
+                    format!("expected an integer in 0..={max}, found {}", describe(v)),
+                );
+                None
+            }
+        }
+    }
+
+    fn string<'v>(&mut self, v: &'v Value, path: &str) -> Option<&'v str> {
+        match v.as_str() {
+            Some(s) => Some(s),
+            None => {
+                self.bad(path, format!("expected a string, found {}", describe(v)));
+                None
+            }
+        }
+    }
+
+    fn enumeration(&mut self, v: &Value, path: &str, allowed: &[&str]) -> Option<String> {
+        let s = self.string(v, path)?;
+        if allowed.contains(&s) {
+            Some(s.to_string())
+        } else {
+            self.bad(
+                path,
+                format!(
+                    "unknown value \"{s}\" (expected one of: {})",
+                    allowed.join(", ")
+                ),
+            );
+            None
+        }
+    }
+
+    fn floats(&mut self, v: &Value, path: &str, len: Option<usize>) -> Option<Vec<f32>> {
+        let Some(a) = v.as_array() else {
+            self.bad(path, format!("expected an array, found {}", describe(v)));
+            return None;
+        };
+        if let Some(n) = len {
+            if a.len() != n {
+                self.bad(path, format!("expected {n} values, found {}", a.len()));
+                return None;
+            }
+        }
+        let vals: Vec<Option<f32>> = a
+            .iter()
+            .enumerate()
+            .map(|(i, x)| self.f32(x, &format!("{path}[{i}]")))
+            .collect();
+        vals.into_iter().collect()
+    }
+
+    /// A relative path; when a directory is known, the file must exist.
+    fn rel_file(&mut self, v: &Value, path: &str) -> Option<std::path::PathBuf> {
+        let s = self.string(v, path)?;
+        let p = Path::new(s);
+        if s.is_empty() || p.is_absolute() || s.contains('\\') {
+            self.bad(
+                path,
+                format!("\"{s}\" must be a non-empty relative path with / separators"),
+            );
+            return None;
+        }
+        if p.components()
+            .any(|c| matches!(c, std::path::Component::ParentDir))
+        {
+            self.bad(
+                path,
+                format!("\"{s}\" must stay inside the scene directory (no ..)"),
+            );
+            return None;
+        }
+        let dir = self.dir?;
+        let full = dir.join(p);
+        if !full.is_file() {
+            self.bad(path, format!("{s}: file does not exist"));
+            return None;
+        }
+        Some(full)
+    }
+
+    fn png(&mut self, v: &Value, path: &str, kind: PngKind, size: Option<(u32, u32)>) {
+        let Some(full) = self.rel_file(v, path) else {
+            return;
+        };
+        let name = v.as_str().unwrap_or_default().to_string();
+        let decoder = image::ImageReader::open(&full)
+            .map_err(|e| e.to_string())
+            .and_then(|r| r.with_guessed_format().map_err(|e| e.to_string()))
+            .and_then(|r| r.into_decoder().map_err(|e| e.to_string()));
+        let d = match decoder {
+            Ok(d) => d,
+            Err(e) => {
+                self.bad(path, format!("{name}: not a readable image: {e}"));
+                return;
+            }
+        };
+        let (w, h) = d.dimensions();
+        if let Some((ew, eh)) = size {
+            if (w, h) != (ew, eh) {
+                self.bad(
+                    path,
+                    format!("{name}: image is {w}x{h}, the camera is {ew}x{eh}"),
+                );
+            }
+        }
+        let ct = d.color_type();
+        let ok = match kind {
+            PngKind::Rgb(8) => ct == image::ColorType::Rgb8,
+            PngKind::Rgb(_) => ct == image::ColorType::Rgb16,
+            PngKind::Mask => matches!(ct, image::ColorType::L8 | image::ColorType::L16),
+        };
+        if !ok {
+            let want = match kind {
+                PngKind::Rgb(b) => format!("{b}-bit RGB (images.bit_depth)"),
+                PngKind::Mask => "8- or 16-bit single channel".into(),
+            };
+            self.bad(
+                path,
+                format!("{name}: pixel format {ct:?}, expected {want}"),
+            );
+        }
+    }
+
+    fn flo(&mut self, v: &Value, path: &str, size: Option<(u32, u32)>) {
+        let Some(full) = self.rel_file(v, path) else {
+            return;
+        };
+        let name = v.as_str().unwrap_or_default().to_string();
+        let mut head = [0u8; 12];
+        let res = std::fs::File::open(&full).and_then(|mut f| {
+            f.read_exact(&mut head)?;
+            f.metadata().map(|m| m.len())
+        });
+        let len = match res {
+            Ok(len) => len,
+            Err(e) => {
+                self.bad(path, format!("{name}: cannot read the .flo header: {e}"));
+                return;
+            }
+        };
+        let word = |i: usize| {
+            [
+                head[4 * i],
+                head[4 * i + 1],
+                head[4 * i + 2],
+                head[4 * i + 3],
+            ]
+        };
+        let magic = f32::from_le_bytes(word(0));
+        if magic != FLO_MAGIC {
+            self.bad(
+                path,
+                format!("{name}: magic {magic} is not 202021.25 (not a .flo file)"),
+            );
+            return;
+        }
+        let (w, h) = (i32::from_le_bytes(word(1)), i32::from_le_bytes(word(2)));
+        if let Some((ew, eh)) = size {
+            if (i64::from(w), i64::from(h)) != (i64::from(ew), i64::from(eh)) {
+                self.bad(
+                    path,
+                    format!("{name}: flow is {w}x{h}, the camera is {ew}x{eh}"),
+                );
+                return;
+            }
+        }
+        let expect = 12 + 8 * (w.max(0) as u64) * (h.max(0) as u64);
+        if len != expect {
+            self.bad(
+                path,
+                format!("{name}: {len} bytes, a {w}x{h} .flo has {expect}"),
+            );
+        }
+    }
+
+    fn scene(&mut self, v: &Value) {
+        let Some(m) = self.obj(
+            v,
+            "scene",
+            &[
+                "format_version",
+                "camera",
+                "body",
+                "fps",
+                "exposure_s",
+                "images",
+                "frames",
+            ],
+            &["generator"],
+        ) else {
+            return;
+        };
+        if let Some(fv) = m.get("format_version") {
+            if let Some(x) = self.uint(fv, "format_version", u64::from(u32::MAX)) {
+                if x != u64::from(FORMAT_VERSION) {
+                    self.bad(
+                        "format_version",
+                        format!("{x} is not supported (this reader knows {FORMAT_VERSION})"),
+                    );
+                }
+            }
+        }
+        let size = m.get("camera").and_then(|c| self.camera(c));
+        if let Some(b) = m.get("body") {
+            if let Some(bm) = self.obj(b, "body", &["model", "betas"], &[]) {
+                if let Some(s) = bm.get("model").and_then(|s| self.string(s, "body.model")) {
+                    if s.is_empty() {
+                        self.bad("body.model", "is empty");
+                    }
+                }
+                if let Some(betas) = bm.get("betas") {
+                    self.floats(betas, "body.betas", None);
+                }
+            }
+        }
+        let fps = m.get("fps").and_then(|x| self.num(x, "fps"));
+        if let Some(f) = fps {
+            if f <= 0.0 {
+                self.bad("fps", format!("{f} must be > 0"));
+            }
+        }
+        if let Some(e) = m.get("exposure_s").and_then(|x| self.num(x, "exposure_s")) {
+            if e <= 0.0 {
+                self.bad("exposure_s", format!("{e} must be > 0"));
+            } else if let Some(f) = fps.filter(|f| *f > 0.0) {
+                if e > (1.0 / f) * (1.0 + 1e-9) {
+                    self.bad(
+                        "exposure_s",
+                        format!(
+                            "{e} s is longer than the frame interval 1/fps = {} s",
+                            1.0 / f
+                        ),
+                    );
+                }
+            }
+        }
+        let mut bits = None;
+        if let Some(im) = m.get("images") {
+            if let Some(imm) = self.obj(im, "images", &["bit_depth", "transfer"], &[]) {
+                if let Some(b) = imm
+                    .get("bit_depth")
+                    .and_then(|b| self.uint(b, "images.bit_depth", 255))
+                {
+                    if b == 8 || b == 16 {
+                        bits = Some(b as u8);
+                    } else {
+                        self.bad("images.bit_depth", format!("{b} is not 8 or 16"));
+                    }
+                }
+                if let Some(t) = imm.get("transfer") {
+                    self.enumeration(t, "images.transfer", &["linear", "srgb"]);
+                }
+            }
+        }
+        if let Some(frames) = m.get("frames") {
+            self.frames(frames, size, bits);
+        }
+    }
+
+    fn camera(&mut self, v: &Value) -> Option<(u32, u32)> {
+        let m = self.obj(
+            v,
+            "camera",
+            &["width", "height", "fx", "fy", "cx", "cy", "world_to_camera"],
+            &[],
+        )?;
+        let w = m
+            .get("width")
+            .and_then(|x| self.uint(x, "camera.width", MAX_SIDE));
+        let h = m
+            .get("height")
+            .and_then(|x| self.uint(x, "camera.height", MAX_SIDE));
+        for key in ["fx", "fy"] {
+            if let Some(f) = m
+                .get(key)
+                .and_then(|x| self.num(x, &format!("camera.{key}")))
+            {
+                if f <= 0.0 {
+                    self.bad(&format!("camera.{key}"), format!("{f} must be > 0"));
+                }
+            }
+        }
+        for key in ["cx", "cy"] {
+            if let Some(x) = m.get(key) {
+                self.num(x, &format!("camera.{key}"));
+            }
+        }
+        if let Some(rt) = m.get("world_to_camera") {
+            self.rigid(rt, "camera.world_to_camera");
+        }
+        match (w, h) {
+            (Some(0), _) | (_, Some(0)) => {
+                self.bad("camera", "width and height must be > 0");
+                None
+            }
+            (Some(w), Some(h)) => Some((w as u32, h as u32)),
+            _ => None,
+        }
+    }
+
+    fn rigid(&mut self, v: &Value, path: &str) {
+        let rows: Option<Vec<Vec<f32>>> = match v.as_array() {
+            Some(a) if a.len() == 3 => a
+                .iter()
+                .enumerate()
+                .map(|(r, row)| self.floats(row, &format!("{path}[{r}]"), Some(4)))
+                .collect(),
+            _ => {
+                self.bad(
+                    path,
+                    format!("expected 3 rows of 4 numbers, found {}", describe(v)),
+                );
+                None
+            }
+        };
+        let Some(rows) = rows else { return };
+        let r = |i: usize, j: usize| f64::from(rows[i][j]);
+        let mut err = 0.0f64;
+        for i in 0..3 {
+            for j in 0..3 {
+                let d: f64 = (0..3).map(|k| r(k, i) * r(k, j)).sum();
+                err = err.max((d - if i == j { 1.0 } else { 0.0 }).abs());
+            }
+        }
+        let det = r(0, 0) * (r(1, 1) * r(2, 2) - r(1, 2) * r(2, 1))
+            - r(0, 1) * (r(1, 0) * r(2, 2) - r(1, 2) * r(2, 0))
+            + r(0, 2) * (r(1, 0) * r(2, 1) - r(1, 1) * r(2, 0));
+        if err > 1e-4 || det <= 0.0 {
+            self.bad(
+                path,
+                format!("R is not a rotation (max |RᵀR − I| = {err:.2e}, det = {det:.4})"),
+            );
+        }
+    }
+
+    fn frames(&mut self, v: &Value, size: Option<(u32, u32)>, bits: Option<u8>) {
+        let Some(a) = v.as_array() else {
+            self.bad(
+                "frames",
+                format!("expected an array, found {}", describe(v)),
+            );
+            return;
+        };
+        if a.is_empty() {
+            self.bad("frames", "no frames");
+            return;
+        }
+        let mut last_index: Option<u64> = None;
+        let mut last_time: Option<f64> = None;
+        let mut train = 0usize;
+        for (k, f) in a.iter().enumerate() {
+            let p = format!("frames[{k}]");
+            let Some(m) = self.obj(
+                f,
+                &p,
+                &["index", "time_s", "image", "pose", "transl", "split"],
+                &["sharp", "mask", "flow_to_next", "events"],
+            ) else {
+                continue;
+            };
+            if let Some(i) = m
+                .get("index")
+                .and_then(|x| self.uint(x, &format!("{p}.index"), u64::from(u32::MAX)))
+            {
+                if let Some(prev) = last_index {
+                    if i <= prev {
+                        self.bad(
+                            &format!("{p}.index"),
+                            format!("{i} does not increase (previous frame has {prev})"),
+                        );
+                    }
+                }
+                last_index = Some(i);
+            }
+            if let Some(t) = m
+                .get("time_s")
+                .and_then(|x| self.num(x, &format!("{p}.time_s")))
+            {
+                if let Some(prev) = last_time {
+                    if t <= prev {
+                        self.bad(
+                            &format!("{p}.time_s"),
+                            format!("{t} s is not after the previous frame's {prev} s (time must increase)"),
+                        );
+                    }
+                }
+                last_time = Some(t);
+            }
+            let rgb = PngKind::Rgb(bits.unwrap_or(16));
+            let check_rgb = bits.is_some();
+            for key in ["image", "sharp"] {
+                if let Some(x) = m.get(key) {
+                    let jp = format!("{p}.{key}");
+                    if check_rgb {
+                        self.png(x, &jp, rgb, size);
+                    } else {
+                        self.rel_file(x, &jp);
+                    }
+                }
+            }
+            if let Some(x) = m.get("mask") {
+                self.png(x, &format!("{p}.mask"), PngKind::Mask, size);
+            }
+            if let Some(x) = m.get("events") {
+                self.rel_file(x, &format!("{p}.events"));
+            }
+            if let Some(pose) = m.get("pose") {
+                let pp = format!("{p}.pose");
+                match pose.as_array() {
+                    Some(rows) if rows.len() == NUM_JOINTS => {
+                        for (j, r) in rows.iter().enumerate() {
+                            self.floats(r, &format!("{pp}[{j}]"), Some(3));
+                        }
+                    }
+                    _ => self.bad(
+                        &pp,
+                        format!(
+                            "expected {NUM_JOINTS} axis-angle triples, found {}",
+                            describe(pose)
+                        ),
+                    ),
+                }
+            }
+            if let Some(t) = m.get("transl") {
+                self.floats(t, &format!("{p}.transl"), Some(3));
+            }
+            if let Some(s) = m.get("split") {
+                if self
+                    .enumeration(s, &format!("{p}.split"), &["train", "test"])
+                    .as_deref()
+                    == Some("train")
+                {
+                    train += 1;
+                }
+            }
+            if let Some(fl) = m.get("flow_to_next") {
+                self.flows(fl, &p, k + 1 == a.len(), size);
+            }
+        }
+        if train == 0 {
+            self.bad("frames", "no frame has split \"train\"");
+        }
+    }
+
+    fn flows(&mut self, v: &Value, p: &str, last: bool, size: Option<(u32, u32)>) {
+        let fp = format!("{p}.flow_to_next");
+        let Some(a) = v.as_array() else {
+            self.bad(&fp, format!("expected an array, found {}", describe(v)));
+            return;
+        };
+        if last && !a.is_empty() {
+            self.bad(&fp, "the last frame has no next frame to flow to");
+        }
+        let mut kinds = HashSet::new();
+        for (i, f) in a.iter().enumerate() {
+            let ip = format!("{fp}[{i}]");
+            let Some(m) = self.obj(f, &ip, &["kind", "path"], &["valid_mask"]) else {
+                continue;
+            };
+            if let Some(k) = m.get("kind").and_then(|k| {
+                self.enumeration(
+                    k,
+                    &format!("{ip}.kind"),
+                    &["ground_truth", "events_cm", "external"],
+                )
+            }) {
+                if !kinds.insert(k.clone()) {
+                    self.bad(&format!("{ip}.kind"), format!("a second \"{k}\" flow"));
+                }
+            }
+            if let Some(x) = m.get("path") {
+                self.flo(x, &format!("{ip}.path"), size);
+            }
+            if let Some(x) = m.get("valid_mask") {
+                self.png(x, &format!("{ip}.valid_mask"), PngKind::Mask, size);
+            }
+        }
+    }
+}
