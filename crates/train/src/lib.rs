@@ -1,1 +1,5 @@
-//! The E-Sem3DGS method: scene format v1, model assembly, losses, optimisation loop, checkpoints, evaluation
+//! The E-Sem3DGS method: model assembly (semantic Gaussians for human and scene, deformation and colour
+//! networks), losses, the optimisation loop, checkpoints and evaluation. This is the only crate that
+//! knows the method; everything it builds on is generic.
+
+pub mod image_loss;
