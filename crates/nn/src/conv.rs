@@ -1,0 +1,372 @@
+//! 2-D convolution (cross-correlation, as PyTorch's `Conv2d`): any square kernel size, stride 1,
+//! symmetric zero padding, by im2col + GEMM over chunks of output rows.
+//!
+//! im2col + GEMM was chosen over a direct kernel because the GEMM crate's packed micro-kernels run the
+//! 7×7 SPyNet layers several times faster than a hand-written direct loop here (see docs/BENCHMARKS.md,
+//! section "flow"). Chunks of output rows (a fixed number of rows, independent of the thread count) keep
+//! the im2col buffer in cache and give parallelism even for a batch of one.
+//!
+//! The input gradient is itself a convolution of the output gradient with the flipped, transposed
+//! kernel (padding `k − 1 − pad`), so it reuses the same fast path. Weight gradients are reduced over
+//! chunks in a fixed order. This module must never depend on thread timing for any sum.
+
+use crate::{check_len, NnError, Real};
+use rayon::prelude::*;
+
+/// Target number of output pixels per im2col chunk.
+const CHUNK_PIXELS: usize = 512;
+/// Number of partial weight-gradient buffers (fixed, so the reduction order never depends on threads).
+const WEIGHT_GRAD_GROUPS: usize = 4;
+
+/// Shape of a stride-1 2-D convolution on a batch of planar images.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Conv2dShape {
+    /// Batch size B.
+    pub batch: usize,
+    /// Input channels.
+    pub c_in: usize,
+    /// Output channels.
+    pub c_out: usize,
+    /// Input height H in pixels.
+    pub height: usize,
+    /// Input width W in pixels.
+    pub width: usize,
+    /// Kernel side length k (the kernel is k × k).
+    pub kernel: usize,
+    /// Zero padding on each side, in pixels (`(k − 1) / 2` keeps the size).
+    pub pad: usize,
+}
+
+impl Conv2dShape {
+    /// Output height `H + 2·pad − k + 1`.
+    pub fn out_height(&self) -> usize {
+        (self.height + 2 * self.pad + 1).saturating_sub(self.kernel)
+    }
+    /// Output width `W + 2·pad − k + 1`.
+    pub fn out_width(&self) -> usize {
+        (self.width + 2 * self.pad + 1).saturating_sub(self.kernel)
+    }
+    /// Number of input elements `B·C_in·H·W`.
+    pub fn input_len(&self) -> usize {
+        self.batch * self.c_in * self.height * self.width
+    }
+    /// Number of output elements `B·C_out·H_out·W_out`.
+    pub fn output_len(&self) -> usize {
+        self.batch * self.c_out * self.out_height() * self.out_width()
+    }
+    /// Number of weights `C_out·C_in·k·k` (layout `(C_out, C_in, k, k)`, as PyTorch).
+    pub fn weight_len(&self) -> usize {
+        self.c_out * self.c_in * self.kernel * self.kernel
+    }
+
+    fn validate(&self) -> Result<(), NnError> {
+        if self.kernel == 0
+            || self.height + 2 * self.pad < self.kernel
+            || self.width + 2 * self.pad < self.kernel
+        {
+            return Err(NnError::Shape(format!(
+                "conv2d kernel {} larger than padded image {}x{} (pad {})",
+                self.kernel, self.height, self.width, self.pad
+            )));
+        }
+        Ok(())
+    }
+
+    fn rows_per_chunk(&self) -> usize {
+        (CHUNK_PIXELS / self.out_width().max(1)).max(1)
+    }
+
+    /// (batch index, first output row, end output row) of every chunk, in a fixed order.
+    fn chunks(&self) -> Vec<(usize, usize, usize)> {
+        let rows = self.rows_per_chunk();
+        let ho = self.out_height();
+        let mut v = Vec::new();
+        for b in 0..self.batch {
+            let mut r0 = 0;
+            while r0 < ho {
+                let r1 = (r0 + rows).min(ho);
+                v.push((b, r0, r1));
+                r0 = r1;
+            }
+        }
+        v
+    }
+}
+
+/// Fills `col` (`(C_in·k·k) × ((r1 − r0)·W_out)`, row-major) with the receptive fields of output
+/// rows `r0..r1` of image `img` (`(C_in, H, W)`).
+fn im2col<T: Real>(s: &Conv2dShape, img: &[T], r0: usize, r1: usize, col: &mut [T]) {
+    let (h, w, k, p) = (s.height, s.width, s.kernel, s.pad);
+    let wo = s.out_width();
+    let n = (r1 - r0) * wo;
+    for ci in 0..s.c_in {
+        let plane = &img[ci * h * w..(ci + 1) * h * w];
+        for ky in 0..k {
+            for kx in 0..k {
+                let row = (ci * k + ky) * k + kx;
+                let dst = &mut col[row * n..(row + 1) * n];
+                // Valid output columns x: 0 <= x + kx - p < w.
+                let x_lo = p.saturating_sub(kx).min(wo);
+                let x_hi = (w + p).saturating_sub(kx).min(wo).max(x_lo);
+                for r in r0..r1 {
+                    let d = &mut dst[(r - r0) * wo..(r - r0 + 1) * wo];
+                    let iy = r + ky;
+                    if iy < p || iy - p >= h {
+                        d.fill(T::zero());
+                        continue;
+                    }
+                    let src = &plane[(iy - p) * w..(iy - p + 1) * w];
+                    d[..x_lo].fill(T::zero());
+                    d[x_hi..].fill(T::zero());
+                    let s0 = x_lo + kx - p;
+                    d[x_lo..x_hi].copy_from_slice(&src[s0..s0 + (x_hi - x_lo)]);
+                }
+            }
+        }
+    }
+}
+
+/// The im2col + GEMM forward used by both the forward and the input-gradient pass.
+fn conv_core<T: Real>(
+    s: &Conv2dShape,
+    input: &[T],
+    weight: &[T],
+    bias: Option<&[T]>,
+    output: &mut [T],
+) {
+    let (ho, wo) = (s.out_height(), s.out_width());
+    let ckk = s.c_in * s.kernel * s.kernel;
+    let in_img = s.c_in * s.height * s.width;
+    let out_img = s.c_out * ho * wo;
+    let chunks = s.chunks();
+    let max_n = s.rows_per_chunk().min(ho) * wo;
+    let results: Vec<Vec<T>> = chunks
+        .par_iter()
+        .map_init(
+            || vec![T::zero(); ckk * max_n],
+            |col, &(b, r0, r1)| {
+                let n = (r1 - r0) * wo;
+                let col = &mut col[..ckk * n];
+                im2col(s, &input[b * in_img..(b + 1) * in_img], r0, r1, col);
+                let mut out = vec![T::zero(); s.c_out * n];
+                let beta = if let Some(bias) = bias {
+                    for (co, row) in out.chunks_exact_mut(n).enumerate() {
+                        row.fill(bias[co]);
+                    }
+                    T::one()
+                } else {
+                    T::zero()
+                };
+                crate::gemm(
+                    s.c_out,
+                    ckk,
+                    n,
+                    T::one(),
+                    weight,
+                    false,
+                    col,
+                    false,
+                    beta,
+                    &mut out,
+                );
+                out
+            },
+        )
+        .collect();
+    for (&(b, r0, r1), out) in chunks.iter().zip(&results) {
+        let n = (r1 - r0) * wo;
+        for co in 0..s.c_out {
+            let dst = b * out_img + co * ho * wo + r0 * wo;
+            output[dst..dst + n].copy_from_slice(&out[co * n..(co + 1) * n]);
+        }
+    }
+}
+
+/// Forward convolution: `out[b, o, y, x] = bias[o] + Σ_{c, dy, dx} w[o, c, dy, dx]·in[b, c, y + dy − pad, x + dx − pad]`
+/// with zeros outside the image.
+///
+/// `input` is `(B, C_in, H, W)`, `weight` `(C_out, C_in, k, k)`, `bias` `(C_out)` or absent,
+/// `output` `(B, C_out, H_out, W_out)` (overwritten).
+pub fn conv2d_forward<T: Real>(
+    s: Conv2dShape,
+    input: &[T],
+    weight: &[T],
+    bias: Option<&[T]>,
+    output: &mut [T],
+) -> Result<(), NnError> {
+    s.validate()?;
+    check_len("conv2d input", s.input_len(), input.len())?;
+    check_len("conv2d weight", s.weight_len(), weight.len())?;
+    check_len("conv2d output", s.output_len(), output.len())?;
+    if let Some(b) = bias {
+        check_len("conv2d bias", s.c_out, b.len())?;
+    }
+    conv_core(&s, input, weight, bias, output);
+    Ok(())
+}
+
+/// Input gradient: overwrites `grad_input` (`(B, C_in, H, W)`) with `∂L/∂in` given
+/// `grad_output = ∂L/∂out`. Requires `pad ≤ k − 1` (always true for "same" convolutions).
+pub fn conv2d_backward_input<T: Real>(
+    s: Conv2dShape,
+    grad_output: &[T],
+    weight: &[T],
+    grad_input: &mut [T],
+) -> Result<(), NnError> {
+    s.validate()?;
+    check_len("conv2d grad_output", s.output_len(), grad_output.len())?;
+    check_len("conv2d weight", s.weight_len(), weight.len())?;
+    check_len("conv2d grad_input", s.input_len(), grad_input.len())?;
+    if s.pad + 1 > s.kernel {
+        return Err(NnError::Shape(format!(
+            "conv2d backward needs pad <= kernel - 1 (pad {}, kernel {})",
+            s.pad, s.kernel
+        )));
+    }
+    let k = s.kernel;
+    // Flipped, transposed kernel: wt[c, o, ky, kx] = w[o, c, k-1-ky, k-1-kx].
+    let mut wt = vec![T::zero(); weight.len()];
+    for o in 0..s.c_out {
+        for c in 0..s.c_in {
+            for ky in 0..k {
+                for kx in 0..k {
+                    wt[((c * s.c_out + o) * k + ky) * k + kx] =
+                        weight[((o * s.c_in + c) * k + (k - 1 - ky)) * k + (k - 1 - kx)];
+                }
+            }
+        }
+    }
+    let t = Conv2dShape {
+        batch: s.batch,
+        c_in: s.c_out,
+        c_out: s.c_in,
+        height: s.out_height(),
+        width: s.out_width(),
+        kernel: k,
+        pad: k - 1 - s.pad,
+    };
+    conv_core(&t, grad_output, &wt, None, grad_input);
+    Ok(())
+}
+
+/// Weight and bias gradients: **accumulates** `∂L/∂w` into `grad_weight` (`(C_out, C_in, k, k)`) and,
+/// if given, `∂L/∂bias` into `grad_bias` (`(C_out)`), given the forward `input` and `grad_output`.
+pub fn conv2d_backward_weight<T: Real>(
+    s: Conv2dShape,
+    input: &[T],
+    grad_output: &[T],
+    grad_weight: &mut [T],
+    grad_bias: Option<&mut [T]>,
+) -> Result<(), NnError> {
+    s.validate()?;
+    check_len("conv2d input", s.input_len(), input.len())?;
+    check_len("conv2d grad_output", s.output_len(), grad_output.len())?;
+    check_len("conv2d grad_weight", s.weight_len(), grad_weight.len())?;
+    let (ho, wo) = (s.out_height(), s.out_width());
+    let hwo = ho * wo;
+    let ckk = s.c_in * s.kernel * s.kernel;
+    let in_img = s.c_in * s.height * s.width;
+    let out_img = s.c_out * hwo;
+    let chunks = s.chunks();
+    let groups = WEIGHT_GRAD_GROUPS.min(chunks.len()).max(1);
+    let per_group = chunks.len().div_ceil(groups);
+    let max_n = s.rows_per_chunk().min(ho) * wo;
+    let partials: Vec<Vec<T>> = chunks
+        .par_chunks(per_group.max(1))
+        .map(|group| {
+            let mut col = vec![T::zero(); ckk * max_n];
+            let mut dw = vec![T::zero(); s.c_out * ckk];
+            for &(b, r0, r1) in group {
+                let n = (r1 - r0) * wo;
+                let col = &mut col[..ckk * n];
+                im2col(&s, &input[b * in_img..(b + 1) * in_img], r0, r1, col);
+                let dy = &grad_output[b * out_img + r0 * wo..];
+                // dw (C_out × ckk) += dy_chunk (C_out × n, row stride H_out·W_out) · colᵀ.
+                T::gemm_unchecked(
+                    s.c_out,
+                    n,
+                    ckk,
+                    T::one(),
+                    dy,
+                    hwo as isize,
+                    1,
+                    col,
+                    1,
+                    n as isize,
+                    T::one(),
+                    &mut dw,
+                    ckk as isize,
+                    1,
+                );
+            }
+            dw
+        })
+        .collect();
+    for p in &partials {
+        for (g, &v) in grad_weight.iter_mut().zip(p) {
+            *g = *g + v;
+        }
+    }
+    if let Some(gb) = grad_bias {
+        check_len("conv2d grad_bias", s.c_out, gb.len())?;
+        for b in 0..s.batch {
+            for (co, g) in gb.iter_mut().enumerate() {
+                let plane = &grad_output[b * out_img + co * hwo..b * out_img + (co + 1) * hwo];
+                let mut acc = T::zero();
+                for &v in plane {
+                    acc = acc + v;
+                }
+                *g = *g + acc;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Slow, obviously-correct direct convolution (the oracle for tests): same contract as
+/// [`conv2d_forward`], one multiply-add per loop iteration.
+pub fn conv2d_reference<T: Real>(
+    s: Conv2dShape,
+    input: &[T],
+    weight: &[T],
+    bias: Option<&[T]>,
+    output: &mut [T],
+) -> Result<(), NnError> {
+    s.validate()?;
+    check_len("conv2d input", s.input_len(), input.len())?;
+    check_len("conv2d weight", s.weight_len(), weight.len())?;
+    check_len("conv2d output", s.output_len(), output.len())?;
+    let (h, w, k, p) = (
+        s.height as isize,
+        s.width as isize,
+        s.kernel,
+        s.pad as isize,
+    );
+    let (ho, wo) = (s.out_height(), s.out_width());
+    for b in 0..s.batch {
+        for o in 0..s.c_out {
+            for y in 0..ho {
+                for x in 0..wo {
+                    let mut acc = bias.map_or(T::zero(), |bb| bb[o]);
+                    for c in 0..s.c_in {
+                        for ky in 0..k {
+                            for kx in 0..k {
+                                let iy = y as isize + ky as isize - p;
+                                let ix = x as isize + kx as isize - p;
+                                if iy < 0 || ix < 0 || iy >= h || ix >= w {
+                                    continue;
+                                }
+                                let iv = input[((b * s.c_in + c) * s.height + iy as usize)
+                                    * s.width
+                                    + ix as usize];
+                                acc = acc + weight[((o * s.c_in + c) * k + ky) * k + kx] * iv;
+                            }
+                        }
+                    }
+                    output[((b * s.c_out + o) * ho + y) * wo + x] = acc;
+                }
+            }
+        }
+    }
+    Ok(())
+}

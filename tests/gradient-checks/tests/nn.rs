@@ -1,0 +1,246 @@
+//! f64 central-finite-difference checks of every backward pass in `nn`.
+//!
+//! Each check draws random inputs and a random cotangent `g`, forms the scalar `L(x) = ⟨g, f(x)⟩` and
+//! compares the analytic `∂L/∂x` from the op's backward pass with central differences of `L`.
+//!
+//! Tolerance (all checks): `abs 1e-7, rel 1e-6` with step `h = 1e-6`. Justification: every op here is,
+//! around the probe point, either linear in the checked argument (dense, conv2d, pooling, resize, warp
+//! w.r.t. the image), a polynomial of degree ≤ 2 in it (warp w.r.t. the flow is bilinear inside one
+//! pixel cell), or smooth with |f'''| ≲ 1 (sigmoid, softplus). Central differences are exact on
+//! quadratics, so the error is rounding, `≈ ε·|L|/h ≈ 1e-16·1e2/1e-6 = 1e-8`, plus `h²·|f'''|/6 ≈ 2e-13`
+//! for the smooth ones: `1e-7` absolute leaves a 10× margin while a wrong sign, a missing term or a
+//! zeroed gradient (all O(0.1–10) here) is off by many orders of magnitude. Each op additionally proves
+//! the check is sensitive: the same comparison must fail for the negated, halved and all-zero analytic
+//! gradient.
+//!
+//! Kinks: ReLU/LeakyReLU inputs are drawn with `|x| ≥ 0.05 ≫ h`; warp sample positions are kept at least
+//! 0.1 px (≫ h) away from integer coordinates (bilinear cell edges) and from the clamping borders 0 and
+//! `n − 1` (positions outside the image are kept ≥ 0.1 px outside, where the gradient is exactly 0 on
+//! both sides).
+
+use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
+use nn::*;
+use proptest::prelude::*;
+
+const H: f64 = 1e-6;
+const TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
+
+struct Rng(u64);
+impl Rng {
+    fn new(seed: u64) -> Self {
+        Self(seed ^ 0x9E37_79B9_7F4A_7C15)
+    }
+    /// Uniform in [-1, 1).
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        ((z >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
+    }
+    fn vec(&mut self, n: usize) -> Vec<f64> {
+        (0..n).map(|_| self.next()).collect()
+    }
+    /// Values with |x| in [0.05, 1] (away from the ReLU kink).
+    fn away_from_zero(&mut self, n: usize) -> Vec<f64> {
+        (0..n)
+            .map(|_| {
+                let v = self.next();
+                v.signum() * (0.05 + 0.95 * v.abs())
+            })
+            .collect()
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Compares `analytic` with central differences of `x ↦ ⟨g, f(x)⟩`, and asserts that the comparison
+/// would catch a wrong sign, a factor-2 error and an all-zero gradient.
+fn check(
+    checker: &mut GradientChecker,
+    name: &str,
+    x: &[f64],
+    g: &[f64],
+    f: impl Fn(&[f64]) -> Vec<f64>,
+    analytic: &[f64],
+) {
+    let numeric = central_differences(|p| dot(g, &f(p)), x, H);
+    checker.check(name, &numeric, analytic, TOL);
+    if analytic.iter().any(|&a| a.abs() > 1e-3) {
+        let neg: Vec<f64> = analytic.iter().map(|a| -a).collect();
+        let half: Vec<f64> = analytic.iter().map(|a| 0.5 * a).collect();
+        let zero = vec![0.0; analytic.len()];
+        for (what, bad) in [("negated", neg), ("halved", half), ("zeroed", zero)] {
+            assert!(
+                !compare(name, &numeric, &bad, TOL).passed(),
+                "{name}: a {what} gradient would pass this check"
+            );
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    #[test]
+    fn dense_gradients(seed in any::<u64>(), batch in 1usize..4, inputs in 1usize..6, outputs in 1usize..5) {
+        let mut r = Rng::new(seed);
+        let s = DenseShape { batch, inputs, outputs };
+        let (x, w, b) = (r.vec(batch * inputs), r.vec(outputs * inputs), r.vec(outputs));
+        let g = r.vec(batch * outputs);
+        let fwd = |x: &[f64], w: &[f64], b: &[f64]| {
+            let mut y = vec![0.0; batch * outputs];
+            dense_forward(s, x, w, Some(b), &mut y).expect("shape");
+            y
+        };
+        let mut dx = vec![f64::NAN; x.len()];
+        let mut dw = vec![0.0; w.len()];
+        let mut db = vec![0.0; b.len()];
+        dense_backward(s, &x, &w, &g, Some(&mut dx), Some(&mut dw), Some(&mut db)).expect("shape");
+        let mut c = GradientChecker::new();
+        check(&mut c, "dense dx", &x, &g, |p| fwd(p, &w, &b), &dx);
+        check(&mut c, "dense dw", &w, &g, |p| fwd(&x, p, &b), &dw);
+        check(&mut c, "dense db", &b, &g, |p| fwd(&x, &w, p), &db);
+        c.finish();
+    }
+
+    #[test]
+    fn activation_gradients(seed in any::<u64>(), n in 1usize..40, slope in 0.01f64..0.3) {
+        let mut r = Rng::new(seed);
+        let x = r.away_from_zero(n);
+        let xs: Vec<f64> = r.vec(n).iter().map(|v| 6.0 * v).collect();
+        let g = r.vec(n);
+        let mut c = GradientChecker::new();
+        let run = |f: &dyn Fn(&[f64], &mut [f64]), p: &[f64]| {
+            let mut y = vec![0.0; p.len()];
+            f(p, &mut y);
+            y
+        };
+        let mut d = vec![f64::NAN; n];
+        relu_backward(&x, &g, &mut d);
+        check(&mut c, "relu", &x, &g, |p| run(&|a, b| relu_forward(a, b), p), &d);
+        leaky_relu_backward(&x, &g, &mut d, slope);
+        check(&mut c, "leaky_relu", &x, &g, |p| run(&|a, b| leaky_relu_forward(a, b, slope), p), &d);
+        let y = run(&|a, b| sigmoid_forward(a, b), &xs);
+        sigmoid_backward(&y, &g, &mut d);
+        check(&mut c, "sigmoid", &xs, &g, |p| run(&|a, b| sigmoid_forward(a, b), p), &d);
+        softplus_backward(&xs, &g, &mut d);
+        check(&mut c, "softplus", &xs, &g, |p| run(&|a, b| softplus_forward(a, b), p), &d);
+        c.finish();
+    }
+
+    #[test]
+    fn conv2d_gradients(
+        seed in any::<u64>(),
+        batch in 1usize..3,
+        c_in in 1usize..3,
+        c_out in 1usize..4,
+        height in 3usize..7,
+        width in 3usize..8,
+        kp in prop::sample::select(vec![(1usize, 0usize), (3, 0), (3, 1), (3, 2), (5, 2), (7, 3)]),
+    ) {
+        let (kernel, pad) = kp;
+        prop_assume!(height + 2 * pad >= kernel && width + 2 * pad >= kernel);
+        let mut r = Rng::new(seed);
+        let s = Conv2dShape { batch, c_in, c_out, height, width, kernel, pad };
+        let (x, w, b) = (r.vec(s.input_len()), r.vec(s.weight_len()), r.vec(c_out));
+        let g = r.vec(s.output_len());
+        let fwd = |x: &[f64], w: &[f64], b: &[f64]| {
+            let mut y = vec![0.0; s.output_len()];
+            conv2d_forward(s, x, w, Some(b), &mut y).expect("shape");
+            y
+        };
+        let mut dx = vec![f64::NAN; x.len()];
+        conv2d_backward_input(s, &g, &w, &mut dx).expect("shape");
+        let mut dw = vec![0.0; w.len()];
+        let mut db = vec![0.0; c_out];
+        conv2d_backward_weight(s, &x, &g, &mut dw, Some(&mut db)).expect("shape");
+        let mut c = GradientChecker::new();
+        check(&mut c, "conv2d dx", &x, &g, |p| fwd(p, &w, &b), &dx);
+        check(&mut c, "conv2d dw", &w, &g, |p| fwd(&x, p, &b), &dw);
+        check(&mut c, "conv2d db", &b, &g, |p| fwd(&x, &w, p), &db);
+        c.finish();
+    }
+
+    #[test]
+    fn avg_pool_gradients(seed in any::<u64>(), planes in 1usize..4, h in 1usize..8, w in 1usize..8) {
+        let mut r = Rng::new(seed);
+        let x = r.vec(planes * h * w);
+        let g = r.vec(planes * pooled_size(h) * pooled_size(w));
+        let mut dx = vec![f64::NAN; x.len()];
+        avg_pool2x2_backward(planes, h, w, &g, &mut dx).expect("shape");
+        let mut c = GradientChecker::new();
+        check(&mut c, "avg_pool", &x, &g, |p| {
+            let mut y = vec![0.0; g.len()];
+            avg_pool2x2_forward(planes, h, w, p, &mut y).expect("shape");
+            y
+        }, &dx);
+        c.finish();
+    }
+
+    #[test]
+    fn resize_gradients(
+        seed in any::<u64>(),
+        planes in 1usize..3,
+        h in 1usize..7,
+        w in 1usize..7,
+        ho in 1usize..12,
+        wo in 1usize..12,
+        align_corners in any::<bool>(),
+    ) {
+        let mut r = Rng::new(seed);
+        let x = r.vec(planes * h * w);
+        let g = r.vec(planes * ho * wo);
+        let mut dx = vec![f64::NAN; x.len()];
+        resize_bilinear_backward(planes, h, w, ho, wo, align_corners, &g, &mut dx).expect("shape");
+        let mut c = GradientChecker::new();
+        check(&mut c, "resize", &x, &g, |p| {
+            let mut y = vec![0.0; g.len()];
+            resize_bilinear_forward(planes, h, w, p, ho, wo, align_corners, &mut y).expect("shape");
+            y
+        }, &dx);
+        c.finish();
+    }
+
+    #[test]
+    fn warp_gradients(seed in any::<u64>(), batch in 1usize..3, channels in 1usize..4, h in 2usize..7, w in 2usize..7) {
+        let mut r = Rng::new(seed);
+        let img = r.vec(batch * channels * h * w);
+        let g = r.vec(img.len());
+        // Sample positions in [-1.5, n + 0.5], then moved ≥ 0.1 px away from integers (cell edges and
+        // the clamping borders 0 and n-1 are integers).
+        let mut flow = vec![0.0; batch * 2 * h * w];
+        for b in 0..batch {
+            for (axis, n) in [(0usize, w), (1, h)] {
+                for y in 0..h {
+                    for x in 0..w {
+                        let mut pos = -1.5 + (r.next() * 0.5 + 0.5) * (n as f64 + 2.0);
+                        let frac = pos - pos.floor();
+                        if frac < 0.1 {
+                            pos += 0.1;
+                        } else if frac > 0.9 {
+                            pos -= 0.1;
+                        }
+                        let base = if axis == 0 { x } else { y } as f64;
+                        flow[((b * 2 + axis) * h + y) * w + x] = pos - base;
+                    }
+                }
+            }
+        }
+        let fwd = |img: &[f64], flow: &[f64]| {
+            let mut y = vec![0.0; img.len()];
+            warp_forward(batch, channels, h, w, img, flow, &mut y).expect("shape");
+            y
+        };
+        let mut di = vec![f64::NAN; img.len()];
+        let mut df = vec![f64::NAN; flow.len()];
+        warp_backward(batch, channels, h, w, &img, &flow, &g, Some(&mut di), Some(&mut df)).expect("shape");
+        let mut c = GradientChecker::new();
+        check(&mut c, "warp d img", &img, &g, |p| fwd(p, &flow), &di);
+        check(&mut c, "warp d flow", &flow, &g, |p| fwd(&img, p), &df);
+        c.finish();
+    }
+}
