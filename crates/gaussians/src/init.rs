@@ -44,6 +44,42 @@ pub fn knn_log_scales(points: &[[f32; 3]]) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// Indices of the `k` nearest other points of every point (row-major, `k` per point, nearest first,
+/// ties broken by index), through a k-d tree. Needs at least `k + 1` points; with fewer, every row lists
+/// all other points and pads by repeating its last entry (or itself, for a single point).
+pub fn knn_indices(points: &[[f32; 3]], k: usize) -> Vec<u32> {
+    let n = points.len();
+    if n == 0 || k == 0 {
+        return Vec::new();
+    }
+    let tree: ImmutableKdTree<f32, u64, 3, 32> = ImmutableKdTree::new_from_slice(points);
+    let want = NonZeroUsize::new((k + 1).min(n)).unwrap_or(NonZeroUsize::MIN);
+    let mut out = Vec::with_capacity(n * k);
+    for (i, p) in points.iter().enumerate() {
+        let mut found = tree.nearest_n::<SquaredEuclidean>(p, want);
+        found.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
+        let start = out.len();
+        let mut dropped_self = false;
+        for nn in &found {
+            if !dropped_self && nn.item == i as u64 {
+                dropped_self = true;
+                continue;
+            }
+            if out.len() - start < k {
+                out.push(nn.item as u32);
+            }
+        }
+        let last = out
+            .get(start..)
+            .and_then(|r| r.last().copied())
+            .unwrap_or(i as u32);
+        while out.len() - start < k {
+            out.push(last);
+        }
+    }
+    out
+}
+
 /// A set from a point cloud: means = points, kNN isotropic scales, identity rotations, opacity
 /// `opacity` (in (0,1), stored as a logit), SH DC from linear RGB colours, zero higher SH, zero features
 /// and zero semantic logits.
@@ -119,6 +155,15 @@ mod tests {
                 fast[i][0]
             );
         }
+    }
+
+    #[test]
+    fn knn_indices_exclude_self_and_sort_by_distance() {
+        let pts: Vec<[f32; 3]> = (0..10).map(|i| [(i * i) as f32, 0.0, 0.0]).collect();
+        let nn = knn_indices(&pts, 3);
+        assert_eq!(&nn[0..3], &[1, 2, 3]);
+        assert_eq!(&nn[5 * 3..6 * 3], &[4, 6, 3]);
+        assert_eq!(knn_indices(&pts[..2], 3), vec![1, 1, 1, 0, 0, 0]);
     }
 
     #[test]

@@ -2,4 +2,5 @@
 //! networks), losses, the optimisation loop, checkpoints and evaluation. This is the only crate that
 //! knows the method; everything it builds on is generic.
 
+pub mod aiap;
 pub mod image_loss;
