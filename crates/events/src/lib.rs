@@ -8,10 +8,14 @@
 
 pub mod error;
 pub mod flowio;
+pub mod io;
+pub mod repr;
 pub mod simulate;
 pub mod stream;
 
 pub use error::{EventsError, Result};
 pub use flowio::{flow_to_rgb, read_flow, write_flo, write_flow, write_flow_colour_png, Flow};
+pub use io::{open_events, read_events, write_events, EventReader};
+pub use repr::{count_frame, time_slice_frames, voxel_grid, CountMode};
 pub use simulate::{grey_from_rgb, simulate_sequence, EsimConfig, EventSimulator};
 pub use stream::{Event, EventSlice, EventStream, SensorSize};
