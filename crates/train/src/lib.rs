@@ -3,4 +3,5 @@
 //! knows the method; everything it builds on is generic.
 
 pub mod aiap;
+pub mod blend;
 pub mod image_loss;
