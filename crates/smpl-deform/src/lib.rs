@@ -1,1 +1,19 @@
-//! Body models (SMPL .npz, built-in CC0 body), forward kinematics, linear blend skinning and the deformation networks
+//! Body models (SMPL `.npz`, the built-in CC0 MakeHuman body), forward kinematics, linear blend
+//! skinning, canonical-space sampling and the inside/outside test.
+//!
+//! This crate knows bodies and skinning, never cameras, images, rasterization or training losses.
+//! Math kernels are generic over f32/f64 ([`num_traits::Float`]) so the f64 versions are checked by
+//! finite differences in the `gradient-checks` package.
+
+pub mod body;
+pub mod error;
+pub mod fk;
+pub mod lbs;
+pub mod makehuman;
+pub mod math;
+pub mod npz;
+pub mod skeleton;
+
+pub use body::{builtin_makehuman_path, BodyModel, BodyRef, PosedBody, SmplParams, UvMap};
+pub use error::{Result, SmplDeformError};
+pub use skeleton::{NUM_JOINTS, NUM_POSE_FEATURES, SMPL_JOINT_NAMES, SMPL_PARENTS};

@@ -1,0 +1,258 @@
+//! Finite-difference checks of `smpl-deform`'s backward passes: Rodrigues, forward kinematics
+//! (w.r.t. pose and translation), linear blend skinning of points and of Gaussian rotations
+//! (w.r.t. canonical position / quaternion, weights and bone transforms).
+//!
+//! Tolerance: every checked function is smooth on the sampled domain (trigonometric and polynomial;
+//! quaternions are kept at norm ≥ 0.3 away from the normalisation singularity). Central differences
+//! with h = 1e-6 in f64 have truncation error ~h²·|f'''| ≈ 1e-12·|f'''| and rounding error
+//! ~ε·|L|/h ≈ 1e-10·|L|; with |L| ≲ 10 here that is ≲ 1e-9. We require
+//! |num − ana| ≤ 1e-7 + 1e-6·max(|num|, |ana|): a relative error of 1e-6 with an absolute floor two
+//! orders above the FD noise and far below real gradient magnitudes (≳ 1e-3).
+//! Rodrigues is also checked at tiny angles (|r| ≤ 1e-3), the Taylor branch, with h = 1e-7 so that the
+//! probe stays on that branch for most coordinates; the branches agree to ~1e-13 at the switch.
+
+use gradient_checks::{central_differences, GradientChecker, Tolerance};
+use proptest::prelude::*;
+use smpl_deform::fk::{forward_kinematics, forward_kinematics_backward};
+use smpl_deform::lbs::{lbs_point, lbs_point_backward, lbs_rotation, lbs_rotation_backward};
+use smpl_deform::math::{rodrigues, rodrigues_backward, Affine};
+use smpl_deform::SMPL_PARENTS;
+
+const TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
+const H: f64 = 1e-6;
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// A deterministic pseudo-random vector in [-1, 1] from a seed (cotangents, joint positions).
+fn lcg_vec(seed: u64, n: usize) -> Vec<f64> {
+    let mut s = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+fn quat_strategy() -> impl Strategy<Value = [f64; 4]> {
+    prop::array::uniform4(-1.0f64..1.0).prop_filter("quaternion norm >= 0.3", |q| {
+        q.iter().map(|v| v * v).sum::<f64>() > 0.09
+    })
+}
+
+fn rigidish_bones(seed: u64, nb: usize) -> Vec<Affine<f64>> {
+    // Rotations from random axis-angles plus random translations (bone transforms in LBS are rigid,
+    // but the backward must not assume it, so add a small non-rigid perturbation too).
+    let v = lcg_vec(seed, nb * 18);
+    (0..nb)
+        .map(|b| {
+            let r = rodrigues([2.0 * v[18 * b], 2.0 * v[18 * b + 1], 2.0 * v[18 * b + 2]]);
+            let mut a = [0.0; 12];
+            for row in 0..3 {
+                for col in 0..3 {
+                    a[4 * row + col] = r[3 * row + col] + 0.05 * v[18 * b + 3 + 3 * row + col];
+                }
+                a[4 * row + 3] = 0.5 * v[18 * b + 12 + row];
+            }
+            a
+        })
+        .collect()
+}
+
+fn convex_weights(seed: u64, nb: usize) -> Vec<f64> {
+    let v = lcg_vec(seed, nb);
+    let e: Vec<f64> = v.iter().map(|x| (3.0 * x).exp()).collect();
+    let s: f64 = e.iter().sum();
+    e.iter().map(|x| x / s).collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn rodrigues_matches_finite_differences(
+        r in prop::array::uniform3(-3.0f64..3.0),
+        seed in any::<u64>(),
+    ) {
+        let g = lcg_vec(seed, 9);
+        let loss = |x: &[f64]| dot(&rodrigues([x[0], x[1], x[2]]), &g);
+        let mut gm = [0.0; 9];
+        gm.copy_from_slice(&g);
+        let ana = rodrigues_backward(r, &gm);
+        let num = central_differences(loss, &r, H);
+        let mut checker = GradientChecker::new();
+        checker.check("rodrigues", &num, &ana, TOL);
+        checker.finish();
+    }
+
+    #[test]
+    fn rodrigues_near_zero_matches_finite_differences(
+        r in prop::array::uniform3(-1e-3f64..1e-3),
+        seed in any::<u64>(),
+    ) {
+        let g = lcg_vec(seed, 9);
+        let loss = |x: &[f64]| dot(&rodrigues([x[0], x[1], x[2]]), &g);
+        let mut gm = [0.0; 9];
+        gm.copy_from_slice(&g);
+        let ana = rodrigues_backward(r, &gm);
+        let num = central_differences(loss, &r, 1e-7);
+        let mut checker = GradientChecker::new();
+        // h = 1e-7: rounding error ε·|L|/h ≈ 2e-9·|L|, so the absolute floor is 1e-7 as above.
+        checker.check("rodrigues near 0", &num, &ana, TOL);
+        checker.finish();
+    }
+
+    #[test]
+    fn forward_kinematics_matches_finite_differences(
+        seed in any::<u64>(),
+        scale in 0.1f64..1.5,
+    ) {
+        let nj = SMPL_PARENTS.len();
+        let pose: Vec<f64> = lcg_vec(seed, 3 * nj).iter().map(|x| scale * x).collect();
+        let transl = {
+            let t = lcg_vec(seed ^ 1, 3);
+            [t[0], t[1], t[2]]
+        };
+        let joints: Vec<[f64; 3]> = lcg_vec(seed ^ 2, 3 * nj)
+            .chunks(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let d_a: Vec<Affine<f64>> = lcg_vec(seed ^ 3, 12 * nj)
+            .chunks(12)
+            .map(|c| {
+                let mut a = [0.0; 12];
+                a.copy_from_slice(c);
+                a
+            })
+            .collect();
+        let d_j: Vec<[f64; 3]> = lcg_vec(seed ^ 4, 3 * nj)
+            .chunks(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let loss = |pose: &[f64], transl: [f64; 3]| {
+            let fk = forward_kinematics(pose, transl, &joints, &SMPL_PARENTS);
+            let mut l = 0.0;
+            for j in 0..nj {
+                l += dot(&fk.posed_from_rest[j], &d_a[j]) + dot(&fk.joints_posed[j], &d_j[j]);
+            }
+            l
+        };
+        let fk = forward_kinematics(&pose, transl, &joints, &SMPL_PARENTS);
+        let grads =
+            forward_kinematics_backward(&pose, &joints, &SMPL_PARENTS, &fk, &d_a, Some(&d_j));
+        let num_pose = central_differences(|p| loss(p, transl), &pose, H);
+        let num_t = central_differences(|t| loss(&pose, [t[0], t[1], t[2]]), &transl, H);
+        let mut checker = GradientChecker::new();
+        checker.check("fk d/dpose", &num_pose, &grads.pose, TOL);
+        checker.check("fk d/dtransl", &num_t, &grads.transl, TOL);
+        checker.finish();
+    }
+
+    #[test]
+    fn lbs_point_matches_finite_differences(
+        x in prop::array::uniform3(-1.0f64..1.0),
+        seed in any::<u64>(),
+    ) {
+        let nb = 24;
+        let bones = rigidish_bones(seed, nb);
+        let w = convex_weights(seed ^ 7, nb);
+        let g = lcg_vec(seed ^ 9, 3);
+        let d_out = [g[0], g[1], g[2]];
+        let mut d_w = vec![0.0; nb];
+        let mut d_b = vec![[0.0; 12]; nb];
+        let d_x = lbs_point_backward(&w, &bones, x, d_out, &mut d_w, &mut d_b);
+        let num_x = central_differences(|p| dot(&lbs_point(&w, &bones, [p[0], p[1], p[2]]), &g), &x, H);
+        let num_w = central_differences(|ww| dot(&lbs_point(ww, &bones, x), &g), &w, H);
+        let flat: Vec<f64> = bones.iter().flatten().copied().collect();
+        let num_b = central_differences(
+            |fb| {
+                let bb: Vec<Affine<f64>> = fb.chunks(12).map(|c| {
+                    let mut a = [0.0; 12];
+                    a.copy_from_slice(c);
+                    a
+                }).collect();
+                dot(&lbs_point(&w, &bb, x), &g)
+            },
+            &flat,
+            H,
+        );
+        let ana_b: Vec<f64> = d_b.iter().flatten().copied().collect();
+        let mut checker = GradientChecker::new();
+        checker.check("lbs point d/dx", &num_x, &d_x, TOL);
+        checker.check("lbs point d/dw", &num_w, &d_w, TOL);
+        checker.check("lbs point d/dbones", &num_b, &ana_b, TOL);
+        checker.finish();
+    }
+
+    #[test]
+    fn lbs_rotation_matches_finite_differences(
+        q in quat_strategy(),
+        seed in any::<u64>(),
+    ) {
+        let nb = 24;
+        let bones = rigidish_bones(seed, nb);
+        let w = convex_weights(seed ^ 7, nb);
+        let g = lcg_vec(seed ^ 11, 9);
+        let mut gm = [0.0; 9];
+        gm.copy_from_slice(&g);
+        let mut d_w = vec![0.0; nb];
+        let mut d_b = vec![[0.0; 12]; nb];
+        let d_q = lbs_rotation_backward(&w, &bones, q, &gm, &mut d_w, &mut d_b);
+        let num_q = central_differences(
+            |p| dot(&lbs_rotation(&w, &bones, [p[0], p[1], p[2], p[3]]), &g),
+            &q,
+            H,
+        );
+        let num_w = central_differences(|ww| dot(&lbs_rotation(ww, &bones, q), &g), &w, H);
+        let flat: Vec<f64> = bones.iter().flatten().copied().collect();
+        let num_b = central_differences(
+            |fb| {
+                let bb: Vec<Affine<f64>> = fb.chunks(12).map(|c| {
+                    let mut a = [0.0; 12];
+                    a.copy_from_slice(c);
+                    a
+                }).collect();
+                dot(&lbs_rotation(&w, &bb, q), &g)
+            },
+            &flat,
+            H,
+        );
+        let ana_b: Vec<f64> = d_b.iter().flatten().copied().collect();
+        let mut checker = GradientChecker::new();
+        checker.check("lbs rotation d/dq", &num_q, &d_q, TOL);
+        checker.check("lbs rotation d/dw", &num_w, &d_w, TOL);
+        checker.check("lbs rotation d/dbones", &num_b, &ana_b, TOL);
+        checker.finish();
+    }
+}
+
+#[test]
+fn rodrigues_is_exact_identity_at_zero_and_orthonormal() {
+    assert_eq!(
+        rodrigues([0.0f64; 3]),
+        [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    );
+    // Both branches agree at the switch (s = 5·ε^{1/4} ≈ 6.1e-4 for f64) to well below 1e-12.
+    let s: f64 = 5.0 * f64::EPSILON.sqrt().sqrt();
+    let th = s.sqrt();
+    let below = rodrigues([th * (1.0 - 1e-9), 0.0, 0.0]);
+    let above = rodrigues([th * (1.0 + 1e-9), 0.0, 0.0]);
+    for k in 0..9 {
+        assert!((below[k] - above[k]).abs() < 1e-8, "branch jump at {k}");
+    }
+    let r = rodrigues([0.3, -1.1, 2.0]);
+    // RᵀR = I to 1e-14.
+    for i in 0..3 {
+        for j in 0..3 {
+            let v: f64 = (0..3).map(|k| r[3 * k + i] * r[3 * k + j]).sum();
+            let e = if i == j { 1.0 } else { 0.0 };
+            assert!((v - e).abs() < 1e-14);
+        }
+    }
+}
