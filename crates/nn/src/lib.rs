@@ -20,6 +20,7 @@ mod adam;
 mod conv;
 mod dense;
 mod gemm;
+pub mod mlp;
 mod pool;
 mod resize;
 mod warp;
