@@ -90,9 +90,11 @@ pub fn sh_basis<T: Float>(degree: usize, dir: [T; 3], out: &mut [T]) {
     out[15] = c::<T>(SH_C3[6]) * x * (xx - three * yy);
 }
 
-/// Given dL/dbasis (`d_basis[..K]`), returns dL/d(unit direction) by the basis Jacobian.
+/// Given dL/dbasis (`d_basis[..K]`), returns dL/d(unit direction) by the basis Jacobian (the
+/// direction is treated as an unconstrained 3-vector; see [`sh_to_color_backward`] for the
+/// normalisation).
 #[inline]
-fn sh_basis_backward<T: Float>(degree: usize, dir: [T; 3], d_basis: &[T]) -> [T; 3] {
+pub fn sh_basis_backward<T: Float>(degree: usize, dir: [T; 3], d_basis: &[T]) -> [T; 3] {
     let [x, y, z] = dir;
     let zero = T::zero();
     let (mut gx, mut gy, mut gz) = (zero, zero, zero);

@@ -4,4 +4,5 @@
 
 pub mod aiap;
 pub mod blend;
+pub mod colour;
 pub mod image_loss;
