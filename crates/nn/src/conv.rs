@@ -118,8 +118,10 @@ fn im2col<T: Real>(s: &Conv2dShape, img: &[T], r0: usize, r1: usize, col: &mut [
                     let src = &plane[(iy - p) * w..(iy - p + 1) * w];
                     d[..x_lo].fill(T::zero());
                     d[x_hi..].fill(T::zero());
-                    let s0 = x_lo + kx - p;
-                    d[x_lo..x_hi].copy_from_slice(&src[s0..s0 + (x_hi - x_lo)]);
+                    if x_hi > x_lo {
+                        let s0 = x_lo + kx - p;
+                        d[x_lo..x_hi].copy_from_slice(&src[s0..s0 + (x_hi - x_lo)]);
+                    }
                 }
             }
         }

@@ -36,6 +36,8 @@ fn conv2d_matches_direct_oracle_forward_and_adjoint() {
         (1, 1, 2, 5, 5, 1, 0),
         (2, 3, 2, 8, 40, 5, 0),
         (1, 2, 2, 30, 33, 7, 3),
+        (1, 2, 3, 1, 2, 7, 3),
+        (2, 2, 3, 2, 1, 5, 2),
     ] {
         let s = Conv2dShape {
             batch,

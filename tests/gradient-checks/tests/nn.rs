@@ -138,8 +138,8 @@ proptest! {
         batch in 1usize..3,
         c_in in 1usize..3,
         c_out in 1usize..4,
-        height in 3usize..7,
-        width in 3usize..8,
+        height in 1usize..7,
+        width in 1usize..8,
         kp in prop::sample::select(vec![(1usize, 0usize), (3, 0), (3, 1), (3, 2), (5, 2), (7, 3)]),
     ) {
         let (kernel, pad) = kp;

@@ -1,0 +1,605 @@
+//! The SPyNet pyramid: forward pass recording a [`Tape`], and the backward pass from `∂L/∂flow` to
+//! `∂L/∂img1`, `∂L/∂img2` and (optionally) the weight gradients.
+//!
+//! The backward pass is the exact adjoint of the forward pass (including the warp's dependence on the
+//! upsampled flow and the pyramid's pooling); it must never approximate or skip a term, because its
+//! output is the gradient that reaches the Gaussians through the frozen network.
+
+use crate::FlowError;
+use nn::{
+    avg_pool2x2_backward, avg_pool2x2_forward, conv2d_backward_input, conv2d_backward_weight,
+    conv2d_forward, pooled_size, resize_bilinear_backward, resize_bilinear_forward, warp_backward,
+    warp_forward, Conv2dShape, Real,
+};
+
+/// Convolution kernel side (pixels); padding is `KERNEL / 2`.
+pub const KERNEL: usize = 7;
+/// `(c_in, c_out)` of the five convolutions of every level.
+pub const LAYER_CHANNELS: [(usize, usize); 5] = [(8, 32), (32, 64), (64, 32), (32, 16), (16, 2)];
+/// ImageNet channel means (RGB) subtracted from the `[0, 1]` input images.
+pub const IMAGENET_MEAN: [f64; 3] = [0.485, 0.456, 0.406];
+/// ImageNet channel standard deviations (RGB) dividing the centred input images.
+pub const IMAGENET_STD: [f64; 3] = [0.229, 0.224, 0.225];
+
+/// Weights and bias of one 7×7 convolution: `weight` `(c_out, c_in, 7, 7)`, `bias` `(c_out)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Conv<T> {
+    /// Kernel weights, PyTorch layout `(c_out, c_in, k, k)`.
+    pub weight: Vec<T>,
+    /// Bias per output channel.
+    pub bias: Vec<T>,
+}
+
+/// A SPyNet-style network: `levels[l][i]` is convolution `i` (0..5) of level `l` (0 = coarsest).
+/// Also used, zero-initialised, as the container for weight gradients.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpyNet<T> {
+    /// Per level, the five convolutions (shapes from [`LAYER_CHANNELS`]).
+    pub levels: Vec<Vec<Conv<T>>>,
+}
+
+/// Everything the backward pass needs from one forward pass, plus its result.
+#[derive(Clone, Debug)]
+pub struct Tape<T> {
+    /// Size of the input images (H, W).
+    pub size: (usize, usize),
+    /// Size the network ran at (multiples of `2^(L−1)`).
+    pub work_size: (usize, usize),
+    /// Pyramid level sizes, index 0 = coarsest.
+    pub level_sizes: Vec<(usize, usize)>,
+    /// Normalised image-2 pyramid (for the warp's backward pass), per level `(3, h, w)`.
+    pyr2: Vec<Vec<T>>,
+    /// Per level run: the upsampled flow `U_l` `(2, h, w)` and the inputs of the five convolutions.
+    levels: Vec<LevelTape<T>>,
+    /// The output flow: `(2, H, W)` for a full pass, `(2, h_l, w_l)` for a partial one.
+    pub flow: Vec<T>,
+}
+
+impl<T: Real> Tape<T> {
+    /// Fingerprint of the piecewise-smooth region the forward pass ran in: the sign pattern of every
+    /// ReLU, and for every warp sample its bilinear cell and whether it was clamped at the border.
+    /// Two passes with equal signatures are evaluations of the same smooth branch of the network;
+    /// finite-difference checks use this to discard probes that straddle a kink.
+    pub fn region_signature(&self) -> u64 {
+        let mut hsh = 0xcbf2_9ce4_8422_2325u64;
+        let mut mix = |v: u64| {
+            hsh ^= v;
+            hsh = hsh.wrapping_mul(0x0000_0100_0000_01B3);
+        };
+        for (l, lt) in self.levels.iter().enumerate() {
+            for a in &lt.acts[1..] {
+                for chunk in a.chunks(64) {
+                    let mut bits = 0u64;
+                    for (i, &v) in chunk.iter().enumerate() {
+                        if v > T::zero() {
+                            bits |= 1 << i;
+                        }
+                    }
+                    mix(bits);
+                }
+            }
+            let (h, w) = self.level_sizes[l];
+            let hw = h * w;
+            for y in 0..h {
+                for x in 0..w {
+                    let p = y * w + x;
+                    for (pos, n) in [
+                        (T::of(x as f64) + lt.up[p], w),
+                        (T::of(y as f64) + lt.up[hw + p], h),
+                    ] {
+                        let max = T::of((n - 1) as f64);
+                        let code = if pos <= T::zero() {
+                            u64::MAX
+                        } else if pos >= max {
+                            u64::MAX - 1
+                        } else {
+                            pos.floor().to_u64().unwrap_or(0)
+                        };
+                        mix(code);
+                    }
+                }
+            }
+        }
+        hsh
+    }
+}
+
+#[derive(Clone, Debug)]
+struct LevelTape<T> {
+    up: Vec<T>,
+    acts: Vec<Vec<T>>,
+}
+
+fn conv_shape(i: usize, h: usize, w: usize) -> Conv2dShape {
+    Conv2dShape {
+        batch: 1,
+        c_in: LAYER_CHANNELS[i].0,
+        c_out: LAYER_CHANNELS[i].1,
+        height: h,
+        width: w,
+        kernel: KERNEL,
+        pad: KERNEL / 2,
+    }
+}
+
+/// Small deterministic generator (SplitMix64) for weight initialisation.
+struct SplitMix(u64);
+impl SplitMix {
+    fn uniform(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        ((z >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
+    }
+}
+
+/// `(2, h, w)` flow → `(2, ht, wt)`: bilinear ×2 (`align_corners = true`), values ×2, then replicate
+/// (or crop) to the target size.
+fn upsample_flow<T: Real>(
+    flow: &[T],
+    (h, w): (usize, usize),
+    (ht, wt): (usize, usize),
+) -> Result<Vec<T>, FlowError> {
+    let (h2, w2) = (2 * h, 2 * w);
+    let mut up = vec![T::zero(); 2 * h2 * w2];
+    resize_bilinear_forward(2, h, w, flow, h2, w2, true, &mut up)?;
+    let two = T::of(2.0);
+    let mut out = vec![T::zero(); 2 * ht * wt];
+    for c in 0..2 {
+        for y in 0..ht {
+            let sy = y.min(h2 - 1);
+            for x in 0..wt {
+                out[(c * ht + y) * wt + x] = two * up[(c * h2 + sy) * w2 + x.min(w2 - 1)];
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Adjoint of [`upsample_flow`].
+fn upsample_flow_backward<T: Real>(
+    grad: &[T],
+    (h, w): (usize, usize),
+    (ht, wt): (usize, usize),
+) -> Result<Vec<T>, FlowError> {
+    let (h2, w2) = (2 * h, 2 * w);
+    let mut g_up = vec![T::zero(); 2 * h2 * w2];
+    let two = T::of(2.0);
+    for c in 0..2 {
+        for y in 0..ht {
+            let sy = y.min(h2 - 1);
+            for x in 0..wt {
+                let i = (c * h2 + sy) * w2 + x.min(w2 - 1);
+                g_up[i] = g_up[i] + two * grad[(c * ht + y) * wt + x];
+            }
+        }
+    }
+    let mut g = vec![T::zero(); 2 * h * w];
+    resize_bilinear_backward(2, h, w, h2, w2, true, &g_up, &mut g)?;
+    Ok(g)
+}
+
+fn add_into<T: Real>(acc: &mut [T], v: &[T]) {
+    for (a, &b) in acc.iter_mut().zip(v) {
+        *a = *a + b;
+    }
+}
+
+impl<T: Real> SpyNet<T> {
+    /// A network of `levels` levels with all weights and biases zero.
+    pub fn zeros(levels: usize) -> Self {
+        let level = || {
+            LAYER_CHANNELS
+                .iter()
+                .map(|&(ci, co)| Conv {
+                    weight: vec![T::zero(); co * ci * KERNEL * KERNEL],
+                    bias: vec![T::zero(); co],
+                })
+                .collect()
+        };
+        Self {
+            levels: (0..levels).map(|_| level()).collect(),
+        }
+    }
+
+    /// A freshly initialised network (He-uniform weights `U(±√(6/fan_in))`, zero biases; the last
+    /// convolution of each level scaled by 0.1 so that the initial residual flow is small),
+    /// deterministic from `seed`.
+    pub fn random(levels: usize, seed: u64) -> Self {
+        let mut net = Self::zeros(levels);
+        let mut rng = SplitMix(seed ^ 0x5EED_F10F);
+        for level in &mut net.levels {
+            for (i, conv) in level.iter_mut().enumerate() {
+                let fan_in = (LAYER_CHANNELS[i].0 * KERNEL * KERNEL) as f64;
+                let gain = if i == 4 { 0.1 } else { 1.0 };
+                let bound = gain * (6.0 / fan_in).sqrt();
+                for v in &mut conv.weight {
+                    *v = T::of(bound * rng.uniform());
+                }
+            }
+        }
+        net
+    }
+
+    /// Number of pyramid levels `L`.
+    pub fn num_levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// The same network with all parameters zero (a gradient accumulator).
+    pub fn zeros_like(&self) -> Self {
+        Self::zeros(self.num_levels())
+    }
+
+    /// Converts the parameters to another scalar type (e.g. `f32` → `f64` for gradient checks).
+    pub fn cast<U: Real>(&self) -> SpyNet<U> {
+        let cv = |v: &[T]| v.iter().map(|&x| U::of(x.as_f64())).collect::<Vec<U>>();
+        SpyNet {
+            levels: self
+                .levels
+                .iter()
+                .map(|l| {
+                    l.iter()
+                        .map(|c| Conv {
+                            weight: cv(&c.weight),
+                            bias: cv(&c.bias),
+                        })
+                        .collect()
+                })
+                .collect(),
+        }
+    }
+
+    /// Total number of scalar parameters.
+    pub fn num_parameters(&self) -> usize {
+        self.levels
+            .iter()
+            .flatten()
+            .map(|c| c.weight.len() + c.bias.len())
+            .sum()
+    }
+
+    /// Side-length multiple the network runs at: `2^(L−1)`.
+    pub fn size_multiple(&self) -> usize {
+        1 << self.num_levels().saturating_sub(1)
+    }
+
+    fn check_structure(&self) -> Result<(), FlowError> {
+        if self.levels.is_empty() {
+            return Err(FlowError::NoLevels);
+        }
+        for (l, level) in self.levels.iter().enumerate() {
+            if level.len() != 5 {
+                return Err(FlowError::MissingTensor {
+                    name: format!("level{l}.conv{}", level.len().min(4)),
+                });
+            }
+            for (i, c) in level.iter().enumerate() {
+                let (ci, co) = LAYER_CHANNELS[i];
+                if c.weight.len() != co * ci * KERNEL * KERNEL {
+                    return Err(FlowError::WrongShape {
+                        name: format!("level{l}.conv{i}.weight"),
+                        expected: vec![co, ci, KERNEL, KERNEL],
+                        actual: vec![c.weight.len()],
+                    });
+                }
+                if c.bias.len() != co {
+                    return Err(FlowError::WrongShape {
+                        name: format!("level{l}.conv{i}.bias"),
+                        expected: vec![co],
+                        actual: vec![c.bias.len()],
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Flow from `img1` to `img2`, both planar RGB `(3, h, w)` in `[0, 1]`. The result is in
+    /// [`Tape::flow`] as `(2, h, w)` pixels; keep the tape for [`SpyNet::backward`].
+    pub fn forward(
+        &self,
+        img1: &[T],
+        img2: &[T],
+        h: usize,
+        w: usize,
+    ) -> Result<Tape<T>, FlowError> {
+        self.forward_impl(img1, img2, h, w, self.num_levels().saturating_sub(1))
+    }
+
+    /// Runs only levels `0..=last_level` (coarse-to-fine training): [`Tape::flow`] is that level's
+    /// output `(2, h_l, w_l)` at the level's own resolution. `h` and `w` must be multiples of
+    /// [`SpyNet::size_multiple`].
+    pub fn forward_to_level(
+        &self,
+        img1: &[T],
+        img2: &[T],
+        h: usize,
+        w: usize,
+        last_level: usize,
+    ) -> Result<Tape<T>, FlowError> {
+        let m = self.size_multiple();
+        if !h.is_multiple_of(m) || !w.is_multiple_of(m) || last_level >= self.num_levels() {
+            return Err(FlowError::Size(format!(
+                "forward_to_level needs sides that are multiples of {m} and a level < {} (got {h}x{w}, level {last_level})",
+                self.num_levels()
+            )));
+        }
+        self.forward_impl(img1, img2, h, w, last_level)
+    }
+
+    fn forward_impl(
+        &self,
+        img1: &[T],
+        img2: &[T],
+        h: usize,
+        w: usize,
+        last_level: usize,
+    ) -> Result<Tape<T>, FlowError> {
+        self.check_structure()?;
+        let n = 3 * h * w;
+        if h == 0 || w == 0 || img1.len() != n || img2.len() != n {
+            return Err(FlowError::Size(format!(
+                "expected two RGB images of {h}x{w} ({n} values), got {} and {}",
+                img1.len(),
+                img2.len()
+            )));
+        }
+        let levels = self.num_levels();
+        let m = self.size_multiple();
+        let (hp, wp) = (h.div_ceil(m) * m, w.div_ceil(m) * m);
+        let resized = (hp, wp) != (h, w);
+        let prep = |img: &[T]| -> Result<Vec<T>, FlowError> {
+            let mut v = if resized {
+                let mut r = vec![T::zero(); 3 * hp * wp];
+                resize_bilinear_forward(3, h, w, img, hp, wp, false, &mut r)?;
+                r
+            } else {
+                img.to_vec()
+            };
+            for (c, plane) in v.chunks_exact_mut(hp * wp).enumerate() {
+                let (mean, inv_std) = (T::of(IMAGENET_MEAN[c]), T::of(1.0 / IMAGENET_STD[c]));
+                for p in plane {
+                    *p = (*p - mean) * inv_std;
+                }
+            }
+            Ok(v)
+        };
+        // Pyramids, finest last.
+        let mut sizes = vec![(hp, wp)];
+        let mut pyr1 = vec![prep(img1)?];
+        let mut pyr2 = vec![prep(img2)?];
+        for _ in 1..levels {
+            let (lh, lw) = sizes[0];
+            let (ph, pw) = (pooled_size(lh), pooled_size(lw));
+            let mut p1 = vec![T::zero(); 3 * ph * pw];
+            let mut p2 = vec![T::zero(); 3 * ph * pw];
+            avg_pool2x2_forward(3, lh, lw, &pyr1[0], &mut p1)?;
+            avg_pool2x2_forward(3, lh, lw, &pyr2[0], &mut p2)?;
+            sizes.insert(0, (ph, pw));
+            pyr1.insert(0, p1);
+            pyr2.insert(0, p2);
+        }
+        let mut tapes = Vec::with_capacity(last_level + 1);
+        let mut flow: Vec<T> = Vec::new();
+        for l in 0..=last_level {
+            let (lh, lw) = sizes[l];
+            let hw = lh * lw;
+            let up = if l == 0 {
+                vec![T::zero(); 2 * hw]
+            } else {
+                upsample_flow(&flow, sizes[l - 1], sizes[l])?
+            };
+            let mut x = vec![T::zero(); 8 * hw];
+            x[..3 * hw].copy_from_slice(&pyr1[l]);
+            warp_forward(1, 3, lh, lw, &pyr2[l], &up, &mut x[3 * hw..6 * hw])?;
+            x[6 * hw..].copy_from_slice(&up);
+            let mut acts = vec![x];
+            for (i, conv) in self.levels[l].iter().enumerate() {
+                let s = conv_shape(i, lh, lw);
+                let mut out = vec![T::zero(); s.output_len()];
+                conv2d_forward(s, &acts[i], &conv.weight, Some(&conv.bias), &mut out)?;
+                if i < 4 {
+                    for v in &mut out {
+                        *v = v.max(T::zero());
+                    }
+                    acts.push(out);
+                } else {
+                    add_into(&mut out, &up);
+                    flow = out;
+                }
+            }
+            tapes.push(LevelTape { up, acts });
+        }
+        let full = last_level + 1 == levels;
+        if full && resized {
+            let mut back = vec![T::zero(); 2 * h * w];
+            resize_bilinear_forward(2, hp, wp, &flow, h, w, false, &mut back)?;
+            let (su, sv) = (T::of(w as f64 / wp as f64), T::of(h as f64 / hp as f64));
+            let (u, v) = back.split_at_mut(h * w);
+            u.iter_mut().for_each(|x| *x = *x * su);
+            v.iter_mut().for_each(|x| *x = *x * sv);
+            flow = back;
+        }
+        Ok(Tape {
+            size: (h, w),
+            work_size: (hp, wp),
+            level_sizes: sizes,
+            pyr2,
+            levels: tapes,
+            flow,
+        })
+    }
+
+    /// Backward pass of a full [`SpyNet::forward`]: returns `(∂L/∂img1, ∂L/∂img2)` (each `(3, H, W)`)
+    /// given `grad_flow = ∂L/∂flow` (`(2, H, W)`). If `weight_grads` is given (same structure as the
+    /// network, e.g. from [`SpyNet::zeros_like`]), the weight and bias gradients are **accumulated**
+    /// into it.
+    pub fn backward(
+        &self,
+        tape: &Tape<T>,
+        grad_flow: &[T],
+        weight_grads: Option<&mut SpyNet<T>>,
+    ) -> Result<(Vec<T>, Vec<T>), FlowError> {
+        if tape.levels.len() != self.num_levels() {
+            return Err(FlowError::Size(
+                "backward needs the tape of a full forward pass".into(),
+            ));
+        }
+        let (h, w) = tape.size;
+        let (hp, wp) = tape.work_size;
+        if grad_flow.len() != 2 * h * w {
+            return Err(FlowError::Size(format!(
+                "flow gradient has {} values, expected 2x{h}x{w}",
+                grad_flow.len()
+            )));
+        }
+        let g_work = if (hp, wp) != (h, w) {
+            let (su, sv) = (T::of(w as f64 / wp as f64), T::of(h as f64 / hp as f64));
+            let mut g = grad_flow.to_vec();
+            let (u, v) = g.split_at_mut(h * w);
+            u.iter_mut().for_each(|x| *x = *x * su);
+            v.iter_mut().for_each(|x| *x = *x * sv);
+            let mut gw = vec![T::zero(); 2 * hp * wp];
+            resize_bilinear_backward(2, hp, wp, h, w, false, &g, &mut gw)?;
+            gw
+        } else {
+            grad_flow.to_vec()
+        };
+        let (mut g1, mut g2) = self
+            .backward_impl(tape, g_work, weight_grads, true, 0)?
+            .ok_or_else(|| FlowError::Size("internal: no input gradient".into()))?;
+        // Pyramids: level l−1 = pool(level l).
+        let sizes = &tape.level_sizes;
+        for l in 1..sizes.len() {
+            let (lh, lw) = sizes[l];
+            for g in [&mut g1, &mut g2] {
+                let mut gi = vec![T::zero(); 3 * lh * lw];
+                avg_pool2x2_backward(3, lh, lw, &g[l - 1], &mut gi)?;
+                add_into(&mut g[l], &gi);
+            }
+        }
+        let mut out = Vec::with_capacity(2);
+        for g in [g1, g2] {
+            let mut g = g.into_iter().next_back().unwrap_or_default();
+            for (c, plane) in g.chunks_exact_mut(hp * wp).enumerate() {
+                let inv_std = T::of(1.0 / IMAGENET_STD[c]);
+                plane.iter_mut().for_each(|v| *v = *v * inv_std);
+            }
+            if (hp, wp) != (h, w) {
+                let mut gi = vec![T::zero(); 3 * h * w];
+                resize_bilinear_backward(3, h, w, hp, wp, false, &g, &mut gi)?;
+                g = gi;
+            }
+            out.push(g);
+        }
+        let g2 = out.pop().unwrap_or_default();
+        let g1 = out.pop().unwrap_or_default();
+        Ok((g1, g2))
+    }
+
+    /// Weight gradients of the last level of a partial pass ([`SpyNet::forward_to_level`]) given
+    /// `∂L/∂flow_l` (`(2, h_l, w_l)`), **accumulated** into `weight_grads`. Lower levels are treated
+    /// as frozen (no gradient flows into them), as in SPyNet's coarse-to-fine training.
+    pub fn backward_last_level_weights(
+        &self,
+        tape: &Tape<T>,
+        grad_flow: &[T],
+        weight_grads: &mut SpyNet<T>,
+    ) -> Result<(), FlowError> {
+        let last = tape.levels.len().saturating_sub(1);
+        let (lh, lw) = tape.level_sizes[last];
+        if grad_flow.len() != 2 * lh * lw {
+            return Err(FlowError::Size(format!(
+                "level {last} flow gradient has {} values, expected 2x{lh}x{lw}",
+                grad_flow.len()
+            )));
+        }
+        self.backward_impl(tape, grad_flow.to_vec(), Some(weight_grads), false, last)?;
+        Ok(())
+    }
+
+    /// Backward through levels `tape.levels.len()−1` down to `min_level`. Returns the per-level
+    /// gradients w.r.t. the normalised pyramids when `inputs` is set.
+    #[allow(clippy::type_complexity)]
+    fn backward_impl(
+        &self,
+        tape: &Tape<T>,
+        mut gflow: Vec<T>,
+        mut weight_grads: Option<&mut SpyNet<T>>,
+        inputs: bool,
+        min_level: usize,
+    ) -> Result<Option<(Vec<Vec<T>>, Vec<Vec<T>>)>, FlowError> {
+        if let Some(g) = &weight_grads {
+            if g.num_levels() != self.num_levels() {
+                return Err(FlowError::Size(
+                    "weight-gradient container has a different number of levels".into(),
+                ));
+            }
+        }
+        let sizes = &tape.level_sizes;
+        let mut gp1: Vec<Vec<T>> = sizes
+            .iter()
+            .map(|&(a, b)| vec![T::zero(); 3 * a * b])
+            .collect();
+        let mut gp2 = gp1.clone();
+        for l in (min_level..tape.levels.len()).rev() {
+            let (lh, lw) = sizes[l];
+            let hw = lh * lw;
+            let lt = &tape.levels[l];
+            let mut g_up = gflow.clone();
+            let mut g = gflow;
+            for i in (0..5).rev() {
+                let s = conv_shape(i, lh, lw);
+                let conv = &self.levels[l][i];
+                if let Some(wg) = weight_grads.as_deref_mut() {
+                    let gc = &mut wg.levels[l][i];
+                    conv2d_backward_weight(s, &lt.acts[i], &g, &mut gc.weight, Some(&mut gc.bias))?;
+                }
+                if i == 0 && (!inputs && l == min_level) {
+                    g = Vec::new();
+                    break;
+                }
+                let mut gin = vec![T::zero(); s.input_len()];
+                conv2d_backward_input(s, &g, &conv.weight, &mut gin)?;
+                if i > 0 {
+                    for (gv, &a) in gin.iter_mut().zip(&lt.acts[i]) {
+                        if a <= T::zero() {
+                            *gv = T::zero();
+                        }
+                    }
+                }
+                g = gin;
+            }
+            if l == min_level && !inputs {
+                break;
+            }
+            // g = ∂L/∂[img1_l, warp(img2_l, U_l), U_l].
+            add_into(&mut gp1[l], &g[..3 * hw]);
+            let mut gi2 = vec![T::zero(); 3 * hw];
+            let mut gfw = vec![T::zero(); 2 * hw];
+            warp_backward(
+                1,
+                3,
+                lh,
+                lw,
+                &tape.pyr2[l],
+                &lt.up,
+                &g[3 * hw..6 * hw],
+                Some(&mut gi2),
+                Some(&mut gfw),
+            )?;
+            add_into(&mut gp2[l], &gi2);
+            add_into(&mut g_up, &gfw);
+            add_into(&mut g_up, &g[6 * hw..]);
+            gflow = if l > 0 {
+                upsample_flow_backward(&g_up, sizes[l - 1], sizes[l])?
+            } else {
+                Vec::new()
+            };
+        }
+        Ok(if inputs { Some((gp1, gp2)) } else { None })
+    }
+}

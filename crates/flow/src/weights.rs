@@ -1,0 +1,108 @@
+//! Reading and writing [`SpyNet`] weights as safetensors (`level{l}.conv{i}.weight|bias`, F32,
+//! little-endian; names documented in the crate docs). Reading validates every tensor's presence,
+//! dtype and shape and names the offending tensor in the error.
+
+use crate::net::{Conv, KERNEL, LAYER_CHANNELS};
+use crate::{FlowError, SpyNet};
+use safetensors::tensor::{Dtype, TensorView};
+use safetensors::SafeTensors;
+use std::collections::HashMap;
+use std::path::Path;
+
+fn tensor_name(l: usize, i: usize, what: &str) -> String {
+    format!("level{l}.conv{i}.{what}")
+}
+
+/// Serialises `net` to safetensors bytes (metadata: `format = spynet`, `levels = L`).
+pub fn write_safetensors(net: &SpyNet<f32>) -> Result<Vec<u8>, FlowError> {
+    let mut buffers: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
+    for (l, level) in net.levels.iter().enumerate() {
+        for (i, c) in level.iter().enumerate() {
+            let (ci, co) = LAYER_CHANNELS[i];
+            let bytes = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+            buffers.push((
+                tensor_name(l, i, "weight"),
+                vec![co, ci, KERNEL, KERNEL],
+                bytes(&c.weight),
+            ));
+            buffers.push((tensor_name(l, i, "bias"), vec![co], bytes(&c.bias)));
+        }
+    }
+    let views = buffers
+        .iter()
+        .map(|(n, s, b)| Ok((n.clone(), TensorView::new(Dtype::F32, s.clone(), b)?)))
+        .collect::<Result<Vec<_>, FlowError>>()?;
+    let meta = HashMap::from([
+        ("format".to_string(), "spynet".to_string()),
+        ("levels".to_string(), net.num_levels().to_string()),
+    ]);
+    Ok(safetensors::serialize(views, Some(meta))?)
+}
+
+/// Parses safetensors bytes into a network; the number of levels is the number of consecutive
+/// `level{l}.conv0.weight` tensors present.
+pub fn read_safetensors(bytes: &[u8]) -> Result<SpyNet<f32>, FlowError> {
+    let st = SafeTensors::deserialize(bytes)?;
+    let names: std::collections::HashSet<String> =
+        st.names().into_iter().map(str::to_string).collect();
+    let mut levels = 0;
+    while names.contains(&tensor_name(levels, 0, "weight")) {
+        levels += 1;
+    }
+    if levels == 0 {
+        return Err(FlowError::NoLevels);
+    }
+    let mut net = SpyNet::<f32>::zeros(levels);
+    for l in 0..levels {
+        let mut convs = Vec::with_capacity(5);
+        for (i, &(ci, co)) in LAYER_CHANNELS.iter().enumerate() {
+            let read = |what: &str, shape: Vec<usize>| -> Result<Vec<f32>, FlowError> {
+                let name = tensor_name(l, i, what);
+                let t = st
+                    .tensor(&name)
+                    .map_err(|_| FlowError::MissingTensor { name: name.clone() })?;
+                if t.dtype() != Dtype::F32 {
+                    return Err(FlowError::WrongDtype {
+                        name,
+                        dtype: format!("{:?}", t.dtype()),
+                    });
+                }
+                if t.shape() != shape.as_slice() {
+                    return Err(FlowError::WrongShape {
+                        name,
+                        expected: shape,
+                        actual: t.shape().to_vec(),
+                    });
+                }
+                Ok(t.data()
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                    .collect())
+            };
+            convs.push(Conv {
+                weight: read("weight", vec![co, ci, KERNEL, KERNEL])?,
+                bias: read("bias", vec![co])?,
+            });
+        }
+        net.levels[l] = convs;
+    }
+    Ok(net)
+}
+
+/// Writes `net` to a safetensors file.
+pub fn save_safetensors(net: &SpyNet<f32>, path: &Path) -> Result<(), FlowError> {
+    let bytes = write_safetensors(net)?;
+    std::fs::write(path, bytes).map_err(|source| FlowError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Reads a network from a safetensors file.
+pub fn load_safetensors(path: &Path) -> Result<SpyNet<f32>, FlowError> {
+    let bytes = std::fs::read(path).map_err(|source| FlowError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    read_safetensors(&bytes)
+}

@@ -1,0 +1,222 @@
+//! Whole-network f64 finite-difference check of the SPyNet input gradients (both images), and of the
+//! weight gradients of a few convolutions, on small random images with 2- and 3-level networks.
+//!
+//! Kinks: the network is piecewise smooth (ReLUs, bilinear cells of the warp, border clamping). Each
+//! probe evaluates the forward pass at `x ± h·e_i` and compares [`flow::Tape::region_signature`] with the
+//! centre's; a probe whose three signatures differ straddles a kink, where a difference quotient means
+//! nothing, and is dropped from the comparison (the test asserts that at most 2% are dropped and
+//! reports how many). Inside one region the network is smooth.
+//!
+//! Tolerance: `abs 1e-6, rel 1e-5`, step `h = 1e-6`. `L = ⟨g, flow⟩` is O(10); rounding in the
+//! difference quotient is `≈ ε·|L|/h ≈ 1e-16·10/1e-6 = 1e-9`, and the truncation error `h²·|L'''|/6`
+//! is below 1e-10 for the O(1)–O(100) third derivatives of these O(1)-scaled networks; the tolerance
+//! leaves a ≥100× margin, yet a wrong sign, a missing term (e.g. the warp's flow path, the pyramid
+//! pooling path, the skip connection) or a zero gradient changes entries by O(0.01–1) and fails.
+
+use flow::SpyNet;
+use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
+use proptest::prelude::*;
+use std::cell::RefCell;
+
+const H: f64 = 1e-6;
+const TOL: Tolerance = Tolerance::new(1e-6, 1e-5);
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        ((z >> 11) as f64) / ((1u64 << 53) as f64)
+    }
+}
+
+/// A random f64 network whose last layers are scaled so the predicted flow is O(1) px (so the warp,
+/// its flow path and border clamping are all exercised).
+fn network(levels: usize, seed: u64) -> SpyNet<f64> {
+    let mut net = SpyNet::<f64>::random(levels, seed);
+    for level in &mut net.levels {
+        for v in &mut level[4].weight {
+            *v *= 30.0;
+        }
+    }
+    net
+}
+
+/// Numeric gradient of `x ↦ ⟨g, f(x)⟩` at the probe coordinates `probe`, where `x` is the
+/// concatenation of the probed vector; drops probes that straddle a kink. Returns (kept indices,
+/// numeric values).
+fn probe_numeric(
+    x: &[f64],
+    probe: &[usize],
+    eval: impl Fn(&[f64]) -> (f64, u64),
+) -> (Vec<usize>, Vec<f64>, usize) {
+    let (_, centre) = eval(x);
+    let mut kept = Vec::new();
+    let mut num = Vec::new();
+    let mut dropped = 0;
+    for &i in probe {
+        let sigs = RefCell::new(Vec::new());
+        let d = central_differences(
+            |p| {
+                let mut full = x.to_vec();
+                full[i] = p[0];
+                let (l, s) = eval(&full);
+                sigs.borrow_mut().push(s);
+                l
+            },
+            &[x[i]],
+            H,
+        );
+        if sigs.borrow().iter().all(|&s| s == centre) {
+            kept.push(i);
+            num.push(d[0]);
+        } else {
+            dropped += 1;
+        }
+    }
+    (kept, num, dropped)
+}
+
+fn check_case(levels: usize, h: usize, w: usize, seed: u64, probes: Option<usize>) {
+    let net = network(levels, seed);
+    let mut rng = Rng(seed ^ 0xF10);
+    let n = 3 * h * w;
+    let imgs: Vec<f64> = (0..2 * n).map(|_| rng.next()).collect();
+    let g: Vec<f64> = (0..2 * h * w).map(|_| 2.0 * rng.next() - 1.0).collect();
+    let eval = |x: &[f64]| {
+        let tape = net.forward(&x[..n], &x[n..], h, w).expect("forward");
+        let l: f64 = tape.flow.iter().zip(&g).map(|(a, b)| a * b).sum();
+        (l, tape.region_signature())
+    };
+    let tape = net.forward(&imgs[..n], &imgs[n..], h, w).expect("forward");
+    let max_flow = tape.flow.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(
+        max_flow > 0.3,
+        "test network predicts too little flow ({max_flow}) to exercise the warp"
+    );
+    let (d1, d2) = net.backward(&tape, &g, None).expect("backward");
+    let analytic: Vec<f64> = d1.iter().chain(&d2).copied().collect();
+    let probe: Vec<usize> = match probes {
+        None => (0..2 * n).collect(),
+        Some(k) => (0..k)
+            .map(|_| (rng.next() * (2 * n) as f64) as usize % (2 * n))
+            .collect(),
+    };
+    let (kept, numeric, dropped) = probe_numeric(&imgs, &probe, eval);
+    assert!(
+        dropped * 50 <= probe.len(),
+        "{dropped} of {} probes straddled a kink",
+        probe.len()
+    );
+    let ana: Vec<f64> = kept.iter().map(|&i| analytic[i]).collect();
+    let name =
+        format!("spynet L={levels} {h}x{w} seed {seed} d(img1,img2) ({dropped} probes dropped)");
+    let mut checker = GradientChecker::new();
+    checker.check(&name, &numeric, &ana, TOL);
+    // The check must be able to fail: wrong sign and a zeroed image-2 gradient (the warp path).
+    let neg: Vec<f64> = ana.iter().map(|a| -a).collect();
+    assert!(
+        !compare(&name, &numeric, &neg, TOL).passed(),
+        "{name}: negated gradient passes"
+    );
+    let no_img2: Vec<f64> = kept
+        .iter()
+        .map(|&i| if i >= n { 0.0 } else { analytic[i] })
+        .collect();
+    if kept.iter().any(|&i| i >= n) {
+        assert!(
+            !compare(&name, &numeric, &no_img2, TOL).passed(),
+            "{name}: zero d img2 passes"
+        );
+    }
+    checker.finish();
+}
+
+#[test]
+fn two_level_network_all_input_coordinates() {
+    check_case(2, 6, 8, 11, None);
+}
+
+#[test]
+fn three_level_network_resized_input_sampled_coordinates() {
+    // 7x10 is not a multiple of 4: exercises the resize-in / resize-back path.
+    check_case(3, 7, 10, 23, Some(120));
+}
+
+#[test]
+fn weight_gradients_of_selected_convolutions() {
+    let (levels, h, w) = (2, 6, 8);
+    let net = network(levels, 5);
+    let mut rng = Rng(77);
+    let n = 3 * h * w;
+    let img1: Vec<f64> = (0..n).map(|_| rng.next()).collect();
+    let img2: Vec<f64> = (0..n).map(|_| rng.next()).collect();
+    let g: Vec<f64> = (0..2 * h * w).map(|_| 2.0 * rng.next() - 1.0).collect();
+    let tape = net.forward(&img1, &img2, h, w).expect("forward");
+    let mut grads = net.zeros_like();
+    net.backward(&tape, &g, Some(&mut grads)).expect("backward");
+    let mut checker = GradientChecker::new();
+    for (l, i, bias) in [
+        (0, 0, false),
+        (0, 4, true),
+        (1, 1, false),
+        (1, 3, true),
+        (1, 4, false),
+    ] {
+        let len = if bias {
+            net.levels[l][i].bias.len()
+        } else {
+            net.levels[l][i].weight.len()
+        };
+        let probe: Vec<usize> = (0..24.min(len))
+            .map(|_| (rng.next() * len as f64) as usize % len)
+            .collect();
+        let get = |m: &SpyNet<f64>| {
+            let c = &m.levels[l][i];
+            if bias {
+                c.bias.clone()
+            } else {
+                c.weight.clone()
+            }
+        };
+        let params = get(&net);
+        let eval = |p: &[f64]| {
+            let mut m = net.clone();
+            if bias {
+                m.levels[l][i].bias = p.to_vec()
+            } else {
+                m.levels[l][i].weight = p.to_vec()
+            }
+            let t = m.forward(&img1, &img2, h, w).expect("forward");
+            (
+                t.flow.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>(),
+                t.region_signature(),
+            )
+        };
+        let (kept, numeric, dropped) = probe_numeric(&params, &probe, eval);
+        assert!(
+            dropped * 10 <= probe.len(),
+            "level {l} conv {i}: {dropped} probes on kinks"
+        );
+        let all = get(&grads);
+        let ana: Vec<f64> = kept.iter().map(|&k| all[k]).collect();
+        checker.check(
+            &format!("level{l}.conv{i} {}", if bias { "bias" } else { "weight" }),
+            &numeric,
+            &ana,
+            TOL,
+        );
+    }
+    checker.finish();
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(3))]
+    #[test]
+    fn random_two_level_networks_sampled_coordinates(seed in any::<u64>(), h in 4usize..7, w in 4usize..7) {
+        check_case(2, 2 * (h / 2), 2 * (w / 2), seed, Some(60));
+    }
+}
