@@ -5,4 +5,5 @@
 pub mod aiap;
 pub mod blend;
 pub mod colour;
+pub mod flow_loss;
 pub mod image_loss;

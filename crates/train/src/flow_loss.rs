@@ -1,0 +1,150 @@
+//! The event-flow loss of E-Sem3DGS (paper §4.4), minus the network: preparing the event-flow target
+//! at the flow network's resolution, and the masked L1 between predicted and event flow.
+//!
+//! L_flow = (1/|M|) Σ_{p∈M} ‖F_pred(p) − F_evt(p)‖₁ with M = {p : ‖F_evt(p)‖₂ > τ and p valid}, where
+//! F_evt is the event flow bilinearly resized (`align_corners = true`) to the network's resolution with
+//! its vectors scaled by the same factor (x by w_out/W, y by h_out/H; 1/4 in the paper). The renders
+//! themselves are resized by the same operator inside the training step (`nn::resize_bilinear_*`).
+//! Flows are planar (2, H, W) in pixels, forward k → k+1 (DESIGN.md §3).
+
+use nn::{resize_bilinear_forward, NnError, Real};
+
+/// Event flow at the network's resolution, with the supervision mask.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlowTarget<T> {
+    /// Height of the resized flow (pixels).
+    pub height: usize,
+    /// Width of the resized flow (pixels).
+    pub width: usize,
+    /// Resized flow (2, h, w), vectors in resized pixels.
+    pub flow: Vec<T>,
+    /// Supervised pixels (h × w): magnitude above τ and valid.
+    pub mask: Vec<bool>,
+}
+
+impl<T: Real> FlowTarget<T> {
+    /// Number of supervised pixels |M|.
+    pub fn supervised(&self) -> usize {
+        self.mask.iter().filter(|&&m| m).count()
+    }
+}
+
+/// Resizes an event flow (2, H, W) and its validity (H × W, `None` = all valid) to (h_out, w_out) and
+/// builds the mask with threshold `tau` (pixels at the *resized* scale). A resized pixel is valid when
+/// its bilinear validity weight is above 0.5 (i.e. it is mostly made of valid source pixels).
+pub fn prepare_target<T: Real>(
+    flow: &[T],
+    valid: Option<&[bool]>,
+    height: usize,
+    width: usize,
+    h_out: usize,
+    w_out: usize,
+    tau: T,
+) -> Result<FlowTarget<T>, NnError> {
+    let mut resized = vec![T::zero(); 2 * h_out * w_out];
+    resize_bilinear_forward(2, height, width, flow, h_out, w_out, true, &mut resized)?;
+    let (sx, sy) = (
+        T::of(w_out as f64 / width.max(1) as f64),
+        T::of(h_out as f64 / height.max(1) as f64),
+    );
+    let plane = h_out * w_out;
+    for v in &mut resized[..plane] {
+        *v = *v * sx;
+    }
+    for v in &mut resized[plane..] {
+        *v = *v * sy;
+    }
+    let valid_resized = match valid {
+        Some(valid) => {
+            let as_float: Vec<T> = valid
+                .iter()
+                .map(|&b| if b { T::one() } else { T::zero() })
+                .collect();
+            let mut out = vec![T::zero(); plane];
+            resize_bilinear_forward(1, height, width, &as_float, h_out, w_out, true, &mut out)?;
+            out.iter().map(|&v| v > T::of(0.5)).collect()
+        }
+        None => vec![true; plane],
+    };
+    let mask = (0..plane)
+        .map(|p| {
+            let (u, v) = (resized[p], resized[plane + p]);
+            valid_resized[p] && (u * u + v * v).sqrt() > tau
+        })
+        .collect();
+    Ok(FlowTarget {
+        height: h_out,
+        width: w_out,
+        flow: resized,
+        mask,
+    })
+}
+
+/// Masked L1 between a predicted flow (2, h, w) and the target; writes dL/dpred into `grad` when given.
+/// Returns 0 (and a zero gradient) when no pixel is supervised.
+pub fn masked_l1<T: Real>(pred: &[T], target: &FlowTarget<T>, grad: Option<&mut [T]>) -> T {
+    let plane = target.height * target.width;
+    let count = target.supervised();
+    let mut grad = grad;
+    if let Some(g) = grad.as_deref_mut() {
+        g.iter_mut().for_each(|v| *v = T::zero());
+    }
+    if count == 0 {
+        return T::zero();
+    }
+    let inv = T::one() / T::of(count as f64);
+    let mut total = T::zero();
+    for p in 0..plane {
+        if !target.mask[p] {
+            continue;
+        }
+        for c in 0..2 {
+            let i = c * plane + p;
+            let d = pred[i] - target.flow[i];
+            total = total + d.abs();
+            if let Some(g) = grad.as_deref_mut() {
+                g[i] = if d > T::zero() {
+                    inv
+                } else if d < T::zero() {
+                    -inv
+                } else {
+                    T::zero()
+                };
+            }
+        }
+    }
+    total * inv
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_flow_is_scaled_with_the_resolution() {
+        let (h, w) = (16, 24);
+        let mut flow = vec![8.0f32; h * w];
+        flow.extend(vec![-4.0f32; h * w]);
+        let t = prepare_target(&flow, None, h, w, 4, 6, 0.5).unwrap();
+        assert!(t.flow[..24].iter().all(|&u| (u - 2.0).abs() < 1e-6));
+        assert!(t.flow[24..].iter().all(|&v| (v + 1.0).abs() < 1e-6));
+        assert_eq!(t.supervised(), 24);
+        let still = prepare_target(&vec![0.1f32; 2 * h * w], None, h, w, 4, 6, 0.5).unwrap();
+        assert_eq!(still.supervised(), 0);
+        assert_eq!(masked_l1(&[1.0; 48], &still, None), 0.0);
+    }
+
+    #[test]
+    fn invalid_source_pixels_are_not_supervised() {
+        let (h, w) = (8, 8);
+        let flow = vec![8.0f32; 2 * h * w];
+        let valid: Vec<bool> = (0..h * w).map(|i| i % w < 4).collect();
+        let t = prepare_target(&flow, Some(&valid), h, w, 2, 2, 0.5).unwrap();
+        assert_eq!(t.mask, vec![true, false, true, false]);
+        let pred = vec![0.0f32; 8];
+        let mut g = vec![9.0f32; 8];
+        let l = masked_l1(&pred, &t, Some(&mut g));
+        assert!((l - 4.0).abs() < 1e-6, "{l}");
+        assert_eq!(g, vec![-0.5, 0.0, -0.5, 0.0, -0.5, 0.0, -0.5, 0.0]);
+    }
+}
