@@ -1,0 +1,50 @@
+#![allow(missing_docs)] // criterion_group! generates an undocumented function.
+//! Criterion benchmarks of the rasterizer on the `cargo xtask bench raster` cases (seeded random
+//! scenes): forward, and forward + backward with a constant cotangent.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use rasterize_cpu::synthetic::SyntheticScene;
+use rasterize_cpu::{render, render_backward, Cotangents, RenderSettings};
+
+fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
+    let scene = match SyntheticScene::new(n, w, h, 42) {
+        Ok(s) => s,
+        Err(e) => panic!("scene: {e}"),
+    };
+    let settings = RenderSettings::default();
+    let d_image = vec![1.0f32; 3 * (w * h) as usize];
+    let mut group = c.benchmark_group(name);
+    group.sample_size(10);
+    group.bench_function("fwd", |b| {
+        b.iter(|| render(&scene.camera, &scene.splats(), &settings).map(|o| o.num_pairs))
+    });
+    group.bench_function("fwd_bwd", |b| {
+        b.iter(|| {
+            let out = render(&scene.camera, &scene.splats(), &settings)?;
+            render_backward(
+                &scene.camera,
+                &scene.splats(),
+                &settings,
+                &out,
+                &Cotangents {
+                    image: &d_image,
+                    alpha: None,
+                    depth: None,
+                },
+            )
+            .map(|g| g.means.len())
+        })
+    });
+    group.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    bench_case(c, "50k_256", 50_000, 256, 256);
+    bench_case(c, "100k_256", 100_000, 256, 256);
+    if std::env::var_os("RASTER_BENCH_1M").is_some() {
+        bench_case(c, "1m_1080p", 1_000_000, 1920, 1080);
+    }
+}
+
+criterion_group!(raster, benches);
+criterion_main!(raster);

@@ -1,0 +1,109 @@
+//! The crate's one error type. Every variant names the file, field or value at fault so that a caller
+//! can report it without adding context of its own.
+
+use std::path::PathBuf;
+
+/// Errors of camera construction/reading and of render requests.
+#[derive(Debug, thiserror::Error)]
+pub enum RasterError {
+    /// Image width or height is zero or larger than [`crate::MAX_IMAGE_SIDE`].
+    #[error("image size {width}x{height} is invalid: each side must be in 1..={max}")]
+    InvalidImageSize {
+        /// Requested width (pixels).
+        width: u64,
+        /// Requested height (pixels).
+        height: u64,
+        /// Largest allowed side (pixels).
+        max: u32,
+    },
+    /// A camera field is NaN or infinite.
+    #[error("camera field {field} is not finite ({value})")]
+    NonFiniteCamera {
+        /// Field name, e.g. `fx` or `world_to_camera[1][2]`.
+        field: String,
+        /// Offending value.
+        value: f64,
+    },
+    /// A focal length is zero or negative.
+    #[error("camera focal length {field} = {value} must be positive")]
+    NonPositiveFocal {
+        /// `fx` or `fy`.
+        field: &'static str,
+        /// Offending value (pixels).
+        value: f64,
+    },
+    /// The rotation part of the world-to-camera matrix is singular (|det| below 1e-9).
+    #[error("camera world_to_camera is singular: det of its 3x3 part is {det}")]
+    SingularMatrix {
+        /// Determinant of the upper-left 3×3 block.
+        det: f64,
+    },
+    /// The last row of the world-to-camera matrix is not (0, 0, 0, 1).
+    #[error("camera world_to_camera last row must be [0, 0, 0, 1], got {row:?}")]
+    NotAffine {
+        /// The last row as given.
+        row: [f64; 4],
+    },
+    /// Reading a camera file failed.
+    #[error("reading camera file {path}: {source}")]
+    Io {
+        /// File that could not be read.
+        path: PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// A camera file is not valid JSON of the expected shape.
+    #[error("parsing camera JSON {path}: {source}")]
+    Json {
+        /// File being parsed (`<string>` for in-memory JSON).
+        path: PathBuf,
+        /// Underlying error.
+        source: serde_json::Error,
+    },
+    /// A camera index into an INRIA `cameras.json` list is out of range.
+    #[error("camera index {index} out of range: {path} holds {count} cameras")]
+    CameraIndex {
+        /// File holding the list.
+        path: PathBuf,
+        /// Requested index.
+        index: usize,
+        /// Number of cameras in the file.
+        count: usize,
+    },
+    /// A per-Gaussian input slice has the wrong length.
+    #[error("input {field} has {got} entries, expected {expected}")]
+    LengthMismatch {
+        /// Field name (`log_scales`, `channels`, `d_image`, ...).
+        field: &'static str,
+        /// Entries found.
+        got: usize,
+        /// Entries expected.
+        expected: usize,
+    },
+    /// A Gaussian's quaternion is zero (it has no orientation).
+    #[error("Gaussian {index}: quaternion is zero")]
+    ZeroQuaternion {
+        /// Index of the Gaussian.
+        index: usize,
+    },
+    /// A Gaussian parameter is NaN or infinite.
+    #[error("Gaussian {index}: {field} is not finite")]
+    NonFiniteParameter {
+        /// Index of the Gaussian.
+        index: usize,
+        /// Field name.
+        field: &'static str,
+    },
+    /// Render settings are invalid.
+    #[error("render settings: {0}")]
+    InvalidSettings(String),
+    /// The SH degree is above 3 or does not match the coefficient count.
+    #[error("SH degree {degree} is unsupported (0..=3)")]
+    InvalidShDegree {
+        /// Requested degree.
+        degree: usize,
+    },
+    /// `render_backward` was given a forward output of another scene or camera.
+    #[error("forward output does not match this request: {0}")]
+    ForwardMismatch(String),
+}

@@ -1,0 +1,865 @@
+//! Tile binning, depth sort, front-to-back blending and its analytic backward.
+//!
+//! Forward (INRIA rules): every visible Gaussian is duplicated once per 16×16 tile of its rectangle;
+//! the pairs are ordered by tile, then view depth (ties by input index, which is what INRIA's stable
+//! radix sort does); each tile blends its list front to back with α = min(0.99, o·exp(power)),
+//! skipping power > 0 and α < 1/255, and a pixel stops when T·(1 − α) < 1e-4 (that splat excluded).
+//! Output per pixel: `image_c = Σ wᵢ cᵢ + T_final · bg_c`, `alpha = 1 − T_final`,
+//! `depth = Σ wᵢ zᵢ` with `wᵢ = αᵢ Tᵢ` (divide depth by alpha for the expected depth of what is hit).
+//!
+//! Backward: each tile replays its list front to back (recomputing every Tᵢ exactly as the forward
+//! did, instead of recovering it by division) and gets the colour behind each splat from the stored
+//! final sums. Where α is clamped at 0.99 its derivative w.r.t. opacity and power is zero (the true
+//! derivative of the clamp). Per-(tile, Gaussian) contributions are written in sorted order and then
+//! summed per Gaussian in tile order, so gradients are bit-identical for any thread count.
+//!
+//! Hot loops are splat-major over the pixels of a tile, restricted to the (margin-padded) box where α
+//! can reach 1/255; they never allocate.
+
+use rayon::prelude::*;
+
+use crate::project::{project, project_backward, CameraParams, Projected, ProjectedGrad};
+use crate::{camera, lit, Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
+
+/// Gaussians to splat, as structure-of-arrays slices of equal length N.
+#[derive(Clone, Copy, Debug)]
+pub struct Splats<'a, T> {
+    /// Means in world space (metres).
+    pub means: &'a [[T; 3]],
+    /// Log-scales (natural log of metres).
+    pub log_scales: &'a [[T; 3]],
+    /// Unnormalised quaternions (w, x, y, z); zero quaternions are rejected.
+    pub quats: &'a [[T; 4]],
+    /// Opacity logits (opacity = sigmoid(logit)).
+    pub opacity_logits: &'a [T],
+    /// Per-Gaussian channels, N × C row-major (`channels[i * C + c]`).
+    pub channels: &'a [T],
+    /// Number of channels C (may be 0).
+    pub num_channels: usize,
+}
+
+impl<T> Splats<'_, T> {
+    /// Number of Gaussians N.
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// True when there are no Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+}
+
+/// Render settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Near plane: Gaussians with view depth z ≤ near (metres) are culled. INRIA default 0.2.
+    pub near_plane: f64,
+    /// Background value per channel, composited with the final transmittance. Empty = all zeros;
+    /// otherwise exactly C values.
+    pub background: Vec<f64>,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            near_plane: 0.2,
+            background: Vec::new(),
+        }
+    }
+}
+
+/// Everything the backward pass needs from the forward pass.
+#[derive(Clone, Debug)]
+struct ForwardState<T> {
+    /// Visible Gaussians (compact order = increasing input index).
+    visible: Vec<Projected<T>>,
+    /// Input index of each visible Gaussian.
+    visible_ids: Vec<u32>,
+    /// Offsets of each tile's list in `tile_list` (length tiles + 1).
+    tile_offsets: Vec<usize>,
+    /// Compact indices, sorted by tile then depth.
+    tile_list: Vec<u32>,
+    /// Per tile, tile-major pixels: [T_final (256) | depth (256) | channel sums C × 256].
+    tile_buf: Vec<T>,
+    /// Per tile pixel: number of list entries up to and including the last contributing one.
+    last: Vec<u32>,
+    /// Background in working precision (C values).
+    background: Vec<T>,
+    /// Number of input Gaussians.
+    n: usize,
+}
+
+/// Forward output.
+#[derive(Clone, Debug)]
+pub struct RenderOutput<T> {
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+    /// Channels C.
+    pub num_channels: usize,
+    /// Planar image (C, H, W), background composited.
+    pub image: Vec<T>,
+    /// Accumulated alpha 1 − T_final, (H, W).
+    pub alpha: Vec<T>,
+    /// Alpha-weighted view depth Σ wᵢ zᵢ (metres), (H, W); divide by `alpha` for expected depth.
+    pub depth: Vec<T>,
+    /// INRIA screen radius per input Gaussian (pixels); 0 = culled.
+    pub radii: Vec<u32>,
+    /// Number of (tile, Gaussian) pairs blended (a cost measure).
+    pub num_pairs: usize,
+    state: ForwardState<T>,
+}
+
+/// Cotangents (dL/d output) for [`render_backward`].
+#[derive(Clone, Copy, Debug)]
+pub struct Cotangents<'a, T> {
+    /// dL/d image, (C, H, W).
+    pub image: &'a [T],
+    /// dL/d alpha, (H, W), if the loss uses it.
+    pub alpha: Option<&'a [T]>,
+    /// dL/d depth, (H, W), if the loss uses it.
+    pub depth: Option<&'a [T]>,
+}
+
+/// Gradients w.r.t. every input of [`render`], same layouts as [`Splats`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradients<T> {
+    /// dL/d means (world).
+    pub means: Vec<[T; 3]>,
+    /// dL/d log-scales.
+    pub log_scales: Vec<[T; 3]>,
+    /// dL/d unnormalised quaternions.
+    pub quats: Vec<[T; 4]>,
+    /// dL/d opacity logits.
+    pub opacity_logits: Vec<T>,
+    /// dL/d channels, N × C.
+    pub channels: Vec<T>,
+    /// dL/d screen-space mean (per pixel; multiply by (W/2, H/2) for INRIA's NDC-space gradient),
+    /// for density control.
+    pub means_2d: Vec<[T; 2]>,
+    /// dL/d background, C values.
+    pub background: Vec<T>,
+}
+
+/// One Gaussian's gradients: (mean, log-scale, quaternion, opacity logit, screen mean).
+type GaussianGrad<T> = ([T; 3], [T; 3], [T; 4], T, [T; 2]);
+
+const BUF_T: usize = 0;
+const BUF_D: usize = TILE_PIXELS;
+const BUF_C: usize = 2 * TILE_PIXELS;
+
+fn validate<T: Real>(splats: &Splats<'_, T>) -> Result<(), RasterError> {
+    let n = splats.len();
+    let check_len = |field, got| {
+        if got == n {
+            Ok(())
+        } else {
+            Err(RasterError::LengthMismatch {
+                field,
+                got,
+                expected: n,
+            })
+        }
+    };
+    check_len("log_scales", splats.log_scales.len())?;
+    check_len("quats", splats.quats.len())?;
+    check_len("opacity_logits", splats.opacity_logits.len())?;
+    let expected = n * splats.num_channels;
+    if splats.channels.len() != expected {
+        return Err(RasterError::LengthMismatch {
+            field: "channels",
+            got: splats.channels.len(),
+            expected,
+        });
+    }
+    if n > u32::MAX as usize {
+        return Err(RasterError::InvalidSettings(format!(
+            "{n} Gaussians exceed the supported maximum {}",
+            u32::MAX
+        )));
+    }
+    let c = splats.num_channels;
+    // Report the first bad Gaussian (lowest index), found in parallel.
+    let bad = (0..n).into_par_iter().find_first(|&i| {
+        let q = splats.quats[i];
+        !(splats.means[i].iter().all(|v| v.is_finite())
+            && splats.log_scales[i].iter().all(|v| v.is_finite())
+            && q.iter().all(|v| v.is_finite())
+            && splats.opacity_logits[i].is_finite()
+            && splats.channels[i * c..(i + 1) * c]
+                .iter()
+                .all(|v| v.is_finite())
+            && q.iter().any(|v| *v != T::zero()))
+    });
+    if let Some(i) = bad {
+        let q = splats.quats[i];
+        let field = if !splats.means[i].iter().all(|v| v.is_finite()) {
+            "means"
+        } else if !splats.log_scales[i].iter().all(|v| v.is_finite()) {
+            "log_scales"
+        } else if !q.iter().all(|v| v.is_finite()) {
+            "quats"
+        } else if !splats.opacity_logits[i].is_finite() {
+            "opacity_logits"
+        } else if !splats.channels[i * c..(i + 1) * c]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            "channels"
+        } else {
+            return Err(RasterError::ZeroQuaternion { index: i });
+        };
+        return Err(RasterError::NonFiniteParameter { index: i, field });
+    }
+    Ok(())
+}
+
+fn background<T: Real>(settings: &RenderSettings, c: usize) -> Result<Vec<T>, RasterError> {
+    if !(settings.near_plane.is_finite() && settings.near_plane > 0.0) {
+        return Err(RasterError::InvalidSettings(format!(
+            "near_plane {} must be finite and positive",
+            settings.near_plane
+        )));
+    }
+    if settings.background.is_empty() {
+        return Ok(vec![T::zero(); c]);
+    }
+    if settings.background.len() != c {
+        return Err(RasterError::LengthMismatch {
+            field: "background",
+            got: settings.background.len(),
+            expected: c,
+        });
+    }
+    if let Some(v) = settings.background.iter().find(|v| !v.is_finite()) {
+        return Err(RasterError::InvalidSettings(format!(
+            "background value {v} is not finite"
+        )));
+    }
+    Ok(settings.background.iter().map(|&v| lit(v)).collect())
+}
+
+/// Range of pixel columns (or rows) `[lo, hi)` within a tile side of `len` pixels starting at
+/// `origin` whose centres lie within `half` of `mean`.
+#[inline]
+fn pixel_span<T: Real>(mean: T, half: T, origin: T, len: usize) -> (usize, usize) {
+    let h: T = lit(0.5);
+    let lo = (mean - half - h - origin).ceil();
+    let hi = (mean + half - h - origin).floor() + T::one();
+    let clampi = |v: T| -> usize {
+        if v <= T::zero() {
+            0
+        } else {
+            v.to_usize().unwrap_or(len).min(len)
+        }
+    };
+    (clampi(lo), clampi(hi))
+}
+
+/// Renders the Gaussians `splats` from `camera` (see the module docs for the rules and outputs).
+pub fn render<T: Real>(
+    camera: &Camera,
+    splats: &Splats<'_, T>,
+    settings: &RenderSettings,
+) -> Result<RenderOutput<T>, RasterError> {
+    camera::check_image_size(camera.width.into(), camera.height.into())?;
+    validate(splats)?;
+    let c = splats.num_channels;
+    let bg = background::<T>(settings, c)?;
+    let cam = CameraParams::<T>::new(camera, settings.near_plane);
+    let n = splats.len();
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let [gx, gy] = cam.grid;
+    let (gx, gy) = (gx as usize, gy as usize);
+    let n_tiles = gx * gy;
+
+    // 1. Project (parallel, order-preserving).
+    let projected: Vec<Option<Projected<T>>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            project(
+                &cam,
+                splats.means[i],
+                splats.log_scales[i],
+                splats.quats[i],
+                splats.opacity_logits[i],
+            )
+        })
+        .collect();
+    let mut radii = vec![0u32; n];
+    let mut visible = Vec::new();
+    let mut visible_ids = Vec::new();
+    for (i, p) in projected.into_iter().enumerate() {
+        if let Some(p) = p {
+            radii[i] = p.radius;
+            visible.push(p);
+            visible_ids.push(i as u32);
+        }
+    }
+
+    // 2. Bin into tiles: counting sort by tile (stable in input order), then sort each tile by
+    //    (depth, input index), which equals INRIA's stable radix sort on (tile, depth).
+    let (tile_offsets, tile_list) = bin_and_sort(&visible, gx, n_tiles);
+    let num_pairs = tile_list.len();
+
+    // 3. Blend every tile.
+    let stride = (2 + c) * TILE_PIXELS;
+    let mut tile_buf = vec![T::zero(); n_tiles * stride];
+    let mut last = vec![0u32; n_tiles * TILE_PIXELS];
+    tile_buf
+        .par_chunks_mut(stride)
+        .zip(last.par_chunks_mut(TILE_PIXELS))
+        .enumerate()
+        .for_each(|(tile, (buf, last))| {
+            let list = &tile_list[tile_offsets[tile]..tile_offsets[tile + 1]];
+            let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
+            let size = [
+                TILE_SIZE.min(width - origin[0]),
+                TILE_SIZE.min(height - origin[1]),
+            ];
+            forward_tile(
+                list,
+                &visible,
+                &visible_ids,
+                splats.channels,
+                c,
+                origin,
+                size,
+                buf,
+                last,
+            );
+        });
+
+    // 4. Planar outputs.
+    let hw = width * height;
+    let mut image = vec![T::zero(); c * hw];
+    let mut alpha = vec![T::zero(); hw];
+    let mut depth = vec![T::zero(); hw];
+    let tile_px = |x: usize, y: usize| {
+        let tile = (y / TILE_SIZE) * gx + x / TILE_SIZE;
+        (tile * stride, (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE)
+    };
+    image
+        .par_chunks_mut(width)
+        .enumerate()
+        .for_each(|(row, out)| {
+            let (ch, y) = (row / height, row % height);
+            for (x, o) in out.iter_mut().enumerate() {
+                let (base, p) = tile_px(x, y);
+                *o = tile_buf[base + BUF_C + ch * TILE_PIXELS + p]
+                    + tile_buf[base + BUF_T + p] * bg[ch];
+            }
+        });
+    alpha
+        .par_chunks_mut(width)
+        .zip(depth.par_chunks_mut(width))
+        .enumerate()
+        .for_each(|(y, (a, d))| {
+            for x in 0..width {
+                let (base, p) = tile_px(x, y);
+                a[x] = T::one() - tile_buf[base + BUF_T + p];
+                d[x] = tile_buf[base + BUF_D + p];
+            }
+        });
+
+    Ok(RenderOutput {
+        width: camera.width,
+        height: camera.height,
+        num_channels: c,
+        image,
+        alpha,
+        depth,
+        radii,
+        num_pairs,
+        state: ForwardState {
+            visible,
+            visible_ids,
+            tile_offsets,
+            tile_list,
+            tile_buf,
+            last,
+            background: bg,
+            n,
+        },
+    })
+}
+
+fn bin_and_sort<T: Real>(
+    visible: &[Projected<T>],
+    gx: usize,
+    n_tiles: usize,
+) -> (Vec<usize>, Vec<u32>) {
+    let mut counts = vec![0usize; n_tiles + 1];
+    for p in visible {
+        for ty in p.rect[1]..p.rect[3] {
+            let row = ty as usize * gx;
+            for tx in p.rect[0]..p.rect[2] {
+                counts[row + tx as usize + 1] += 1;
+            }
+        }
+    }
+    for t in 0..n_tiles {
+        counts[t + 1] += counts[t];
+    }
+    let offsets = counts;
+    let mut cursor = offsets.clone();
+    let mut entries = vec![(0u64, 0u32); offsets[n_tiles]];
+    for (ci, p) in visible.iter().enumerate() {
+        // View depth is > near > 0, so its f64 bit pattern orders like the value.
+        let key = p.depth.to_f64().unwrap_or(0.0).to_bits();
+        for ty in p.rect[1]..p.rect[3] {
+            let row = ty as usize * gx;
+            for tx in p.rect[0]..p.rect[2] {
+                let t = row + tx as usize;
+                entries[cursor[t]] = (key, ci as u32);
+                cursor[t] += 1;
+            }
+        }
+    }
+    let mut slices = Vec::with_capacity(n_tiles);
+    let mut rest: &mut [(u64, u32)] = &mut entries;
+    for t in 0..n_tiles {
+        let (head, tail) = rest.split_at_mut(offsets[t + 1] - offsets[t]);
+        slices.push(head);
+        rest = tail;
+    }
+    slices.into_par_iter().for_each(|s| s.sort_unstable());
+    let list = entries.into_iter().map(|(_, ci)| ci).collect();
+    (offsets, list)
+}
+
+/// Blends one tile front to back into `buf` ([T | depth | channels] × 256) and `last`.
+#[allow(clippy::too_many_arguments)]
+fn forward_tile<T: Real>(
+    list: &[u32],
+    visible: &[Projected<T>],
+    ids: &[u32],
+    channels: &[T],
+    c: usize,
+    origin: [usize; 2],
+    size: [usize; 2],
+    buf: &mut [T],
+    last: &mut [u32],
+) {
+    buf[BUF_T..BUF_T + TILE_PIXELS].fill(T::one());
+    if list.is_empty() {
+        return;
+    }
+    let (tbuf, rest) = buf.split_at_mut(BUF_D);
+    let (dbuf, cbuf) = rest.split_at_mut(TILE_PIXELS);
+    let mut done = [false; TILE_PIXELS];
+    let mut n_done = 0usize;
+    let n_pixels = size[0] * size[1];
+    let ox: T = lit(origin[0] as f64);
+    let oy: T = lit(origin[1] as f64);
+    let mut centre = [T::zero(); TILE_SIZE];
+    for (i, v) in centre.iter_mut().enumerate() {
+        *v = lit(i as f64 + 0.5);
+    }
+    let half: T = lit(0.5);
+    let max_alpha: T = lit(0.99);
+    let min_alpha: T = lit(1.0 / 255.0);
+    let min_t: T = lit(1e-4);
+    for (k, &ci) in list.iter().enumerate() {
+        let p = &visible[ci as usize];
+        let (x0, x1) = pixel_span(p.mean2d[0], p.extent[0], ox, size[0]);
+        let (y0, y1) = pixel_span(p.mean2d[1], p.extent[1], oy, size[1]);
+        if x0 >= x1 || y0 >= y1 {
+            continue;
+        }
+        let g = ids[ci as usize] as usize;
+        let ch = &channels[g * c..(g + 1) * c];
+        let [ca, cb, cc] = p.conic;
+        let mx = p.mean2d[0] - ox;
+        let my = p.mean2d[1] - oy;
+        for y in y0..y1 {
+            let dy = my - centre[y];
+            let row = y * TILE_SIZE;
+            for x in x0..x1 {
+                let idx = row + x;
+                if done[idx] {
+                    continue;
+                }
+                let dx = mx - centre[x];
+                let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
+                if power > T::zero() {
+                    continue;
+                }
+                let alpha = (p.opacity * power.exp()).min(max_alpha);
+                if alpha < min_alpha {
+                    continue;
+                }
+                let t = tbuf[idx];
+                let test_t = t * (T::one() - alpha);
+                if test_t < min_t {
+                    done[idx] = true;
+                    n_done += 1;
+                    continue;
+                }
+                let w = alpha * t;
+                for (j, &v) in ch.iter().enumerate() {
+                    let s = &mut cbuf[j * TILE_PIXELS + idx];
+                    *s = *s + w * v;
+                }
+                dbuf[idx] = dbuf[idx] + w * p.depth;
+                tbuf[idx] = test_t;
+                last[idx] = k as u32 + 1;
+            }
+        }
+        if n_done == n_pixels {
+            break;
+        }
+    }
+}
+
+/// Analytic backward of [`render`]: gradients of a scalar loss L w.r.t. every input, given
+/// `cot` = dL/d(image, alpha, depth). `forward` must be the output of `render` for the same camera,
+/// splats and settings.
+pub fn render_backward<T: Real>(
+    camera: &Camera,
+    splats: &Splats<'_, T>,
+    settings: &RenderSettings,
+    forward: &RenderOutput<T>,
+    cot: &Cotangents<'_, T>,
+) -> Result<Gradients<T>, RasterError> {
+    let c = splats.num_channels;
+    let st = &forward.state;
+    if forward.width != camera.width
+        || forward.height != camera.height
+        || forward.num_channels != c
+        || st.n != splats.len()
+    {
+        return Err(RasterError::ForwardMismatch(format!(
+            "forward was {}x{} with {} channels and {} Gaussians, request is {}x{} with {} and {}",
+            forward.width,
+            forward.height,
+            forward.num_channels,
+            st.n,
+            camera.width,
+            camera.height,
+            c,
+            splats.len()
+        )));
+    }
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let hw = width * height;
+    let check = |field, got: usize, expected: usize| {
+        if got == expected {
+            Ok(())
+        } else {
+            Err(RasterError::LengthMismatch {
+                field,
+                got,
+                expected,
+            })
+        }
+    };
+    check("d_image", cot.image.len(), c * hw)?;
+    if let Some(a) = cot.alpha {
+        check("d_alpha", a.len(), hw)?;
+    }
+    if let Some(d) = cot.depth {
+        check("d_depth", d.len(), hw)?;
+    }
+    let cam = CameraParams::<T>::new(camera, settings.near_plane);
+    let gx = cam.grid[0] as usize;
+    let n_tiles = st.tile_offsets.len() - 1;
+    let stride = (2 + c) * TILE_PIXELS;
+    let slot = 7 + c;
+
+    // 1. Per (tile, Gaussian) pair contributions, in sorted order.
+    let mut pair_grads = vec![T::zero(); st.tile_list.len() * slot];
+    let mut slices = Vec::with_capacity(n_tiles);
+    let mut rest: &mut [T] = &mut pair_grads;
+    for t in 0..n_tiles {
+        let (head, tail) = rest.split_at_mut((st.tile_offsets[t + 1] - st.tile_offsets[t]) * slot);
+        slices.push(head);
+        rest = tail;
+    }
+    slices.into_par_iter().enumerate().for_each_init(
+        || BackwardScratch::new(c),
+        |scratch, (tile, out)| {
+            let list = &st.tile_list[st.tile_offsets[tile]..st.tile_offsets[tile + 1]];
+            if list.is_empty() {
+                return;
+            }
+            let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
+            let size = [
+                TILE_SIZE.min(width - origin[0]),
+                TILE_SIZE.min(height - origin[1]),
+            ];
+            backward_tile(
+                list,
+                st,
+                splats.channels,
+                c,
+                origin,
+                size,
+                width,
+                hw,
+                &st.tile_buf[tile * stride..(tile + 1) * stride],
+                &st.last[tile * TILE_PIXELS..(tile + 1) * TILE_PIXELS],
+                cot,
+                scratch,
+                out,
+            );
+        },
+    );
+
+    // 2. Per visible Gaussian: its pair positions in tile order (counting sort, deterministic).
+    let nv = st.visible.len();
+    let mut offsets = vec![0usize; nv + 1];
+    for &ci in &st.tile_list {
+        offsets[ci as usize + 1] += 1;
+    }
+    for i in 0..nv {
+        offsets[i + 1] += offsets[i];
+    }
+    let mut cursor = offsets.clone();
+    let mut positions = vec![0u32; st.tile_list.len()];
+    for (pos, &ci) in st.tile_list.iter().enumerate() {
+        positions[cursor[ci as usize]] = pos as u32;
+        cursor[ci as usize] += 1;
+    }
+
+    // 3. Reduce in fixed order and chain through the projection.
+    let mut compact = vec![u32::MAX; st.n];
+    for (ci, &id) in st.visible_ids.iter().enumerate() {
+        compact[id as usize] = ci as u32;
+    }
+    let zero3 = [T::zero(); 3];
+    let per_gaussian: Vec<GaussianGrad<T>> = (0..st.n)
+        .into_par_iter()
+        .map(|i| {
+            let ci = compact[i];
+            if ci == u32::MAX {
+                return (zero3, zero3, [T::zero(); 4], T::zero(), [T::zero(); 2]);
+            }
+            let ci = ci as usize;
+            let mut acc = [T::zero(); 7];
+            for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
+                let s = &pair_grads[pos as usize * slot..pos as usize * slot + 7];
+                for j in 0..7 {
+                    acc[j] = acc[j] + s[j];
+                }
+            }
+            let g = ProjectedGrad {
+                mean2d: [acc[0], acc[1]],
+                conic: [acc[2], acc[3], acc[4]],
+                opacity: acc[5],
+                depth: acc[6],
+            };
+            let (dm, ds, dq, dl) = project_backward(
+                &cam,
+                splats.means[i],
+                splats.log_scales[i],
+                splats.quats[i],
+                splats.opacity_logits[i],
+                &g,
+            );
+            (dm, ds, dq, dl, g.mean2d)
+        })
+        .collect();
+    let mut d_channels = vec![T::zero(); st.n * c];
+    if c > 0 {
+        d_channels
+            .par_chunks_mut(c)
+            .enumerate()
+            .for_each(|(i, out)| {
+                let ci = compact[i];
+                if ci == u32::MAX {
+                    return;
+                }
+                let ci = ci as usize;
+                for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
+                    let s = &pair_grads[pos as usize * slot + 7..(pos as usize + 1) * slot];
+                    for j in 0..c {
+                        out[j] = out[j] + s[j];
+                    }
+                }
+            });
+    }
+    // dL/d background_c = Σ_pixels dL/dimage_c · T_final, rows in order.
+    let mut d_bg = vec![T::zero(); c];
+    for (ch, d) in d_bg.iter_mut().enumerate() {
+        let mut acc = T::zero();
+        for y in 0..height {
+            for x in 0..width {
+                let tile = (y / TILE_SIZE) * gx + x / TILE_SIZE;
+                let p = (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE;
+                acc = acc
+                    + cot.image[ch * hw + y * width + x] * st.tile_buf[tile * stride + BUF_T + p];
+            }
+        }
+        *d = acc;
+    }
+    let mut out = Gradients {
+        means: Vec::with_capacity(st.n),
+        log_scales: Vec::with_capacity(st.n),
+        quats: Vec::with_capacity(st.n),
+        opacity_logits: Vec::with_capacity(st.n),
+        channels: d_channels,
+        means_2d: Vec::with_capacity(st.n),
+        background: d_bg,
+    };
+    for (dm, ds, dq, dl, d2) in per_gaussian {
+        out.means.push(dm);
+        out.log_scales.push(ds);
+        out.quats.push(dq);
+        out.opacity_logits.push(dl);
+        out.means_2d.push(d2);
+    }
+    Ok(out)
+}
+
+/// Per-thread scratch of the backward tile kernel (allocated once per rayon job split, not per pixel).
+struct BackwardScratch<T> {
+    t: Vec<T>,
+    pre: Vec<T>,
+    g_img: Vec<T>,
+    g_alpha: Vec<T>,
+    g_depth: Vec<T>,
+    acc: Vec<T>,
+}
+
+impl<T: Real> BackwardScratch<T> {
+    fn new(c: usize) -> Self {
+        Self {
+            t: vec![T::zero(); TILE_PIXELS],
+            pre: vec![T::zero(); (c + 1) * TILE_PIXELS],
+            g_img: vec![T::zero(); c * TILE_PIXELS],
+            g_alpha: vec![T::zero(); TILE_PIXELS],
+            g_depth: vec![T::zero(); TILE_PIXELS],
+            acc: vec![T::zero(); 7 + c],
+        }
+    }
+}
+
+/// Replays one tile front to back and writes each pair's gradient slot
+/// [mean2d x, y | conic a, b, c | opacity | depth | channels C].
+#[allow(clippy::too_many_arguments)]
+fn backward_tile<T: Real>(
+    list: &[u32],
+    st: &ForwardState<T>,
+    channels: &[T],
+    c: usize,
+    origin: [usize; 2],
+    size: [usize; 2],
+    width: usize,
+    hw: usize,
+    buf: &[T],
+    last: &[u32],
+    cot: &Cotangents<'_, T>,
+    s: &mut BackwardScratch<T>,
+    out: &mut [T],
+) {
+    let slot = 7 + c;
+    s.t.fill(T::one());
+    s.pre.fill(T::zero());
+    s.g_img.fill(T::zero());
+    s.g_alpha.fill(T::zero());
+    s.g_depth.fill(T::zero());
+    let mut max_last = 0u32;
+    for y in 0..size[1] {
+        for x in 0..size[0] {
+            let idx = y * TILE_SIZE + x;
+            let pix = (origin[1] + y) * width + origin[0] + x;
+            for j in 0..c {
+                s.g_img[j * TILE_PIXELS + idx] = cot.image[j * hw + pix];
+            }
+            if let Some(a) = cot.alpha {
+                s.g_alpha[idx] = a[pix];
+            }
+            if let Some(d) = cot.depth {
+                s.g_depth[idx] = d[pix];
+            }
+            max_last = max_last.max(last[idx]);
+        }
+    }
+    let t_final = &buf[BUF_T..BUF_T + TILE_PIXELS];
+    let d_final = &buf[BUF_D..BUF_D + TILE_PIXELS];
+    let c_final = &buf[BUF_C..];
+    let bg = &st.background;
+    let ox: T = lit(origin[0] as f64);
+    let oy: T = lit(origin[1] as f64);
+    let mut centre = [T::zero(); TILE_SIZE];
+    for (i, v) in centre.iter_mut().enumerate() {
+        *v = lit(i as f64 + 0.5);
+    }
+    let half: T = lit(0.5);
+    let max_alpha: T = lit(0.99);
+    let min_alpha: T = lit(1.0 / 255.0);
+    for (k, &ci) in list.iter().enumerate().take(max_last as usize) {
+        let p = &st.visible[ci as usize];
+        let (x0, x1) = pixel_span(p.mean2d[0], p.extent[0], ox, size[0]);
+        let (y0, y1) = pixel_span(p.mean2d[1], p.extent[1], oy, size[1]);
+        if x0 >= x1 || y0 >= y1 {
+            continue;
+        }
+        let g = st.visible_ids[ci as usize] as usize;
+        let ch = &channels[g * c..(g + 1) * c];
+        let [ca, cb, cc] = p.conic;
+        let mx = p.mean2d[0] - ox;
+        let my = p.mean2d[1] - oy;
+        let z = p.depth;
+        s.acc.fill(T::zero());
+        let kk = k as u32;
+        for y in y0..y1 {
+            let dy = my - centre[y];
+            let row = y * TILE_SIZE;
+            for x in x0..x1 {
+                let idx = row + x;
+                if kk >= last[idx] {
+                    continue;
+                }
+                let dx = mx - centre[x];
+                let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
+                if power > T::zero() {
+                    continue;
+                }
+                let gauss = power.exp();
+                let raw = p.opacity * gauss;
+                let alpha = raw.min(max_alpha);
+                if alpha < min_alpha {
+                    continue;
+                }
+                let t = s.t[idx];
+                let w = alpha * t;
+                let one_minus = T::one() - alpha;
+                let inv = T::one() / one_minus;
+                let tn = t_final[idx];
+                let mut d_alpha = T::zero();
+                for j in 0..c {
+                    let pre = &mut s.pre[j * TILE_PIXELS + idx];
+                    *pre = *pre + w * ch[j];
+                    let behind = c_final[j * TILE_PIXELS + idx] - *pre + tn * bg[j];
+                    let gj = s.g_img[j * TILE_PIXELS + idx];
+                    d_alpha = d_alpha + gj * (t * ch[j] - behind * inv);
+                    s.acc[7 + j] = s.acc[7 + j] + w * gj;
+                }
+                {
+                    let pre = &mut s.pre[c * TILE_PIXELS + idx];
+                    *pre = *pre + w * z;
+                    let behind = d_final[idx] - *pre;
+                    let gd = s.g_depth[idx];
+                    d_alpha = d_alpha + gd * (t * z - behind * inv);
+                    s.acc[6] = s.acc[6] + w * gd;
+                }
+                d_alpha = d_alpha + s.g_alpha[idx] * tn * inv;
+                s.t[idx] = t * one_minus;
+                if raw < max_alpha {
+                    let d_power = alpha * d_alpha;
+                    s.acc[0] = s.acc[0] - d_power * (ca * dx + cb * dy);
+                    s.acc[1] = s.acc[1] - d_power * (cc * dy + cb * dx);
+                    s.acc[2] = s.acc[2] - half * d_power * dx * dx;
+                    s.acc[3] = s.acc[3] - d_power * dx * dy;
+                    s.acc[4] = s.acc[4] - half * d_power * dy * dy;
+                    s.acc[5] = s.acc[5] + gauss * d_alpha;
+                }
+            }
+        }
+        out[k * slot..(k + 1) * slot].copy_from_slice(&s.acc);
+    }
+}
