@@ -89,19 +89,26 @@ pub fn rotation_from_quat_backward<T: Float>(q: [T; 4], d_rot: &Mat3<T>) -> [T; 
     ]
 }
 
-/// World-space covariance Σ = R S Sᵀ Rᵀ (m²) from log-scales (ln m) and an unnormalised (w, x, y, z)
-/// quaternion. The result is symmetric positive semi-definite.
+/// R (from the normalised quaternion), the scales s = exp(log-scale) and M = R·diag(s).
 #[inline]
-pub fn covariance_3d<T: Float>(log_scale: [T; 3], quat: [T; 4]) -> Mat3<T> {
+fn scaled_rotation<T: Float>(log_scale: [T; 3], quat: [T; 4]) -> (Mat3<T>, [T; 3], Mat3<T>) {
     let r = rotation_from_quat(quat);
-    let s = [log_scale[0].exp(), log_scale[1].exp(), log_scale[2].exp()];
-    // M = R S, Σ = M Mᵀ.
+    let s = log_scale.map(T::exp);
     let mut m = [[T::zero(); 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
             m[i][j] = r[i][j] * s[j];
         }
     }
+    (r, s, m)
+}
+
+/// World-space covariance Σ = R S Sᵀ Rᵀ (m²) from log-scales (ln m) and an unnormalised (w, x, y, z)
+/// quaternion. The result is symmetric positive semi-definite.
+#[inline]
+pub fn covariance_3d<T: Float>(log_scale: [T; 3], quat: [T; 4]) -> Mat3<T> {
+    let (_, _, m) = scaled_rotation(log_scale, quat);
+    // Σ = M Mᵀ.
     let mut cov = [[T::zero(); 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
@@ -120,14 +127,7 @@ pub fn covariance_3d_backward<T: Float>(
     quat: [T; 4],
     d_cov: &Mat3<T>,
 ) -> ([T; 3], [T; 4]) {
-    let r = rotation_from_quat(quat);
-    let s = [log_scale[0].exp(), log_scale[1].exp(), log_scale[2].exp()];
-    let mut m = [[T::zero(); 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            m[i][j] = r[i][j] * s[j];
-        }
-    }
+    let (r, s, m) = scaled_rotation(log_scale, quat);
     // Σ = M Mᵀ  ⇒  dL/dM = (G + Gᵀ) M.
     let mut d_m = [[T::zero(); 3]; 3];
     for i in 0..3 {
