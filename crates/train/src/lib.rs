@@ -7,3 +7,25 @@ pub mod blend;
 pub mod colour;
 pub mod flow_loss;
 pub mod image_loss;
+pub mod step;
+
+/// Errors of the training crate.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// A network op rejected its inputs.
+    #[error(transparent)]
+    Nn(#[from] nn::NnError),
+    /// The rasterizer rejected its inputs.
+    #[error(transparent)]
+    Raster(#[from] rasterize_cpu::RasterError),
+    /// An array does not have the expected length.
+    #[error("{what}: expected {expected} values, found {found}")]
+    Shape {
+        /// What was checked.
+        what: String,
+        /// Expected length.
+        expected: usize,
+        /// Actual length.
+        found: usize,
+    },
+}
