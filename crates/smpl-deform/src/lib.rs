@@ -6,14 +6,21 @@
 //! finite differences in the `gradient-checks` package.
 
 pub mod body;
+pub mod canonical;
 pub mod error;
 pub mod fk;
+pub mod inside;
+pub mod io;
 pub mod lbs;
 pub mod makehuman;
 pub mod math;
 pub mod npz;
+pub mod sample;
 pub mod skeleton;
 
 pub use body::{builtin_makehuman_path, BodyModel, BodyRef, PosedBody, SmplParams, UvMap};
+pub use canonical::{da_pose_params, CanonicalBody};
 pub use error::{Result, SmplDeformError};
+pub use inside::{inside, winding_number};
+pub use sample::{sample_surface, SurfaceSamples};
 pub use skeleton::{NUM_JOINTS, NUM_POSE_FEATURES, SMPL_JOINT_NAMES, SMPL_PARENTS};
