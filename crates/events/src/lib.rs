@@ -6,6 +6,7 @@
 //! frame k to k+1 (`x_{k+1} = x_k + F(x_k)`). This crate knows nothing of the flow network, of
 //! training or of the synthetic benchmark (it sits below them, DESIGN.md §2).
 
+pub mod cmax;
 pub mod error;
 pub mod flowio;
 pub mod io;
@@ -13,6 +14,7 @@ pub mod repr;
 pub mod simulate;
 pub mod stream;
 
+pub use cmax::{flow_from_events, CmaxConfig, CmaxProblem};
 pub use error::{EventsError, Result};
 pub use flowio::{flow_to_rgb, read_flow, write_flo, write_flow, write_flow_colour_png, Flow};
 pub use io::{open_events, read_events, write_events, EventReader};
