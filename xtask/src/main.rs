@@ -4,6 +4,8 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+mod body;
+mod body_convert;
 mod ply_info;
 
 /// E-Sem3DGS driver: reconstruct people and scenes from blurred video + events, on the CPU.
@@ -18,11 +20,17 @@ struct Cli {
 enum Command {
     /// Print a summary of a 3DGS PLY file (counts, SH degree, extra properties, bounds).
     PlyInfo(ply_info::Args),
+    /// Pose a body model (SMPL .npz or builtin:makehuman) with SMPL parameters; write .npy or .obj.
+    Body(body::Args),
+    /// Convert the CC0 MakeHuman assets into data-fixtures/body/makehuman.npz.
+    BodyConvert(body_convert::Args),
 }
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::PlyInfo(args) => ply_info::run(args),
+        Command::Body(args) => body::run(args),
+        Command::BodyConvert(args) => body_convert::run(args),
     }
 }
