@@ -3,7 +3,8 @@
 //!
 //! The moments live beside the parameters they belong to and support the same row operations as
 //! [`GaussianSet`] (retain, append zero rows, reset), so density control can never misalign them.
-//! Updates are element-wise and sequential: bit-identical whatever the thread count.
+//! The update rule itself is `nn::adam_update` (one Adam for the whole workspace); updates are
+//! element-wise and sequential: bit-identical whatever the thread count.
 
 use crate::set::{gather_rows, retain_rows, GaussianSet};
 use crate::GaussianError;
@@ -81,20 +82,19 @@ impl AdamState {
             )));
         }
         self.step += 1;
-        let t = self.step as i32;
-        let bias1 = 1.0 - config.beta1.powi(t);
-        let bias2_sqrt = (1.0 - config.beta2.powi(t)).sqrt();
-        let stride = row_stride.max(1);
-        for j in 0..params.len() {
-            let g = grads[j];
-            let m = config.beta1 * self.m[j] + (1.0 - config.beta1) * g;
-            let v = config.beta2 * self.v[j] + (1.0 - config.beta2) * g * g;
-            self.m[j] = m;
-            self.v[j] = v;
-            let step_size = lr_of_column(j % stride) / bias1;
-            params[j] -= step_size * m / (v.sqrt() / bias2_sqrt + config.eps);
-        }
-        Ok(())
+        nn::adam_update(
+            params,
+            grads,
+            &mut self.m,
+            &mut self.v,
+            self.step,
+            f64::from(config.beta1),
+            f64::from(config.beta2),
+            f64::from(config.eps),
+            row_stride,
+            lr_of_column,
+        )
+        .map_err(|e| GaussianError::Incompatible(e.to_string()))
     }
 
     /// Keeps rows of `stride` values whose flag is set.

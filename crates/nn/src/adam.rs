@@ -61,18 +61,53 @@ impl<T: Real> Adam<T> {
         check_len("adam grads", self.m.len(), grads.len())?;
         self.t += 1;
         let c = self.config;
-        let (b1, b2) = (T::of(c.beta1), T::of(c.beta2));
-        let bc1 = T::of(1.0 - c.beta1.powi(self.t as i32));
-        let bc2 = T::of(1.0 - c.beta2.powi(self.t as i32));
-        let (lr, eps) = (T::of(c.lr), T::of(c.eps));
-        for i in 0..params.len() {
-            let g = grads[i];
-            self.m[i] = b1 * self.m[i] + (T::one() - b1) * g;
-            self.v[i] = b2 * self.v[i] + (T::one() - b2) * g * g;
-            let mh = self.m[i] / bc1;
-            let vh = self.v[i] / bc2;
-            params[i] = params[i] - lr * mh / (vh.sqrt() + eps);
-        }
-        Ok(())
+        let lr = T::of(c.lr);
+        adam_update(
+            params,
+            grads,
+            &mut self.m,
+            &mut self.v,
+            self.t,
+            c.beta1,
+            c.beta2,
+            c.eps,
+            1,
+            |_| lr,
+        )
     }
+}
+
+/// The Adam update shared by every optimiser in the workspace, with PyTorch's operation order:
+/// `m ← β₁m + (1−β₁)g`, `v ← β₂v + (1−β₂)g²`, `p ← p − lr/(1−β₁ᵗ) · m / (√v/√(1−β₂ᵗ) + ε)` for step
+/// `t` (1-based, already incremented by the caller). Parameter `j` uses learning rate
+/// `lr_of_column(j % row_stride)`, so one flat tensor can carry per-column rates (e.g. SH DC and
+/// higher-order coefficients). Sequential and element-wise: bit-identical for any thread count.
+pub fn adam_update<T: Real>(
+    params: &mut [T],
+    grads: &[T],
+    m: &mut [T],
+    v: &mut [T],
+    t: u64,
+    beta1: f64,
+    beta2: f64,
+    eps: f64,
+    row_stride: usize,
+    lr_of_column: impl Fn(usize) -> T,
+) -> Result<(), NnError> {
+    check_len("adam params", m.len(), params.len())?;
+    check_len("adam grads", m.len(), grads.len())?;
+    check_len("adam second moment", m.len(), v.len())?;
+    let exponent = i32::try_from(t).unwrap_or(i32::MAX);
+    let bias1 = T::of(1.0 - beta1.powi(exponent));
+    let bias2_sqrt = T::of((1.0 - beta2.powi(exponent)).sqrt());
+    let (b1, b2, eps) = (T::of(beta1), T::of(beta2), T::of(eps));
+    let stride = row_stride.max(1);
+    for j in 0..params.len() {
+        let g = grads[j];
+        m[j] = b1 * m[j] + (T::one() - b1) * g;
+        v[j] = b2 * v[j] + (T::one() - b2) * g * g;
+        let step_size = lr_of_column(j % stride) / bias1;
+        params[j] = params[j] - step_size * m[j] / (v[j].sqrt() / bias2_sqrt + eps);
+    }
+    Ok(())
 }
