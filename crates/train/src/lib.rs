@@ -5,6 +5,7 @@
 pub mod aiap;
 pub mod blend;
 pub mod colour;
+pub mod fit;
 pub mod flow_loss;
 pub mod image_loss;
 pub mod step;
@@ -18,6 +19,17 @@ pub enum TrainError {
     /// The rasterizer rejected its inputs.
     #[error(transparent)]
     Raster(#[from] rasterize_cpu::RasterError),
+    /// A configuration or input that cannot be trained on.
+    #[error("{0}")]
+    Config(String),
+    /// A loss or gradient became NaN or infinite; the parameters of the previous step are kept.
+    #[error(
+        "non-finite loss or gradient at step {step}; stopping with the last finite parameters"
+    )]
+    NonFinite {
+        /// The step at which it happened.
+        step: usize,
+    },
     /// An array does not have the expected length.
     #[error("{what}: expected {expected} values, found {found}")]
     Shape {
