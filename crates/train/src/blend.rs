@@ -3,11 +3,15 @@
 //! rendering loss reaches the semantic logits.
 //!
 //! Exact definition (per Gaussian, p ∈ [0, 1]):
-//! - position  x = p·x_def + (1 − p)·x_static
-//! - log-scale s = p·s_def + (1 − p)·s_static
-//! - rotation  q = p·q_def' + (1 − p)·q_static, where q_def' = ±q_def with the sign that makes
-//!   q_def'·q_static ≥ 0 (q and −q are the same rotation; the rasterizer normalises q);
-//! - colour    c = p·c_human + (1 − p)·c_scene.
+//! - position   x = p·x_def + (1 − p)·x_static
+//! - covariance Σ = p·Σ_def + (1 − p)·Σ_static (a convex combination of positive semi-definite
+//!   matrices stays positive semi-definite; the deformed covariance is M·diag(e^{2s})·Mᵀ with M the
+//!   skinning-blended rotation, which is not a rotation, so blending covariances — not quaternions —
+//!   is the exact, well-defined choice)
+//! - colour     c = p·c_human + (1 − p)·c_scene.
+//!
+//! Once p is near 0 or 1, which the semantic logits are initialised to (±3) and trained towards, the
+//! blend is exactly the static or the deformed Gaussian.
 //!
 //! The probability comes from the semantic mode (`--semantic`): `OneHot` p = softmax(l)[1] over K = 2
 //! logits (paper), `Scalar` p = sigmoid(l) of a single logit, `None` p = 1 for every Gaussian
@@ -75,14 +79,10 @@ pub struct BlendInputs<T> {
     pub x_def: [T; 3],
     /// Static position (m).
     pub x_static: [T; 3],
-    /// Deformed log-scales.
-    pub s_def: [T; 3],
-    /// Static log-scales.
-    pub s_static: [T; 3],
-    /// Deformed rotation (w, x, y, z), unnormalised.
-    pub q_def: [T; 4],
-    /// Static rotation (w, x, y, z), unnormalised.
-    pub q_static: [T; 4],
+    /// Deformed covariance (m²), rows.
+    pub cov_def: [[T; 3]; 3],
+    /// Static covariance (m²), rows.
+    pub cov_static: [[T; 3]; 3],
     /// Human colour (linear RGB).
     pub c_human: [T; 3],
     /// Scene colour (linear RGB).
@@ -94,31 +94,20 @@ pub struct BlendInputs<T> {
 pub struct Blended<T> {
     /// Position (m).
     pub x: [T; 3],
-    /// Log-scales.
-    pub s: [T; 3],
-    /// Rotation (w, x, y, z), unnormalised.
-    pub q: [T; 4],
+    /// Covariance (m²), rows.
+    pub cov: [[T; 3]; 3],
     /// Colour (linear RGB).
     pub c: [T; 3],
-}
-
-fn aligned_sign<T: Float>(q_def: &[T; 4], q_static: &[T; 4]) -> T {
-    let dot = (0..4).fold(T::zero(), |acc, k| acc + q_def[k] * q_static[k]);
-    if dot < T::zero() {
-        -T::one()
-    } else {
-        T::one()
-    }
 }
 
 /// Blends one Gaussian's attributes with human probability `p` (see the module docs).
 pub fn blend<T: Float>(p: T, a: &BlendInputs<T>) -> Blended<T> {
     let one_m = T::one() - p;
-    let sign = aligned_sign(&a.q_def, &a.q_static);
     Blended {
         x: std::array::from_fn(|k| p * a.x_def[k] + one_m * a.x_static[k]),
-        s: std::array::from_fn(|k| p * a.s_def[k] + one_m * a.s_static[k]),
-        q: std::array::from_fn(|k| p * sign * a.q_def[k] + one_m * a.q_static[k]),
+        cov: std::array::from_fn(|r| {
+            std::array::from_fn(|c| p * a.cov_def[r][c] + one_m * a.cov_static[r][c])
+        }),
         c: std::array::from_fn(|k| p * a.c_human[k] + one_m * a.c_scene[k]),
     }
 }
@@ -126,24 +115,18 @@ pub fn blend<T: Float>(p: T, a: &BlendInputs<T>) -> Blended<T> {
 /// Backward of [`blend`]: given dL/d(blended), returns (dL/dp, dL/d(inputs)).
 pub fn blend_backward<T: Float>(p: T, a: &BlendInputs<T>, d: &Blended<T>) -> (T, BlendInputs<T>) {
     let one_m = T::one() - p;
-    let sign = aligned_sign(&a.q_def, &a.q_static);
     let mut d_p = T::zero();
     for k in 0..3 {
-        d_p = d_p
-            + d.x[k] * (a.x_def[k] - a.x_static[k])
-            + d.s[k] * (a.s_def[k] - a.s_static[k])
-            + d.c[k] * (a.c_human[k] - a.c_scene[k]);
-    }
-    for k in 0..4 {
-        d_p = d_p + d.q[k] * (sign * a.q_def[k] - a.q_static[k]);
+        d_p = d_p + d.x[k] * (a.x_def[k] - a.x_static[k]) + d.c[k] * (a.c_human[k] - a.c_scene[k]);
+        for c in 0..3 {
+            d_p = d_p + d.cov[k][c] * (a.cov_def[k][c] - a.cov_static[k][c]);
+        }
     }
     let grads = BlendInputs {
         x_def: d.x.map(|g| g * p),
         x_static: d.x.map(|g| g * one_m),
-        s_def: d.s.map(|g| g * p),
-        s_static: d.s.map(|g| g * one_m),
-        q_def: d.q.map(|g| g * p * sign),
-        q_static: d.q.map(|g| g * one_m),
+        cov_def: d.cov.map(|row| row.map(|g| g * p)),
+        cov_static: d.cov.map(|row| row.map(|g| g * one_m)),
         c_human: d.c.map(|g| g * p),
         c_scene: d.c.map(|g| g * one_m),
     };
@@ -156,25 +139,21 @@ mod tests {
 
     #[test]
     fn extreme_probabilities_select_one_side() {
+        let eye = [[1.0f64, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let a = BlendInputs {
             x_def: [1.0f64, 2.0, 3.0],
             x_static: [4.0, 5.0, 6.0],
-            s_def: [0.1; 3],
-            s_static: [0.2; 3],
-            q_def: [-1.0, 0.0, 0.0, 0.0],
-            q_static: [1.0, 0.0, 0.0, 0.0],
+            cov_def: eye,
+            cov_static: eye.map(|r| r.map(|v| 2.0 * v)),
             c_human: [1.0, 0.0, 0.0],
             c_scene: [0.0, 0.0, 1.0],
         };
         let human = blend(1.0, &a);
         assert_eq!(human.x, a.x_def);
-        assert_eq!(
-            human.q,
-            [1.0, 0.0, 0.0, 0.0],
-            "sign aligned to the static rotation"
-        );
+        assert_eq!(human.cov, a.cov_def);
         let scene = blend(0.0, &a);
         assert_eq!(scene.c, a.c_scene);
+        assert_eq!(blend(0.5, &a).cov[1][1], 1.5);
         assert_eq!(SemanticMode::None.probability::<f64>(&[]), 1.0);
         assert!((SemanticMode::OneHot.probability(&[-3.0f64, 3.0]) - 0.997_527_376).abs() < 1e-8);
     }

@@ -1,10 +1,9 @@
 //! Finite-difference check of the semantic blend (`train::blend`) through the probability
 //! parameterisations (one-hot softmax, scalar sigmoid) down to the logits and every blended input.
 //!
-//! The blend is bilinear in p and the inputs, and p is a smooth function of the logits, except for the
-//! quaternion sign alignment, which is constant away from q_def·q_static = 0: cases within 1e-3 of that
-//! plane are rejected. With h = 1e-6 in f64 the tolerance |num − ana| ≤ 1e-9 + 1e-6·max(|num|, |ana|)
-//! leaves five orders of magnitude of margin over the truncation and rounding error (~1e-10).
+//! The blend is bilinear in p and the inputs, and p is a smooth function of the logits, so central
+//! differences with h = 1e-6 in f64 are exact to ~1e-10; the tolerance
+//! |num − ana| ≤ 1e-9 + 1e-6·max(|num|, |ana|) leaves orders of magnitude of margin.
 
 use gradient_checks::{central_differences, GradientChecker, Tolerance};
 use proptest::prelude::*;
@@ -15,27 +14,24 @@ const H: f64 = 1e-6;
 
 fn unpack(v: &[f64]) -> BlendInputs<f64> {
     let a3 = |o: usize| [v[o], v[o + 1], v[o + 2]];
-    let a4 = |o: usize| [v[o], v[o + 1], v[o + 2], v[o + 3]];
+    let m3 = |o: usize| [a3(o), a3(o + 3), a3(o + 6)];
     BlendInputs {
         x_def: a3(0),
         x_static: a3(3),
-        s_def: a3(6),
-        s_static: a3(9),
-        q_def: a4(12),
-        q_static: a4(16),
-        c_human: a3(20),
-        c_scene: a3(23),
+        cov_def: m3(6),
+        cov_static: m3(15),
+        c_human: a3(24),
+        c_scene: a3(27),
     }
 }
 
 fn pack(b: &BlendInputs<f64>) -> Vec<f64> {
+    let m = |m: &[[f64; 3]; 3]| m.iter().flatten().copied().collect::<Vec<f64>>();
     [
         &b.x_def[..],
         &b.x_static,
-        &b.s_def,
-        &b.s_static,
-        &b.q_def,
-        &b.q_static,
+        &m(&b.cov_def),
+        &m(&b.cov_static),
         &b.c_human,
         &b.c_scene,
     ]
@@ -43,7 +39,8 @@ fn pack(b: &BlendInputs<f64>) -> Vec<f64> {
 }
 
 fn dot(out: &Blended<f64>, w: &[f64]) -> f64 {
-    let flat = [&out.x[..], &out.s, &out.q, &out.c].concat();
+    let cov: Vec<f64> = out.cov.iter().flatten().copied().collect();
+    let flat = [&out.x[..], &cov, &out.c].concat();
     flat.iter().zip(w).map(|(a, b)| a * b).sum()
 }
 
@@ -52,23 +49,24 @@ proptest! {
 
     #[test]
     fn blend_gradients_match(
-        inputs in prop::collection::vec(-1.0f64..1.0, 26),
+        inputs in prop::collection::vec(-1.0f64..1.0, 30),
         logits in prop::array::uniform2(-4.0f64..4.0),
-        cotangent in prop::collection::vec(-1.0f64..1.0, 13),
+        cotangent in prop::collection::vec(-1.0f64..1.0, 15),
         scalar in any::<bool>(),
     ) {
         let mode = if scalar { SemanticMode::Scalar } else { SemanticMode::OneHot };
         let logits = &logits[..mode.logits_per_gaussian()];
         let a = unpack(&inputs);
-        let qdot: f64 = (0..4).map(|k| a.q_def[k] * a.q_static[k]).sum();
-        prop_assume!(qdot.abs() > 1e-3);
         let loss = |v: &[f64], l: &[f64]| dot(&blend(mode.probability(l), &unpack(v)), &cotangent);
         let p = mode.probability(logits);
         let d_out = Blended {
             x: [cotangent[0], cotangent[1], cotangent[2]],
-            s: [cotangent[3], cotangent[4], cotangent[5]],
-            q: [cotangent[6], cotangent[7], cotangent[8], cotangent[9]],
-            c: [cotangent[10], cotangent[11], cotangent[12]],
+            cov: [
+                [cotangent[3], cotangent[4], cotangent[5]],
+                [cotangent[6], cotangent[7], cotangent[8]],
+                [cotangent[9], cotangent[10], cotangent[11]],
+            ],
+            c: [cotangent[12], cotangent[13], cotangent[14]],
         };
         let (d_p, d_in) = blend_backward(p, &a, &d_out);
         let mut d_logits = vec![0.0; logits.len()];
