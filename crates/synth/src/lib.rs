@@ -1,1 +1,25 @@
-//! The synthetic motion-blur benchmark generator (mesh renderer, room, moving body, events, ground-truth flow)
+//! The synthetic motion-blur benchmark generator: a textured room, a dressed SMPL-topology body
+//! moving fast, a fixed camera; S sub-frames per exposure rendered by a triangle-mesh renderer
+//! independent of the Gaussian rasterizer; blurred frames, sharp references, masks, ground-truth
+//! flow, events; written in scene format v1 (DESIGN.md §5, docs/FORMATS.md).
+//!
+//! This crate must never depend on `rasterize-cpu` or `train`: the benchmark would otherwise share
+//! the model's renderer or its assumptions. Every output byte is a function of [`SynthConfig`].
+
+pub mod body;
+pub mod camera;
+pub mod config;
+pub mod error;
+pub mod flow;
+pub mod generate;
+pub mod mesh;
+pub mod motion;
+mod preview;
+pub mod raster;
+pub mod room;
+pub mod texture;
+
+pub use config::{Preset, SynthConfig};
+pub use error::{Result, SynthError};
+pub use generate::{generate, generate_with_body, Stats};
+pub use motion::Speed;

@@ -1,0 +1,197 @@
+//! Generator settings, presets and their validation.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, SynthError};
+use crate::motion::Speed;
+
+/// Largest accepted image side (pixels).
+pub const MAX_SIDE: u32 = 8192;
+/// Largest accepted frame count.
+pub const MAX_FRAMES: u32 = 100_000;
+/// Largest accepted number of sub-frames per frame.
+pub const MAX_SUBFRAMES: u32 = 256;
+
+/// Named settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    /// 20 frames at 64×64, S = 8: the checked-in test fixture (< 2 MB).
+    Tiny,
+    /// The benchmark: 100 frames at 256×256, S = 16.
+    Default,
+    /// 400 frames at 256×256, S = 16.
+    Paper,
+}
+
+/// Every knob of the generator. Same settings, same bytes (any thread count).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SynthConfig {
+    /// Seed of the motion phases and the event simulator's noise.
+    pub seed: u64,
+    /// Number of frames.
+    pub frames: u32,
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+    /// Sub-frames rendered per exposure (S); the blurred frame is their mean.
+    pub subframes: u32,
+    /// Supersampling factor per axis of the renderer (odd).
+    pub supersample: u32,
+    /// Motion speed.
+    pub speed: Speed,
+    /// Seed of the room and clothing textures and of the prop placement.
+    pub texture_seed: u64,
+    /// Horizontal distance from the person to the camera (metres).
+    pub camera_distance: f32,
+    /// Camera height above the floor (metres).
+    pub camera_height: f32,
+    /// Frame rate (frames per second).
+    pub fps: f64,
+    /// Exposure as a fraction of the frame interval (0, 1].
+    pub exposure_fraction: f64,
+    /// Mean event contrast thresholds C+ = C− (log intensity).
+    pub event_threshold: f32,
+    /// Per-pixel threshold standard deviation σ (log intensity).
+    pub event_sigma: f32,
+    /// Event refractory period (microseconds).
+    pub refractory_us: i64,
+    /// Body model reference (`builtin:makehuman` or an SMPL `.npz` path).
+    pub body: String,
+}
+
+impl SynthConfig {
+    /// The settings of a preset.
+    pub fn preset(p: Preset) -> Self {
+        let base = Self {
+            seed: 0,
+            frames: 100,
+            width: 256,
+            height: 256,
+            subframes: 16,
+            supersample: 3,
+            speed: Speed::Fast,
+            texture_seed: 0,
+            camera_distance: 3.6,
+            camera_height: 1.3,
+            fps: 30.0,
+            exposure_fraction: 1.0,
+            event_threshold: 0.2,
+            event_sigma: 0.03,
+            refractory_us: 1000,
+            body: "builtin:makehuman".into(),
+        };
+        match p {
+            Preset::Tiny => Self {
+                frames: 20,
+                width: 64,
+                height: 64,
+                subframes: 8,
+                ..base
+            },
+            Preset::Default => base,
+            Preset::Paper => Self {
+                frames: 400,
+                ..base
+            },
+        }
+    }
+
+    /// Refuses settings out of range, naming the knob and the accepted range.
+    pub fn validate(&self) -> Result<()> {
+        let knob = |knob: &'static str, value: String, reason: &str| {
+            Err(SynthError::Knob {
+                knob,
+                value,
+                reason: reason.into(),
+            })
+        };
+        if self.frames < 2 || self.frames > MAX_FRAMES {
+            return knob(
+                "frames",
+                self.frames.to_string(),
+                "must be in 2..=100000 (flow needs a next frame)",
+            );
+        }
+        for (name, v) in [("width", self.width), ("height", self.height)] {
+            if !(16..=MAX_SIDE).contains(&v) {
+                return knob(name, v.to_string(), "must be in 16..=8192 pixels");
+            }
+        }
+        if self.subframes == 0 || self.subframes > MAX_SUBFRAMES {
+            return knob(
+                "subframes",
+                self.subframes.to_string(),
+                "must be in 1..=256",
+            );
+        }
+        if self.supersample.is_multiple_of(2) || self.supersample > 7 {
+            return knob(
+                "supersample",
+                self.supersample.to_string(),
+                "must be odd, 1..=7",
+            );
+        }
+        if !(self.camera_distance.is_finite() && (1.0..=5.5).contains(&self.camera_distance)) {
+            return knob(
+                "camera-distance",
+                self.camera_distance.to_string(),
+                "must be in 1.0..=5.5 metres (the room ends at 6 m)",
+            );
+        }
+        if !(self.camera_height.is_finite() && (0.2..=2.6).contains(&self.camera_height)) {
+            return knob(
+                "camera-height",
+                self.camera_height.to_string(),
+                "must be in 0.2..=2.6 metres (walls are 2.8 m high)",
+            );
+        }
+        if !(self.fps.is_finite() && (1.0..=1000.0).contains(&self.fps)) {
+            return knob("fps", self.fps.to_string(), "must be in 1..=1000");
+        }
+        if !(self.exposure_fraction.is_finite()
+            && self.exposure_fraction > 0.0
+            && self.exposure_fraction <= 1.0)
+        {
+            return knob(
+                "exposure-fraction",
+                self.exposure_fraction.to_string(),
+                "must be in (0, 1]",
+            );
+        }
+        // Sub-frame timestamps (integer microseconds) must strictly increase.
+        let spacing_us = 1e6 * self.exposure_fraction / self.fps / f64::from(self.subframes);
+        if spacing_us < 4.0 {
+            return knob(
+                "subframes",
+                self.subframes.to_string(),
+                "sub-frames closer than 4 µs apart: lower subframes or fps",
+            );
+        }
+        if !(self.event_threshold.is_finite()
+            && self.event_threshold > 0.0
+            && self.event_threshold < 10.0)
+        {
+            return knob(
+                "event-threshold",
+                self.event_threshold.to_string(),
+                "must be in (0, 10)",
+            );
+        }
+        if !(self.event_sigma.is_finite() && self.event_sigma >= 0.0 && self.event_sigma < 1.0) {
+            return knob(
+                "event-sigma",
+                self.event_sigma.to_string(),
+                "must be in [0, 1)",
+            );
+        }
+        if self.refractory_us < 0 {
+            return knob(
+                "refractory-us",
+                self.refractory_us.to_string(),
+                "must be >= 0",
+            );
+        }
+        Ok(())
+    }
+}
