@@ -8,6 +8,7 @@ pub mod colour;
 pub mod fit;
 pub mod flow_loss;
 pub mod image_loss;
+pub mod init;
 pub mod step;
 
 /// Errors of the training crate.
