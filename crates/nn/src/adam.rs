@@ -50,6 +50,27 @@ impl<T: Real> Adam<T> {
         }
     }
 
+    /// Rebuilds the state from saved moments and step count (for checkpoints).
+    pub fn from_parts(
+        config: AdamConfig,
+        m: Vec<T>,
+        v: Vec<T>,
+        steps: u64,
+    ) -> Result<Self, NnError> {
+        check_len("adam second moment", m.len(), v.len())?;
+        Ok(Self {
+            config,
+            m,
+            v,
+            t: steps,
+        })
+    }
+
+    /// First and second moments (for checkpoints).
+    pub fn moments(&self) -> (&[T], &[T]) {
+        (&self.m, &self.v)
+    }
+
     /// Number of steps taken so far.
     pub fn steps(&self) -> u64 {
         self.t

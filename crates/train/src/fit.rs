@@ -9,12 +9,15 @@
 use crate::colour::ColourNet;
 use crate::step::{photometric_step, StaticGaussians};
 use crate::TrainError;
-use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
+use gaussians::adam::{AdamConfig, AdamState, GaussianAdam, GaussianLearningRates};
 use gaussians::density::{densify_and_prune, reset_opacity, DensifyConfig, DensityStats};
 use gaussians::GaussianSet;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rasterize_cpu::{Camera, RenderSettings};
+use safetensors::tensor::{Dtype, TensorView};
+use safetensors::SafeTensors;
+use std::path::Path;
 
 /// One training view: a camera and its target image, (3, H, W) linear RGB.
 #[derive(Clone, Debug)]
@@ -95,49 +98,104 @@ pub fn exponential_rate(lr0: f32, final_fraction: f32, step: usize, steps: usize
     (lr0.ln() * (1.0 - t) + (lr0 * final_fraction).ln() * t).exp()
 }
 
-/// Optimises `set` (whose `features` feed `net`) and `net` against `views`. Calls `on_step` after every
-/// step. Stops with an error, leaving the last good parameters in place, if a loss or gradient becomes
-/// non-finite.
+/// Optimises `set` (whose `features` feed `net`) and `net` against `views` for `config.steps` steps.
+/// Calls `on_step` after every step. Stops with an error if a loss or gradient becomes non-finite; the
+/// parameters are then those of the last finite step.
 pub fn fit_static(
     set: &mut GaussianSet,
     net: &mut ColourNet<f32>,
     views: &[View],
     config: &FitConfig,
-    mut on_step: impl FnMut(&StepReport),
+    on_step: impl FnMut(&StepReport),
 ) -> Result<(), TrainError> {
-    if views.is_empty() {
-        return Err(TrainError::Config("no training views".into()));
-    }
-    if set.feature_dim != net.config.feature_dim {
-        return Err(TrainError::Shape {
-            what: "Gaussian feature length vs colour network input".into(),
-            expected: net.config.feature_dim,
-            found: set.feature_dim,
-        });
-    }
-    let mut adam = GaussianAdam::new(set, AdamConfig::default());
-    let mut net_adam = nn::Adam::<f32>::new(
-        net.mlp.num_params(),
-        nn::AdamConfig {
-            lr: f64::from(config.colour_rate),
-            ..nn::AdamConfig::default()
-        },
-    );
-    let mut stats = DensityStats::new(set.len());
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
-    let mut order: Vec<usize> = Vec::new();
-    let settings = RenderSettings {
-        near_plane: 0.2,
-        background: config.background.iter().map(|&v| f64::from(v)).collect(),
-    };
-    let mut densify = config.densify;
-    densify.scene_extent = config.scene_extent;
-    for step in 0..config.steps {
-        if order.is_empty() {
-            order = (0..views.len()).collect();
-            order.shuffle(&mut rng);
+    let mut trainer = StaticTrainer::new(set.clone(), net.clone(), config.clone())?;
+    let result = trainer.run(views, config.steps, on_step);
+    *set = trainer.set;
+    *net = trainer.net;
+    result
+}
+
+/// All state of a scene-branch optimisation: parameters, optimiser moments, density statistics, the
+/// view-order RNG and the step count. Saving and loading it resumes a run bit for bit.
+#[derive(Clone, Debug)]
+pub struct StaticTrainer {
+    /// The Gaussians being optimised.
+    pub set: GaussianSet,
+    /// The scene-colour network.
+    pub net: ColourNet<f32>,
+    /// Hyper-parameters.
+    pub config: FitConfig,
+    /// Steps taken so far.
+    pub step: usize,
+    adam: GaussianAdam,
+    net_adam: nn::Adam<f32>,
+    stats: DensityStats,
+    rng: rand_chacha::ChaCha8Rng,
+    order: Vec<usize>,
+}
+
+impl StaticTrainer {
+    /// Fresh optimiser state for `set` and `net`.
+    pub fn new(
+        set: GaussianSet,
+        net: ColourNet<f32>,
+        config: FitConfig,
+    ) -> Result<Self, TrainError> {
+        if set.feature_dim != net.config.feature_dim {
+            return Err(TrainError::Shape {
+                what: "Gaussian feature length vs colour network input".into(),
+                expected: net.config.feature_dim,
+                found: set.feature_dim,
+            });
         }
-        let view = &views[order.pop().unwrap_or(0)];
+        let adam = GaussianAdam::new(&set, AdamConfig::default());
+        let net_adam = nn::Adam::<f32>::new(net.mlp.num_params(), net_adam_config(&config));
+        let stats = DensityStats::new(set.len());
+        let rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
+        Ok(Self {
+            set,
+            net,
+            config,
+            step: 0,
+            adam,
+            net_adam,
+            stats,
+            rng,
+            order: Vec::new(),
+        })
+    }
+
+    /// Runs steps until `self.step == until` (no-op if already there).
+    pub fn run(
+        &mut self,
+        views: &[View],
+        until: usize,
+        mut on_step: impl FnMut(&StepReport),
+    ) -> Result<(), TrainError> {
+        while self.step < until {
+            let report = self.step(views)?;
+            on_step(&report);
+        }
+        Ok(())
+    }
+
+    /// One optimisation step on the next view of the seeded order.
+    pub fn step(&mut self, views: &[View]) -> Result<StepReport, TrainError> {
+        if views.is_empty() {
+            return Err(TrainError::Config("no training views".into()));
+        }
+        let config = &self.config;
+        let step = self.step;
+        if self.order.is_empty() {
+            self.order = (0..views.len()).collect();
+            self.order.shuffle(&mut self.rng);
+        }
+        let view = &views[self.order.pop().unwrap_or(0) % views.len()];
+        let settings = RenderSettings {
+            near_plane: 0.2,
+            background: config.background.iter().map(|&v| f64::from(v)).collect(),
+        };
+        let set = &mut self.set;
         let gaussians = StaticGaussians {
             means: &set.means,
             log_scales: &set.log_scales,
@@ -148,7 +206,7 @@ pub fn fit_static(
         let out = photometric_step(
             &view.camera,
             &gaussians,
-            net,
+            &self.net,
             &view.image,
             config.ssim_weight,
             &settings,
@@ -159,6 +217,10 @@ pub fn fit_static(
         };
         let finite = out.loss.is_finite()
             && g.means.iter().flatten().all(|v| v.is_finite())
+            && g.log_scales.iter().flatten().all(|v| v.is_finite())
+            && g.quats.iter().flatten().all(|v| v.is_finite())
+            && g.opacity_logits.iter().all(|v| v.is_finite())
+            && g.features.iter().all(|v| v.is_finite())
             && g.colour_params.iter().all(|v| v.is_finite());
         if !finite {
             return Err(TrainError::NonFinite { step });
@@ -176,9 +238,11 @@ pub fn fit_static(
             step,
             config.steps,
         );
-        adam.step(set, &grads, &rates)
+        self.adam
+            .step(set, &grads, &rates)
             .map_err(|e| TrainError::Config(e.to_string()))?;
-        net_adam.step(&mut net.mlp.params, &g.colour_params)?;
+        self.net_adam
+            .step(&mut self.net.mlp.params, &g.colour_params)?;
         // Density statistics in INRIA's NDC convention: pixel gradients × (W/2, H/2).
         let (hw, hh) = (
             view.camera.width as f32 * 0.5,
@@ -186,35 +250,309 @@ pub fn fit_static(
         );
         let grad_ndc: Vec<[f32; 2]> = g.means_2d.iter().map(|m| [m[0] * hw, m[1] * hh]).collect();
         let radius: Vec<f32> = out.radii.iter().map(|&r| r as f32).collect();
-        stats.accumulate(&grad_ndc, &radius);
+        self.stats.accumulate(&grad_ndc, &radius);
         let done = step + 1;
         if done >= config.densify_from
             && done <= config.densify_until
             && config.densify_every > 0
-            && done % config.densify_every == 0
+            && done.is_multiple_of(config.densify_every)
         {
+            let mut densify = config.densify;
+            densify.scene_extent = config.scene_extent;
             densify_and_prune(
                 set,
-                &mut adam,
-                &mut stats,
+                &mut self.adam,
+                &mut self.stats,
                 &densify,
                 config.seed ^ done as u64,
             );
         }
         if config.opacity_reset_every > 0
-            && done % config.opacity_reset_every == 0
+            && done.is_multiple_of(config.opacity_reset_every)
             && done < config.steps
         {
-            reset_opacity(set, &mut adam, 0.01);
+            reset_opacity(set, &mut self.adam, 0.01);
         }
-        on_step(&StepReport {
+        self.step = done;
+        Ok(StepReport {
             step,
             loss: out.loss,
             psnr: crate::image_loss::psnr(&out.image, &view.image),
             gaussians: set.len(),
-        });
+        })
     }
-    Ok(())
+
+    /// Writes the whole state to one safetensors file, atomically (temporary sibling + rename).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), TrainError> {
+        let mut tensors: Vec<(String, Vec<f32>)> = Vec::new();
+        let s = &self.set;
+        tensors.push(("set.means".into(), s.means.as_flattened().to_vec()));
+        tensors.push((
+            "set.log_scales".into(),
+            s.log_scales.as_flattened().to_vec(),
+        ));
+        tensors.push(("set.quats".into(), s.quats.as_flattened().to_vec()));
+        tensors.push(("set.opacity_logits".into(), s.opacity_logits.clone()));
+        tensors.push(("set.sh".into(), s.sh.clone()));
+        tensors.push(("set.features".into(), s.features.clone()));
+        tensors.push(("set.semantic_logits".into(), s.semantic_logits.clone()));
+        for (name, g) in adam_groups(&self.adam) {
+            tensors.push((format!("adam.{name}.m"), g.m.clone()));
+            tensors.push((format!("adam.{name}.v"), g.v.clone()));
+        }
+        tensors.push(("net.params".into(), self.net.mlp.params.clone()));
+        let (m, v) = self.net_adam.moments();
+        tensors.push(("net_adam.m".into(), m.to_vec()));
+        tensors.push(("net_adam.v".into(), v.to_vec()));
+        tensors.push(("stats.grad_accum".into(), self.stats.grad_accum.clone()));
+        tensors.push(("stats.max_radius".into(), self.stats.max_radius.clone()));
+        let counts: Vec<f32> = self.stats.visible_count.iter().map(|&c| c as f32).collect();
+        tensors.push(("stats.visible_count".into(), counts));
+        let meta = CheckpointMeta {
+            format: CHECKPOINT_FORMAT.into(),
+            step: self.step,
+            sh_degree: s.sh_degree,
+            feature_dim: s.feature_dim,
+            semantic_classes: s.semantic_classes,
+            adam_steps: adam_groups(&self.adam)
+                .iter()
+                .map(|(_, g)| g.step)
+                .collect(),
+            net_adam_steps: self.net_adam.steps(),
+            rng_seed: self
+                .rng
+                .get_seed()
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect(),
+            rng_word_pos: self.rng.get_word_pos().to_string(),
+            order: self.order.clone(),
+        };
+        let meta_json = serde_json::to_string(&meta).map_err(|e| TrainError::Checkpoint {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let bytes: Vec<(String, Vec<u8>, Vec<usize>)> = tensors
+            .into_iter()
+            .map(|(name, values)| {
+                let len = values.len();
+                (
+                    name,
+                    values.iter().flat_map(|v| v.to_le_bytes()).collect(),
+                    vec![len],
+                )
+            })
+            .collect();
+        let views = bytes
+            .iter()
+            .map(|(name, data, shape)| {
+                TensorView::new(Dtype::F32, shape.clone(), data).map(|v| (name.clone(), v))
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| TrainError::Checkpoint {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        let mut metadata = std::collections::HashMap::new();
+        metadata.insert("trainer".to_string(), meta_json);
+        let file =
+            safetensors::serialize(views, Some(metadata)).map_err(|e| TrainError::Checkpoint {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        gaussians::ply::write_atomically(path, &file).map_err(|e| TrainError::Checkpoint {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Restores a trainer saved by [`StaticTrainer::save_checkpoint`]; `net` supplies the colour
+    /// network's architecture (its parameters are replaced) and `config` the hyper-parameters.
+    pub fn load_checkpoint(
+        path: &Path,
+        net: ColourNet<f32>,
+        config: FitConfig,
+    ) -> Result<Self, TrainError> {
+        let err = |message: String| TrainError::Checkpoint {
+            path: path.to_path_buf(),
+            message,
+        };
+        let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
+        let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| err(e.to_string()))?;
+        let meta_json = header
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get("trainer"))
+            .ok_or_else(|| err("missing `trainer` metadata".into()))?;
+        let meta: CheckpointMeta =
+            serde_json::from_str(meta_json).map_err(|e| err(format!("metadata: {e}")))?;
+        if meta.format != CHECKPOINT_FORMAT {
+            return Err(err(format!("unknown checkpoint format `{}`", meta.format)));
+        }
+        let st = SafeTensors::deserialize(&bytes).map_err(|e| err(e.to_string()))?;
+        let get = |name: &str| -> Result<Vec<f32>, TrainError> {
+            let t = st
+                .tensor(name)
+                .map_err(|_| err(format!("missing tensor `{name}`")))?;
+            if t.dtype() != Dtype::F32 {
+                return Err(err(format!("tensor `{name}` is not float32")));
+            }
+            Ok(t.data()
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect())
+        };
+        let rows3 = |v: Vec<f32>, name: &str| -> Result<Vec<[f32; 3]>, TrainError> {
+            if !v.len().is_multiple_of(3) {
+                return Err(err(format!(
+                    "tensor `{name}` length {} is not a multiple of 3",
+                    v.len()
+                )));
+            }
+            Ok(v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+        };
+        let mut set = GaussianSet::new(meta.sh_degree, meta.feature_dim, meta.semantic_classes);
+        set.means = rows3(get("set.means")?, "set.means")?;
+        set.log_scales = rows3(get("set.log_scales")?, "set.log_scales")?;
+        let quats = get("set.quats")?;
+        if !quats.len().is_multiple_of(4) {
+            return Err(err(
+                "tensor `set.quats` length is not a multiple of 4".into()
+            ));
+        }
+        set.quats = quats
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        set.opacity_logits = get("set.opacity_logits")?;
+        set.sh = get("set.sh")?;
+        set.features = get("set.features")?;
+        set.semantic_logits = get("set.semantic_logits")?;
+        set.validate().map_err(|e| err(e.to_string()))?;
+        let mut trainer = Self::new(set, net, config)?;
+        let n_groups = adam_groups(&trainer.adam).len();
+        if meta.adam_steps.len() != n_groups {
+            return Err(err(format!(
+                "expected {n_groups} Adam step counts, found {}",
+                meta.adam_steps.len()
+            )));
+        }
+        for (k, name) in ADAM_GROUP_NAMES.iter().enumerate() {
+            let m = get(&format!("adam.{name}.m"))?;
+            let v = get(&format!("adam.{name}.v"))?;
+            let group = adam_group_mut(&mut trainer.adam, k);
+            if m.len() != group.m.len() || v.len() != group.v.len() {
+                return Err(err(format!(
+                    "Adam moments of `{name}` do not match the Gaussians"
+                )));
+            }
+            group.m = m;
+            group.v = v;
+            group.step = meta.adam_steps[k];
+        }
+        let params = get("net.params")?;
+        if params.len() != trainer.net.mlp.num_params() {
+            return Err(err(format!(
+                "colour network has {} parameters in the checkpoint, {} in the architecture",
+                params.len(),
+                trainer.net.mlp.num_params()
+            )));
+        }
+        trainer.net.mlp.params = params;
+        trainer.net_adam = nn::Adam::from_parts(
+            net_adam_config(&trainer.config),
+            get("net_adam.m")?,
+            get("net_adam.v")?,
+            meta.net_adam_steps,
+        )?;
+        let n = trainer.set.len();
+        let stats_grad = get("stats.grad_accum")?;
+        let stats_radius = get("stats.max_radius")?;
+        let stats_count = get("stats.visible_count")?;
+        if stats_grad.len() != n || stats_radius.len() != n || stats_count.len() != n {
+            return Err(err("density statistics do not match the Gaussians".into()));
+        }
+        trainer.stats = DensityStats {
+            grad_accum: stats_grad,
+            visible_count: stats_count.iter().map(|&c| c as u32).collect(),
+            max_radius: stats_radius,
+        };
+        let seed_bytes: Vec<u8> = (0..meta.rng_seed.len() / 2)
+            .map(|i| u8::from_str_radix(&meta.rng_seed[2 * i..2 * i + 2], 16))
+            .collect::<Result<_, _>>()
+            .map_err(|e| err(format!("rng seed: {e}")))?;
+        let seed: [u8; 32] = seed_bytes
+            .try_into()
+            .map_err(|_| err("rng seed must be 32 bytes".into()))?;
+        trainer.rng = rand_chacha::ChaCha8Rng::from_seed(seed);
+        trainer.rng.set_word_pos(
+            meta.rng_word_pos
+                .parse()
+                .map_err(|e| err(format!("rng position: {e}")))?,
+        );
+        trainer.order = meta.order;
+        trainer.step = meta.step;
+        Ok(trainer)
+    }
+}
+
+/// Identifier stored in every checkpoint's metadata.
+pub const CHECKPOINT_FORMAT: &str = "e-sem3dgs-static-trainer-v1";
+
+const ADAM_GROUP_NAMES: [&str; 7] = [
+    "means",
+    "log_scales",
+    "quats",
+    "opacity_logits",
+    "sh",
+    "features",
+    "semantic_logits",
+];
+
+fn adam_groups(adam: &GaussianAdam) -> [(&'static str, &AdamState); 7] {
+    [
+        (ADAM_GROUP_NAMES[0], &adam.means),
+        (ADAM_GROUP_NAMES[1], &adam.log_scales),
+        (ADAM_GROUP_NAMES[2], &adam.quats),
+        (ADAM_GROUP_NAMES[3], &adam.opacity_logits),
+        (ADAM_GROUP_NAMES[4], &adam.sh),
+        (ADAM_GROUP_NAMES[5], &adam.features),
+        (ADAM_GROUP_NAMES[6], &adam.semantic_logits),
+    ]
+}
+
+fn adam_group_mut(adam: &mut GaussianAdam, k: usize) -> &mut AdamState {
+    match k {
+        0 => &mut adam.means,
+        1 => &mut adam.log_scales,
+        2 => &mut adam.quats,
+        3 => &mut adam.opacity_logits,
+        4 => &mut adam.sh,
+        5 => &mut adam.features,
+        _ => &mut adam.semantic_logits,
+    }
+}
+
+fn net_adam_config(config: &FitConfig) -> nn::AdamConfig {
+    nn::AdamConfig {
+        lr: f64::from(config.colour_rate),
+        ..nn::AdamConfig::default()
+    }
+}
+
+/// Non-tensor state of a checkpoint (stored as JSON in the safetensors metadata).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct CheckpointMeta {
+    format: String,
+    step: usize,
+    sh_degree: usize,
+    feature_dim: usize,
+    semantic_classes: usize,
+    adam_steps: Vec<u64>,
+    net_adam_steps: u64,
+    rng_seed: String,
+    rng_word_pos: String,
+    order: Vec<usize>,
 }
 
 #[cfg(test)]

@@ -31,6 +31,14 @@ pub enum TrainError {
         /// The step at which it happened.
         step: usize,
     },
+    /// A checkpoint could not be written or read.
+    #[error("checkpoint {path}: {message}")]
+    Checkpoint {
+        /// The checkpoint file.
+        path: std::path::PathBuf,
+        /// What went wrong.
+        message: String,
+    },
     /// An array does not have the expected length.
     #[error("{what}: expected {expected} values, found {found}")]
     Shape {

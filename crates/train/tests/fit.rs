@@ -8,7 +8,7 @@ use gaussians::GaussianSet;
 use rand::{Rng, SeedableRng};
 use rasterize_cpu::{render_sh, Camera, RenderSettings, ShSplats};
 use train::colour::{ColourNet, ColourNetConfig};
-use train::fit::{fit_static, FitConfig, View};
+use train::fit::{fit_static, FitConfig, StaticTrainer, View};
 
 /// A camera at `eye` looking at the origin (OpenCV axes: x right, y down, z forward).
 fn look_at(eye: [f64; 3], w: u32, h: u32) -> Camera {
@@ -116,27 +116,38 @@ fn start(t: &GaussianSet, feature_dim: usize) -> GaussianSet {
     s
 }
 
-fn run(steps: usize) -> (GaussianSet, ColourNet<f32>, Vec<f32>) {
-    let t = truth(24);
-    let views = views(&t);
+fn net() -> ColourNet<f32> {
     let mut config_net = ColourNetConfig::scene();
     config_net.feature_dim = 8;
     config_net.hidden = vec![16];
-    let mut net = ColourNet::new(config_net, 3).unwrap();
-    let mut set = start(&t, 8);
-    let config = FitConfig {
+    ColourNet::new(config_net, 3).unwrap()
+}
+
+fn config(steps: usize) -> FitConfig {
+    FitConfig {
         steps,
         densify_from: 100,
         densify_until: 200,
+        densify_every: 50,
         rates: gaussians::GaussianLearningRates {
             features: 1e-2,
             ..Default::default()
         },
         colour_rate: 1e-2,
         ..FitConfig::default()
-    };
+    }
+}
+
+fn run(steps: usize) -> (GaussianSet, ColourNet<f32>, Vec<f32>) {
+    let t = truth(24);
+    let views = views(&t);
+    let mut net = net();
+    let mut set = start(&t, 8);
     let mut losses = Vec::new();
-    fit_static(&mut set, &mut net, &views, &config, |r| losses.push(r.loss)).unwrap();
+    fit_static(&mut set, &mut net, &views, &config(steps), |r| {
+        losses.push(r.loss)
+    })
+    .unwrap();
     (set, net, losses)
 }
 
@@ -165,4 +176,61 @@ fn fitting_is_deterministic_across_thread_counts() {
     assert_eq!(one.0, two.0);
     assert_eq!(one.1, two.1);
     assert_eq!(one.2, two.2);
+}
+
+#[test]
+fn resuming_from_a_checkpoint_is_bit_identical() {
+    // 160 steps straight vs 110 steps, checkpoint, reload, 50 more: density control runs at 100 and 150,
+    // so the resumed half includes a densification and the RNG-driven view order and split sampling.
+    let t = truth(24);
+    let views = views(&t);
+    let mut straight = StaticTrainer::new(start(&t, 8), net(), config(160)).unwrap();
+    straight.run(&views, 160, |_| {}).unwrap();
+
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("checkpoint.safetensors");
+    let mut first = StaticTrainer::new(start(&t, 8), net(), config(160)).unwrap();
+    first.run(&views, 110, |_| {}).unwrap();
+    first.save_checkpoint(&path).unwrap();
+    drop(first);
+    let mut resumed = StaticTrainer::load_checkpoint(&path, net(), config(160)).unwrap();
+    assert_eq!(resumed.step, 110);
+    resumed.run(&views, 160, |_| {}).unwrap();
+    assert_ne!(
+        straight.set.len(),
+        24,
+        "density control should have changed the count"
+    );
+    assert_eq!(resumed.set, straight.set);
+    assert_eq!(resumed.net, straight.net);
+}
+
+#[test]
+fn bad_checkpoints_are_reported_with_their_path() {
+    let t = truth(4);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ck.safetensors");
+    let trainer = StaticTrainer::new(start(&t, 8), net(), config(10)).unwrap();
+    trainer.save_checkpoint(&path).unwrap();
+    // Truncated file.
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let err = StaticTrainer::load_checkpoint(&path, net(), config(10))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("ck.safetensors"), "{err}");
+    // A different network architecture.
+    trainer.save_checkpoint(&path).unwrap();
+    let mut other = ColourNetConfig::scene();
+    other.feature_dim = 8;
+    other.hidden = vec![7];
+    let err = StaticTrainer::load_checkpoint(&path, ColourNet::new(other, 1).unwrap(), config(10))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("parameters"), "{err}");
+    // Missing file.
+    let err = StaticTrainer::load_checkpoint(&dir.path().join("nope"), net(), config(10))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("nope"), "{err}");
 }
