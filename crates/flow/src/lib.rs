@@ -32,7 +32,9 @@
 //! This crate knows nothing about events, Gaussians or the training losses of the method.
 
 mod net;
+pub mod synthetic;
 pub mod t7;
+pub mod train;
 mod weights;
 
 pub use net::{SpyNet, Tape, IMAGENET_MEAN, IMAGENET_STD, KERNEL, LAYER_CHANNELS};
