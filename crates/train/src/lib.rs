@@ -5,6 +5,7 @@
 pub mod aiap;
 pub mod blend;
 pub mod colour;
+pub mod eval;
 pub mod fit;
 pub mod flow_loss;
 pub mod image_loss;

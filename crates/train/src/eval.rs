@@ -1,0 +1,208 @@
+//! Evaluation (DESIGN.md §6): PSNR and SSIM of test renders against the sharp references over the full
+//! frame and inside the human bounding box (from the reference mask), mask IoU of the rendered human
+//! probability thresholded at 0.5, and side-by-side strips for a person to look at.
+//!
+//! Works on images already rendered, so it is independent of how the model produced them. SSIM is the
+//! project's one SSIM (`image_loss::ssim`: 11×11 Gaussian window, σ 1.5, zero padding, data range 1).
+
+use crate::image_loss::{crop, mask_iou, psnr, ssim, ImageShape};
+
+/// One evaluated frame: planar (3, H, W) images in linear [0, 1] and (H, W) masks.
+#[derive(Clone, Copy, Debug)]
+pub struct EvalFrame<'a> {
+    /// Width (pixels).
+    pub width: usize,
+    /// Height (pixels).
+    pub height: usize,
+    /// The model's render.
+    pub render: &'a [f32],
+    /// The sharp reference.
+    pub reference: &'a [f32],
+    /// The blurred input frame (for the blurred-input baseline figures).
+    pub blurred: &'a [f32],
+    /// Reference human mask (true = human).
+    pub mask: &'a [bool],
+    /// Rendered human probability per pixel, in [0, 1].
+    pub human_probability: &'a [f32],
+}
+
+/// Per-frame figures.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FrameMetrics {
+    /// PSNR (dB), full frame.
+    pub psnr_full: f64,
+    /// SSIM, full frame.
+    pub ssim_full: f64,
+    /// PSNR (dB) inside the human bounding box (NaN if the mask is empty).
+    pub psnr_human_box: f64,
+    /// SSIM inside the human bounding box (NaN if the mask is empty).
+    pub ssim_human_box: f64,
+    /// IoU of rendered human probability > 0.5 against the mask.
+    pub mask_iou: f64,
+    /// PSNR (dB) of the blurred input against the reference, full frame.
+    pub blurred_psnr_full: f64,
+    /// PSNR (dB) of the blurred input against the reference, human box.
+    pub blurred_psnr_human_box: f64,
+}
+
+/// Tight bounding box `(x0, y0, x1, y1)` (exclusive ends) of the true pixels of an (H, W) mask.
+pub fn mask_bbox(
+    mask: &[bool],
+    width: usize,
+    height: usize,
+) -> Option<(usize, usize, usize, usize)> {
+    let mut bbox: Option<(usize, usize, usize, usize)> = None;
+    for y in 0..height {
+        for x in 0..width {
+            if mask[y * width + x] {
+                bbox = Some(match bbox {
+                    None => (x, y, x + 1, y + 1),
+                    Some((x0, y0, x1, y1)) => (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1)),
+                });
+            }
+        }
+    }
+    bbox
+}
+
+/// Figures of one frame.
+pub fn evaluate_frame(f: &EvalFrame<'_>) -> FrameMetrics {
+    let shape = ImageShape {
+        channels: 3,
+        height: f.height,
+        width: f.width,
+    };
+    let mut out = FrameMetrics {
+        psnr_full: psnr(f.render, f.reference),
+        ssim_full: f64::from(ssim(f.render, f.reference, shape, None)),
+        psnr_human_box: f64::NAN,
+        ssim_human_box: f64::NAN,
+        mask_iou: {
+            let m: Vec<f32> = f.mask.iter().map(|&b| if b { 1.0 } else { 0.0 }).collect();
+            mask_iou(f.human_probability, &m)
+        },
+        blurred_psnr_full: psnr(f.blurred, f.reference),
+        blurred_psnr_human_box: f64::NAN,
+    };
+    if let Some((x0, y0, x1, y1)) = mask_bbox(f.mask, f.width, f.height) {
+        let crop_of = |img: &[f32]| crop(img, shape, x0, y0, x1, y1);
+        let box_shape = ImageShape {
+            channels: 3,
+            height: y1 - y0,
+            width: x1 - x0,
+        };
+        let (r, g, b) = (crop_of(f.render), crop_of(f.reference), crop_of(f.blurred));
+        out.psnr_human_box = psnr(&r, &g);
+        out.ssim_human_box = f64::from(ssim(&r, &g, box_shape, None));
+        out.blurred_psnr_human_box = psnr(&b, &g);
+    }
+    out
+}
+
+/// Mean of the per-frame figures (NaN entries, from frames without a human, are skipped per field).
+pub fn mean_metrics(frames: &[FrameMetrics]) -> FrameMetrics {
+    let mean = |get: fn(&FrameMetrics) -> f64| {
+        let vals: Vec<f64> = frames.iter().map(get).filter(|v| v.is_finite()).collect();
+        if vals.is_empty() {
+            f64::NAN
+        } else {
+            vals.iter().sum::<f64>() / vals.len() as f64
+        }
+    };
+    FrameMetrics {
+        psnr_full: mean(|m| m.psnr_full),
+        ssim_full: mean(|m| m.ssim_full),
+        psnr_human_box: mean(|m| m.psnr_human_box),
+        ssim_human_box: mean(|m| m.ssim_human_box),
+        mask_iou: mean(|m| m.mask_iou),
+        blurred_psnr_full: mean(|m| m.blurred_psnr_full),
+        blurred_psnr_human_box: mean(|m| m.blurred_psnr_human_box),
+    }
+}
+
+/// A horizontal strip `blurred | render | reference | human probability (grey)` as planar (3, H, 4W),
+/// with a 2-pixel white separator between panels (so the strip is 4W + 6 wide).
+pub fn comparison_strip(f: &EvalFrame<'_>) -> (usize, usize, Vec<f32>) {
+    let (w, h) = (f.width, f.height);
+    let sep = 2;
+    let out_w = 4 * w + 3 * sep;
+    let mut out = vec![1.0f32; 3 * h * out_w];
+    let panels: [&dyn Fn(usize, usize, usize) -> f32; 4] = [
+        &|c, y, x| f.blurred[(c * h + y) * w + x],
+        &|c, y, x| f.render[(c * h + y) * w + x],
+        &|c, y, x| f.reference[(c * h + y) * w + x],
+        &|_, y, x| f.human_probability[y * w + x],
+    ];
+    for (k, panel) in panels.iter().enumerate() {
+        let x_off = k * (w + sep);
+        for c in 0..3 {
+            for y in 0..h {
+                for x in 0..w {
+                    out[(c * h + y) * out_w + x_off + x] = panel(c, y, x).clamp(0.0, 1.0);
+                }
+            }
+        }
+    }
+    (out_w, h, out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bbox_psnr_and_iou_on_a_toy_frame() {
+        let (w, h) = (16, 12);
+        let reference: Vec<f32> = (0..3 * w * h).map(|i| (i % 7) as f32 / 7.0).collect();
+        let mut render = reference.clone();
+        let mut mask = vec![false; w * h];
+        for y in 3..6 {
+            for x in 4..9 {
+                mask[y * w + x] = true;
+                render[y * w + x] += 0.1; // error only inside the box, channel 0
+            }
+        }
+        let prob: Vec<f32> = mask.iter().map(|&m| if m { 0.9 } else { 0.1 }).collect();
+        let f = EvalFrame {
+            width: w,
+            height: h,
+            render: &render,
+            reference: &reference,
+            blurred: &reference,
+            mask: &mask,
+            human_probability: &prob,
+        };
+        assert_eq!(mask_bbox(&mask, w, h), Some((4, 3, 9, 6)));
+        let m = evaluate_frame(&f);
+        assert_eq!(m.mask_iou, 1.0);
+        // Box: 15 of 45 values off by 0.1 → MSE 1/300 → 24.77 dB; full frame: 15 of 576.
+        assert!(
+            (m.psnr_human_box - 10.0 * 300f64.log10()).abs() < 1e-3,
+            "{m:?}"
+        );
+        assert!((m.psnr_full - 10.0 * (576.0f64 / 15.0 / 0.01).log10()).abs() < 1e-3);
+        assert!(m.blurred_psnr_full.is_infinite());
+        let (sw, sh, strip) = comparison_strip(&f);
+        assert_eq!((sw, sh, strip.len()), (4 * 16 + 6, 12, 3 * 12 * 70));
+    }
+
+    #[test]
+    fn empty_masks_give_nan_box_figures_that_the_mean_skips() {
+        let a = FrameMetrics {
+            psnr_full: 20.0,
+            ssim_full: 0.5,
+            psnr_human_box: f64::NAN,
+            ssim_human_box: f64::NAN,
+            mask_iou: 1.0,
+            blurred_psnr_full: 18.0,
+            blurred_psnr_human_box: f64::NAN,
+        };
+        let b = FrameMetrics {
+            psnr_human_box: 10.0,
+            ..a
+        };
+        let m = mean_metrics(&[a, b]);
+        assert_eq!(m.psnr_human_box, 10.0);
+        assert_eq!(m.psnr_full, 20.0);
+    }
+}
