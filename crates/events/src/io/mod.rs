@@ -11,7 +11,9 @@ use std::path::Path;
 use crate::error::{EventsError, Result};
 use crate::stream::{EventStream, SensorSize};
 
+pub mod aedat4;
 pub mod npz;
+pub mod prophesee;
 pub mod text;
 
 /// Default number of events per chunk used by [`read_events`].
@@ -39,17 +41,29 @@ pub enum EventFormat {
     Text,
     /// `.npz` with arrays `x`, `y`, `t`, `p`.
     Npz,
+    /// AEDAT 4 (iniVation DV).
+    Aedat4,
+    /// Prophesee `.raw` (EVT 2.0 / 3.0, from the header); read only.
+    PropheseeRaw,
+    /// Prophesee `.dat`; read only.
+    PropheseeDat,
 }
 
 impl EventFormat {
-    /// Guesses the format from the extension (`.txt`, `.csv` → text; `.npz`).
+    /// Guesses the format from the extension (`.txt`, `.csv` → text; `.npz`; `.aedat4`/`.aedat`;
+    /// `.raw`; `.dat`).
     pub fn from_path(path: &Path) -> Result<Self> {
         match crate::flowio::extension(path).as_str() {
             "txt" | "csv" | "text" => Ok(Self::Text),
             "npz" => Ok(Self::Npz),
+            "aedat4" | "aedat" => Ok(Self::Aedat4),
+            "raw" => Ok(Self::PropheseeRaw),
+            "dat" => Ok(Self::PropheseeDat),
             other => Err(EventsError::format(
                 path,
-                format!("unknown event-file extension {other:?} (expected txt, npz)"),
+                format!(
+                    "unknown event-file extension {other:?} (expected txt, npz, aedat4, raw, dat)"
+                ),
             )),
         }
     }
@@ -61,6 +75,10 @@ pub fn open_events(path: impl AsRef<Path>) -> Result<Box<dyn EventReader>> {
     Ok(match EventFormat::from_path(path)? {
         EventFormat::Text => Box::new(text::TextReader::open(path)?),
         EventFormat::Npz => Box::new(npz::NpzReader::open(path)?),
+        EventFormat::Aedat4 => Box::new(aedat4::Aedat4Reader::open(path)?),
+        EventFormat::PropheseeRaw | EventFormat::PropheseeDat => {
+            Box::new(prophesee::PropheseeReader::open(path)?)
+        }
     })
 }
 
@@ -78,11 +96,17 @@ pub fn read_all(r: &mut dyn EventReader) -> Result<EventStream> {
     Ok(s)
 }
 
-/// Writes a stream (format from the extension).
+/// Writes a stream (format from the extension; AEDAT 4 uncompressed; Prophesee formats are read
+/// only).
 pub fn write_events(path: impl AsRef<Path>, events: &EventStream) -> Result<()> {
     let path = path.as_ref();
     match EventFormat::from_path(path)? {
         EventFormat::Text => text::write_text(path, events),
         EventFormat::Npz => npz::write_npz(path, events),
+        EventFormat::Aedat4 => aedat4::write_aedat4(path, events, aedat4::Compression::None),
+        EventFormat::PropheseeRaw | EventFormat::PropheseeDat => Err(EventsError::format(
+            path,
+            "writing Prophesee files is not supported (read only)".to_string(),
+        )),
     }
 }
