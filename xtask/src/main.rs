@@ -4,9 +4,13 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+mod bench_flow;
 mod body;
 mod body_convert;
+mod flow_estimate;
+mod flow_import_t7;
 mod ply_info;
+mod train_flow;
 
 /// E-Sem3DGS driver: reconstruct people and scenes from blurred video + events, on the CPU.
 #[derive(Parser, Debug)]
@@ -24,6 +28,22 @@ enum Command {
     Body(body::Args),
     /// Convert the CC0 MakeHuman assets into data-fixtures/body/makehuman.npz.
     BodyConvert(body_convert::Args),
+    /// Optical flow between two images with the SPyNet-style network.
+    Flow(flow_estimate::Args),
+    /// Convert the original SPyNet Torch7 files into a safetensors weights file.
+    FlowImportT7(flow_import_t7::Args),
+    /// Train SPyNet-style weights on procedural pairs (coarse to fine, EPE loss).
+    TrainFlow(train_flow::Args),
+    /// Benchmarks, printed as JSON lines.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+/// `cargo xtask bench <what>`.
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// SPyNet forward and forward + input-gradient times.
+    Flow(bench_flow::Args),
 }
 
 fn main() -> Result<()> {
@@ -32,5 +52,9 @@ fn main() -> Result<()> {
         Command::PlyInfo(args) => ply_info::run(args),
         Command::Body(args) => body::run(args),
         Command::BodyConvert(args) => body_convert::run(args),
+        Command::Flow(args) => flow_estimate::run(args),
+        Command::FlowImportT7(args) => flow_import_t7::run(args),
+        Command::TrainFlow(args) => train_flow::run(args),
+        Command::Bench(BenchCommand::Flow(args)) => bench_flow::run(args),
     }
 }

@@ -1,0 +1,82 @@
+//! `cargo xtask bench flow [--quick]`: times the SPyNet forward pass and forward + input-gradient pass
+//! on seeded random images and prints one JSON line per case
+//! `{"case","width","height","levels","threads","fwd_ms","fwd_bwd_ms"}` (medians over repeats), for
+//! 1 thread and for the machine's threads.
+
+use anyhow::{Context, Result};
+use std::time::Instant;
+
+/// Arguments of `bench flow`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Fewer repeats (a smoke run).
+    #[arg(long)]
+    pub quick: bool,
+    /// Thread counts to run (default: 1 and all available).
+    #[arg(long, value_delimiter = ',')]
+    pub threads: Vec<usize>,
+    /// Pyramid levels of the (randomly initialised) network.
+    #[arg(long, default_value_t = 4)]
+    pub levels: usize,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Runs the benchmark cases.
+pub fn run(args: Args) -> Result<()> {
+    let threads = if args.threads.is_empty() {
+        let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if all > 1 {
+            vec![1, all]
+        } else {
+            vec![1]
+        }
+    } else {
+        args.threads.clone()
+    };
+    let repeats = if args.quick { 3 } else { 9 };
+    let net = flow::SpyNet::<f32>::random(args.levels, 1);
+    for (name, size) in [("pair_64", 64usize), ("pair_256", 256)] {
+        let n = 3 * size * size;
+        let mut rng = 0x1234_5678u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((rng >> 40) as f32) / ((1u64 << 24) as f32)
+        };
+        let a: Vec<f32> = (0..n).map(|_| next()).collect();
+        let b: Vec<f32> = (0..n).map(|_| next()).collect();
+        for &t in &threads {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .context("building thread pool")?;
+            let (fwd, both) = pool.install(|| -> Result<(Vec<f64>, Vec<f64>)> {
+                let (mut fwd, mut both) = (Vec::new(), Vec::new());
+                for _ in 0..repeats {
+                    let s = Instant::now();
+                    let tape = net.forward(&a, &b, size, size)?;
+                    fwd.push(s.elapsed().as_secs_f64() * 1e3);
+                    let g = vec![1.0f32; tape.flow.len()];
+                    let s = Instant::now();
+                    let tape = net.forward(&a, &b, size, size)?;
+                    let _grads = net.backward(&tape, &g, None)?;
+                    both.push(s.elapsed().as_secs_f64() * 1e3);
+                }
+                Ok((fwd, both))
+            })?;
+            println!(
+                "{}",
+                serde_json::json!({
+                    "case": name, "width": size, "height": size, "levels": args.levels,
+                    "threads": t, "fwd_ms": median(fwd), "fwd_bwd_ms": median(both),
+                })
+            );
+        }
+    }
+    Ok(())
+}
