@@ -157,3 +157,99 @@ pub fn lbs_vertices_exact_rest(
         })
         .collect()
 }
+
+/// Points per parallel chunk in the batch backward; fixed so reductions do not depend on the thread
+/// count.
+pub const LBS_CHUNK: usize = 1024;
+
+/// Skins Gaussians: positions `x' = T x` and rotation matrices `M = R_T R(q)` for each of N Gaussians
+/// (`weights` row-major `(N, B)`, `quats` `(w, x, y, z)` unnormalised). Returns `(positions, mats)`.
+pub fn lbs_gaussians<T: Float + Send + Sync>(
+    weights: &[T],
+    bones: &[Affine<T>],
+    positions: &[[T; 3]],
+    quats: &[[T; 4]],
+) -> (Vec<[T; 3]>, Vec<Mat3<T>>) {
+    let nb = bones.len();
+    assert_eq!(
+        weights.len(),
+        positions.len() * nb,
+        "weights must be (N, B)"
+    );
+    assert_eq!(quats.len(), positions.len(), "one quaternion per Gaussian");
+    positions
+        .par_iter()
+        .zip(quats.par_iter())
+        .enumerate()
+        .map(|(i, (&x, &q))| {
+            let w = &weights[i * nb..(i + 1) * nb];
+            let t = blend_transforms(w, bones);
+            (
+                affine_apply(&t, x),
+                mat3_mul(&affine_rot(&t), &quat_to_mat3(q)),
+            )
+        })
+        .unzip()
+}
+
+/// Gradients of [`lbs_gaussians`].
+#[derive(Clone, Debug)]
+pub struct LbsGaussiansGrad<T> {
+    /// ∂L/∂positions (canonical), `(N, 3)`.
+    pub positions: Vec<[T; 3]>,
+    /// ∂L/∂quats, `(N, 4)`.
+    pub quats: Vec<[T; 4]>,
+    /// ∂L/∂weights, row-major `(N, B)`.
+    pub weights: Vec<T>,
+    /// ∂L/∂bones, summed over Gaussians in a fixed order (chunks of [`LBS_CHUNK`], then chunk sums
+    /// in order): bit-identical for any thread count.
+    pub bones: Vec<Affine<T>>,
+}
+
+/// Backward of [`lbs_gaussians`] from `∂L/∂positions` and `∂L/∂mats`.
+pub fn lbs_gaussians_backward<T: Float + Send + Sync>(
+    weights: &[T],
+    bones: &[Affine<T>],
+    positions: &[[T; 3]],
+    quats: &[[T; 4]],
+    d_positions: &[[T; 3]],
+    d_mats: &[Mat3<T>],
+) -> LbsGaussiansGrad<T> {
+    let n = positions.len();
+    let nb = bones.len();
+    assert_eq!(weights.len(), n * nb, "weights must be (N, B)");
+    let mut g_pos = vec![[T::zero(); 3]; n];
+    let mut g_q = vec![[T::zero(); 4]; n];
+    let mut g_w = vec![T::zero(); n * nb];
+    let chunk_bones: Vec<Vec<Affine<T>>> = g_pos
+        .par_chunks_mut(LBS_CHUNK)
+        .zip(g_q.par_chunks_mut(LBS_CHUNK))
+        .zip(g_w.par_chunks_mut(LBS_CHUNK * nb))
+        .enumerate()
+        .map(|(c, ((gp, gq), gw))| {
+            let mut db = vec![[T::zero(); 12]; nb];
+            for k in 0..gp.len() {
+                let i = c * LBS_CHUNK + k;
+                let w = &weights[i * nb..(i + 1) * nb];
+                let dw = &mut gw[k * nb..(k + 1) * nb];
+                gp[k] = lbs_point_backward(w, bones, positions[i], d_positions[i], dw, &mut db);
+                gq[k] = lbs_rotation_backward(w, bones, quats[i], &d_mats[i], dw, &mut db);
+            }
+            db
+        })
+        .collect();
+    let mut g_b = vec![[T::zero(); 12]; nb];
+    for db in chunk_bones {
+        for b in 0..nb {
+            for k in 0..12 {
+                g_b[b][k] = g_b[b][k] + db[b][k];
+            }
+        }
+    }
+    LbsGaussiansGrad {
+        positions: g_pos,
+        quats: g_q,
+        weights: g_w,
+        bones: g_b,
+    }
+}

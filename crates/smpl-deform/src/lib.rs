@@ -7,6 +7,7 @@
 
 pub mod body;
 pub mod canonical;
+pub mod deform_net;
 pub mod error;
 pub mod fk;
 pub mod inside;

@@ -256,3 +256,170 @@ fn rodrigues_is_exact_identity_at_zero_and_orthonormal() {
         }
     }
 }
+
+mod deformation_networks {
+    //! End-to-end FD check of the Gaussian deformation (non-rigid MLP → skinning-field MLP → LBS)
+    //! w.r.t. canonical positions, log-scales, quaternions, bone transforms and a strided subset of
+    //! both networks' parameters. Same tolerance and step as above: the pipeline is smooth except at
+    //! LeakyReLU kinks, which random inputs hit within h = 1e-6 with probability ~1e-5 per unit.
+
+    use super::*;
+    use smpl_deform::deform_net::{
+        deform_gaussians, deform_gaussians_backward, CanonicalGaussians, NonRigidNet,
+        SkinningField, NR_FEATURE_DIM,
+    };
+    use smpl_deform::NUM_POSE_FEATURES;
+
+    const N: usize = 3;
+
+    struct Setup {
+        nonrigid: NonRigidNet<f64>,
+        field: SkinningField<f64>,
+        positions: Vec<[f64; 3]>,
+        log_scales: Vec<[f64; 3]>,
+        quats: Vec<[f64; 4]>,
+        bones: Vec<Affine<f64>>,
+        pose_code: Vec<f64>,
+        cot: Vec<f64>,
+    }
+
+    fn setup(seed: u64) -> Setup {
+        let box_vertices = [[-0.8f32, -1.0, -0.2], [0.8, 0.8, 0.3]];
+        let mut nonrigid = NonRigidNet::<f64>::new(&box_vertices, 8, seed).expect("net");
+        // The real init zeroes the last layer; perturb it so every layer gets a gradient.
+        let np = nonrigid.mlp.params.len();
+        let noise = lcg_vec(seed ^ 21, np);
+        for (p, r) in nonrigid.mlp.params.iter_mut().zip(&noise) {
+            if *p == 0.0 {
+                *p = 0.2 * r;
+            }
+        }
+        let field = SkinningField::<f64>::new(&box_vertices, 8, seed ^ 5).expect("field");
+        let v = lcg_vec(seed ^ 31, N * 10);
+        Setup {
+            nonrigid,
+            field,
+            positions: (0..N)
+                .map(|i| [0.7 * v[10 * i], 0.9 * v[10 * i + 1], 0.2 * v[10 * i + 2]])
+                .collect(),
+            log_scales: (0..N)
+                .map(|i| {
+                    [
+                        v[10 * i + 3] - 4.0,
+                        v[10 * i + 4] - 4.0,
+                        v[10 * i + 5] - 4.0,
+                    ]
+                })
+                .collect(),
+            quats: (0..N)
+                .map(|i| {
+                    [
+                        1.0 + 0.3 * v[10 * i + 6],
+                        v[10 * i + 7],
+                        v[10 * i + 8],
+                        v[10 * i + 9],
+                    ]
+                })
+                .collect(),
+            bones: rigidish_bones(seed ^ 41, 24),
+            pose_code: lcg_vec(seed ^ 51, NUM_POSE_FEATURES)
+                .iter()
+                .map(|x| 0.3 * x)
+                .collect(),
+            cot: lcg_vec(seed ^ 61, N * (3 + 3 + 9 + NR_FEATURE_DIM)),
+        }
+    }
+
+    fn loss(s: &Setup) -> f64 {
+        let g = CanonicalGaussians {
+            positions: &s.positions,
+            log_scales: &s.log_scales,
+            quats: &s.quats,
+        };
+        let (out, _) =
+            deform_gaussians(&s.nonrigid, &s.field, &g, &s.pose_code, &s.bones).expect("fwd");
+        let c = &s.cot;
+        let mut l = 0.0;
+        for i in 0..N {
+            let o = i * (15 + NR_FEATURE_DIM);
+            l += dot(&out.positions[i], &c[o..o + 3]);
+            l += dot(&out.log_scales[i], &c[o + 3..o + 6]);
+            l += dot(&out.mats[i], &c[o + 6..o + 15]);
+            l += dot(
+                &out.features[i * NR_FEATURE_DIM..(i + 1) * NR_FEATURE_DIM],
+                &c[o + 15..o + 15 + NR_FEATURE_DIM],
+            );
+        }
+        l
+    }
+
+    fn flat<const K: usize>(v: &[[f64; K]]) -> Vec<f64> {
+        v.iter().flatten().copied().collect()
+    }
+
+    fn unflat<const K: usize>(v: &[f64]) -> Vec<[f64; K]> {
+        v.chunks(K)
+            .map(|c| {
+                let mut a = [0.0; K];
+                a.copy_from_slice(c);
+                a
+            })
+            .collect()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(8))]
+
+        #[test]
+        fn deformation_matches_finite_differences(seed in any::<u64>()) {
+            let s = setup(seed);
+            let g = CanonicalGaussians { positions: &s.positions, log_scales: &s.log_scales, quats: &s.quats };
+            let (_, cache) = deform_gaussians(&s.nonrigid, &s.field, &g, &s.pose_code, &s.bones).expect("fwd");
+            let c = &s.cot;
+            let stride = 15 + NR_FEATURE_DIM;
+            let d_pos: Vec<[f64; 3]> = (0..N).map(|i| [c[i * stride], c[i * stride + 1], c[i * stride + 2]]).collect();
+            let d_s: Vec<[f64; 3]> = (0..N).map(|i| [c[i * stride + 3], c[i * stride + 4], c[i * stride + 5]]).collect();
+            let d_m: Vec<[f64; 9]> = (0..N).map(|i| {
+                let mut m = [0.0; 9];
+                m.copy_from_slice(&c[i * stride + 6..i * stride + 15]);
+                m
+            }).collect();
+            let d_f: Vec<f64> = (0..N).flat_map(|i| c[i * stride + 15..(i + 1) * stride].to_vec()).collect();
+            let mut d_nr = vec![0.0; s.nonrigid.mlp.params.len()];
+            let mut d_field = vec![0.0; s.field.mlp.params.len()];
+            let grad = deform_gaussians_backward(
+                &s.nonrigid, &s.field, &s.bones, &cache, &d_pos, &d_s, &d_m, &d_f, &mut d_nr, &mut d_field,
+            ).expect("bwd");
+
+            let mut checker = GradientChecker::new();
+            let num = central_differences(|x| { let mut t = setup(seed); t.positions = unflat(x); loss(&t) }, &flat(&s.positions), H);
+            checker.check("deform d/dpositions", &num, &flat(&grad.positions), TOL);
+            let num = central_differences(|x| { let mut t = setup(seed); t.log_scales = unflat(x); loss(&t) }, &flat(&s.log_scales), H);
+            checker.check("deform d/dlog_scales", &num, &flat(&grad.log_scales), TOL);
+            let num = central_differences(|x| { let mut t = setup(seed); t.quats = unflat(x); loss(&t) }, &flat(&s.quats), H);
+            checker.check("deform d/dquats", &num, &flat(&grad.quats), TOL);
+            let num = central_differences(|x| { let mut t = setup(seed); t.bones = unflat(x); loss(&t) }, &flat(&s.bones), H);
+            checker.check("deform d/dbones", &num, &flat(&grad.bones), TOL);
+            // Strided parameter subsets (every 7th / 11th) cover every layer of both networks.
+            let idx_nr: Vec<usize> = (0..d_nr.len()).step_by(7).collect();
+            let p0: Vec<f64> = idx_nr.iter().map(|&k| s.nonrigid.mlp.params[k]).collect();
+            let num = central_differences(|x| {
+                let mut t = setup(seed);
+                for (j, &k) in idx_nr.iter().enumerate() { t.nonrigid.mlp.params[k] = x[j]; }
+                loss(&t)
+            }, &p0, H);
+            let ana: Vec<f64> = idx_nr.iter().map(|&k| d_nr[k]).collect();
+            checker.check("deform d/dnonrigid params", &num, &ana, TOL);
+            let idx_f: Vec<usize> = (0..d_field.len()).step_by(11).collect();
+            let p0: Vec<f64> = idx_f.iter().map(|&k| s.field.mlp.params[k]).collect();
+            let num = central_differences(|x| {
+                let mut t = setup(seed);
+                for (j, &k) in idx_f.iter().enumerate() { t.field.mlp.params[k] = x[j]; }
+                loss(&t)
+            }, &p0, H);
+            let ana: Vec<f64> = idx_f.iter().map(|&k| d_field[k]).collect();
+            checker.check("deform d/dfield params", &num, &ana, TOL);
+            checker.finish();
+        }
+    }
+}
