@@ -13,6 +13,7 @@
 //! (`raster`), reductions run sequentially in a fixed order, and the simulator is seeded; the output
 //! directory's bytes depend only on the [`SynthConfig`]. Wall-clock times are never written.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
@@ -70,10 +71,10 @@ pub struct FlowStats {
     pub warp_mae: f64,
     /// The same error without warping (zero flow), on the same pixels: the baseline.
     pub identity_mae: f64,
-    /// The photometric check restricted to valid human pixels.
-    pub human_warp_mae: f64,
-    /// Zero-flow baseline on valid human pixels.
-    pub human_identity_mae: f64,
+    /// The photometric check restricted to valid human pixels moving more than 1 px.
+    pub moving_human_warp_mae: f64,
+    /// Zero-flow baseline on those pixels.
+    pub moving_human_identity_mae: f64,
 }
 
 /// Event figures.
@@ -89,6 +90,51 @@ pub struct EventStats {
     pub per_pixel_per_frame: f64,
 }
 
+/// Event-only flow (`events::flow_from_events`, default settings) against the ground truth.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CmStats {
+    /// Whether it was computed (`SynthConfig::event_flow`).
+    pub computed: bool,
+    /// Mean end-point error over pixels with valid ground truth (pixels).
+    pub epe_valid_px: f64,
+    /// Mean end-point error over valid pixels whose ground-truth flow exceeds 1 px.
+    pub epe_moving_px: f64,
+    /// End-point error of a zero flow on those moving pixels (the baseline).
+    pub zero_flow_epe_moving_px: f64,
+    /// Number of moving valid pixels over all pairs.
+    pub moving_pixels: usize,
+}
+
+/// Running sums of [`CmStats`].
+#[derive(Default)]
+struct CmAcc {
+    epe_valid: f64,
+    n_valid: usize,
+    epe_moving: f64,
+    zero_moving: f64,
+    n_moving: usize,
+}
+
+impl CmAcc {
+    fn add(&mut self, cm: &[f32], gt: &[f32], valid: &[bool]) {
+        let n = valid.len();
+        for i in 0..n {
+            if !valid[i] {
+                continue;
+            }
+            let e = f64::from((cm[i] - gt[i]).hypot(cm[n + i] - gt[n + i]));
+            self.epe_valid += e;
+            self.n_valid += 1;
+            let m = f64::from(gt[i].hypot(gt[n + i]));
+            if m > 1.0 {
+                self.epe_moving += e;
+                self.zero_moving += m;
+                self.n_moving += 1;
+            }
+        }
+    }
+}
+
 /// Everything written to `stats.json`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Stats {
@@ -100,8 +146,8 @@ pub struct Stats {
     pub flow: FlowStats,
     /// Events.
     pub events: EventStats,
-    /// Event-only (contrast maximisation) flow status.
-    pub events_cm_flow: String,
+    /// Event-only (contrast maximisation) flow against the ground truth.
+    pub events_cm_flow: CmStats,
     /// Frame indices shown in `preview.png`, top to bottom.
     pub preview_frames: Vec<u32>,
 }
@@ -211,7 +257,7 @@ pub fn generate_with_body(
         phases,
         base: [0.0, 0.0],
         floor_offset: body.floor_offset,
-        arm_down: Motion::arm_down_for(&rest_joints),
+        arm_rest_elevation: Motion::arm_rest_elevation(&rest_joints),
     };
     // Camera: looks at the middle of the standing body, slightly from the right.
     let (pose0, transl0) = motion.at(0.0);
@@ -272,8 +318,10 @@ pub fn generate_with_body(
 
     let mut stats = Stats {
         config: Some(cfg.clone()),
-        events_cm_flow: "not generated: the events crate has no contrast-maximisation flow yet"
-            .into(),
+        events_cm_flow: CmStats {
+            computed: cfg.event_flow,
+            ..CmStats::default()
+        },
         preview_frames: preview_set.iter().map(|&k| k as u32).collect(),
         ..Stats::default()
     };
@@ -292,14 +340,53 @@ pub fn generate_with_body(
     let mut bucket_k = 0usize;
     let mut flushed_counts: Vec<Vec<f32>> = Vec::new();
     let event_path = |k: usize| format!("events/{k:06}.npz");
-    let flush = |k: usize, s: &mut events::EventStream, st: &mut EventStats| -> Result<Vec<f32>> {
+    let cm_config = events::CmaxConfig::default();
+    // Writes bucket k; returns its two-channel count frame and, when enabled and k has a next
+    // frame, the event-only flow of [t_k, t_{k+1}).
+    let flush = |k: usize,
+                 s: &mut events::EventStream,
+                 st: &mut EventStats|
+     -> Result<(Vec<f32>, Option<Vec<f32>>)> {
         let p = out.join(event_path(k));
         events::write_events(&p, s)?;
         st.count += s.len();
         st.positive += s.positive_count();
         let frame = events::count_frame(&s.as_slice(), sensor, events::CountMode::TwoChannel);
+        let mut cm = None;
+        if cfg.event_flow && k + 1 < frames {
+            let f = events::flow_from_events(
+                &s.as_slice(),
+                sensor,
+                us(t_of(k)),
+                us(t_of(k + 1)),
+                &cm_config,
+            )?;
+            events::write_flo(out.join(format!("flow/{k:06}_cm.flo")), &f)?;
+            cm = Some(f.data);
+        }
         s.clear();
-        Ok(frame)
+        Ok((frame, cm))
+    };
+    // Ground-truth and event-only flows meet here (either may be ready first).
+    let mut gt_wait: BTreeMap<usize, (Vec<f32>, Vec<bool>)> = BTreeMap::new();
+    let mut cm_wait: BTreeMap<usize, Vec<f32>> = BTreeMap::new();
+    let mut cm_acc = CmAcc::default();
+    let mut pair = |k: usize,
+                    gt: Option<(Vec<f32>, Vec<bool>)>,
+                    cm: Option<Vec<f32>>,
+                    gt_wait: &mut BTreeMap<usize, (Vec<f32>, Vec<bool>)>,
+                    cm_wait: &mut BTreeMap<usize, Vec<f32>>| {
+        if let Some(g) = gt {
+            gt_wait.insert(k, g);
+        }
+        if let Some(c) = cm {
+            cm_wait.insert(k, c);
+        }
+        if let (Some((g, v)), Some(c)) = (gt_wait.get(&k), cm_wait.get(&k)) {
+            cm_acc.add(c, g, v);
+            gt_wait.remove(&k);
+            cm_wait.remove(&k);
+        }
     };
 
     let all_tris = room_and_body_tris(&room.mesh, &body);
@@ -344,8 +431,9 @@ pub fn generate_with_body(
                     continue;
                 }
                 while bucket_k + 1 < frames && e.t >= us(t_of(bucket_k + 1)) {
-                    let f = flush(bucket_k, &mut bucket, &mut stats.events)?;
+                    let (f, cm) = flush(bucket_k, &mut bucket, &mut stats.events)?;
                     flushed_counts.push(f);
+                    pair(bucket_k, None, cm, &mut gt_wait, &mut cm_wait);
                     bucket_k += 1;
                 }
                 bucket.push(e);
@@ -439,11 +527,22 @@ pub fn generate_with_body(
                     }
                 }
             }
+            if cfg.event_flow {
+                pair(
+                    km,
+                    Some((flow.clone(), valid.clone())),
+                    None,
+                    &mut gt_wait,
+                    &mut cm_wait,
+                );
+            }
             let (e, b, c) = warp_error(&p.rgb, &sharp.rgb, &flow, &valid, w, h);
             warp_sum += e * c as f64;
             id_sum += b * c as f64;
             warp_px += c;
-            let hvalid: Vec<bool> = valid.iter().zip(&p.mask).map(|(a, b)| *a && *b).collect();
+            let hvalid: Vec<bool> = (0..n)
+                .map(|i| valid[i] && p.mask[i] && flow[i].hypot(flow[n + i]) > 1.0)
+                .collect();
             let (e, b, c) = warp_error(&p.rgb, &sharp.rgb, &flow, &hvalid, w, h);
             hwarp_sum += e * c as f64;
             hid_sum += b * c as f64;
@@ -465,15 +564,21 @@ pub fn generate_with_body(
             });
         }
 
-        let flow_to_next = if k + 1 < frames {
-            vec![scene::FlowRef {
+        let mut flow_to_next = Vec::new();
+        if k + 1 < frames {
+            flow_to_next.push(scene::FlowRef {
                 kind: scene::FlowKind::GroundTruth,
                 path: format!("flow/{k:06}.flo"),
                 valid_mask: Some(format!("flow/{k:06}_valid.png")),
-            }]
-        } else {
-            Vec::new()
-        };
+            });
+            if cfg.event_flow {
+                flow_to_next.push(scene::FlowRef {
+                    kind: scene::FlowKind::EventsCm,
+                    path: format!("flow/{k:06}_cm.flo"),
+                    valid_mask: None,
+                });
+            }
+        }
         let (pose, transl) = motion.at(tk);
         scene_frames.push(scene::Frame {
             index: k as u32,
@@ -496,8 +601,9 @@ pub fn generate_with_body(
     }
     // Remaining event buckets (the last one, and empty ones if nothing happened).
     while bucket_k < frames {
-        let f = flush(bucket_k, &mut bucket, &mut stats.events)?;
+        let (f, cm) = flush(bucket_k, &mut bucket, &mut stats.events)?;
         flushed_counts.push(f);
+        pair(bucket_k, None, cm, &mut gt_wait, &mut cm_wait);
         bucket_k += 1;
     }
     for (row, &k) in preview_rows.iter_mut().zip(&preview_set) {
@@ -555,9 +661,14 @@ pub fn generate_with_body(
         max_magnitude_px: max_mag,
         warp_mae: div(warp_sum, warp_px),
         identity_mae: div(id_sum, warp_px),
-        human_warp_mae: div(hwarp_sum, hwarp_px),
-        human_identity_mae: div(hid_sum, hwarp_px),
+        moving_human_warp_mae: div(hwarp_sum, hwarp_px),
+        moving_human_identity_mae: div(hid_sum, hwarp_px),
     };
+    let dv = |a: f64, b: usize| if b > 0 { a / b as f64 } else { 0.0 };
+    stats.events_cm_flow.epe_valid_px = dv(cm_acc.epe_valid, cm_acc.n_valid);
+    stats.events_cm_flow.epe_moving_px = dv(cm_acc.epe_moving, cm_acc.n_moving);
+    stats.events_cm_flow.zero_flow_epe_moving_px = dv(cm_acc.zero_moving, cm_acc.n_moving);
+    stats.events_cm_flow.moving_pixels = cm_acc.n_moving;
     stats.events.per_pixel_per_frame = stats.events.count as f64 / (n as f64 * nf);
     let stats_path = out.join("stats.json");
     let mut text = serde_json::to_string_pretty(&stats).map_err(|source| SynthError::Json {

@@ -1,5 +1,7 @@
-//! Procedural SMPL motion: the person turns slowly in place while the arms swing fast and the legs
-//! step (marching on the spot), the elbows and knees bend with the swing, the head and spine sway.
+//! Procedural SMPL motion: the person turns slowly in place while the arms sweep fast (jumping-jack
+//! arcs with a front/back swing), the legs step on the spot and open sideways, elbows and knees
+//! bend, the torso twists, the head nods and the whole body sways sideways. Limb motion is mostly in the image plane of a camera
+//! in front of the person, so it blurs.
 //!
 //! Pose parameters are axis-angle in each joint's parent frame, in the SMPL rest frame (y up, x to
 //! the body's left, z forward). [`Speed`] scales every angular frequency (slow ×0.5, medium ×1,
@@ -53,9 +55,9 @@ pub struct Motion {
     pub base: [f32; 2],
     /// Added to the translation's y so the feet touch the floor (metres).
     pub floor_offset: f32,
-    /// Shoulder rotation (radians) that lowers the rest-pose arms to hang 70° below horizontal
-    /// (see [`Motion::arm_down_for`]).
-    pub arm_down: f32,
+    /// Elevation of the rest-pose upper arms below horizontal (radians, see
+    /// [`Motion::arm_rest_elevation`]); the motion's arm angles are absolute, whatever the rest pose.
+    pub arm_rest_elevation: f32,
 }
 
 fn aa(q: Quat) -> [f32; 3] {
@@ -64,52 +66,57 @@ fn aa(q: Quat) -> [f32; 3] {
 }
 
 impl Motion {
-    /// The shoulder rotation that brings the rest-pose upper arm (left shoulder joint 16 to left
-    /// elbow 18, rest joints in metres) to 70° below horizontal.
-    pub fn arm_down_for(joints_rest: &[[f32; 3]]) -> f32 {
+    /// Elevation of the rest-pose upper arm below horizontal (radians; left shoulder joint 16 to left
+    /// elbow 18, rest joints in metres): 0 for a T-pose, about 0.8 for an A-pose.
+    pub fn arm_rest_elevation(joints_rest: &[[f32; 3]]) -> f32 {
         let (s, e) = (joints_rest[16], joints_rest[18]);
-        let rest_angle = (s[1] - e[1]).atan2((e[0] - s[0]).abs());
-        70f32.to_radians() - rest_angle
+        (s[1] - e[1]).atan2((e[0] - s[0]).abs())
     }
 
     /// Pose (72 axis-angle values) and translation (metres) at time `t` (seconds).
     pub fn at(&self, t: f64) -> (Vec<f32>, [f32; 3]) {
         let f = self.speed.factor();
-        // Phases at t, computed in f64 before reduction so long sequences stay exact.
+        // Phases at t, reduced in f64 so long sequences stay exact; only integer multiples of a
+        // phase are used below, so every angle is continuous in t.
         let ph = |hz: f32, k: usize| -> f32 {
             ((f64::from(hz * f) * t).fract() as f32) * TAU + self.phases[k]
         };
         let mut pose = vec![[0.0f32; 3]; NUM_JOINTS];
-        // Slow turn in place (0.12 Hz at medium), ±0.6 rad.
-        let yaw = 0.6 * ph(0.125, 0).sin();
-        pose[0] = aa(Quat::from_rotation_y(yaw));
-        // Arms: lowered to 70° below horizontal, swinging ±0.9 rad front/back in opposite phase.
-        let arm = ph(1.0, 1);
-        let swing = 0.9 * arm.sin();
-        let down = self.arm_down;
-        pose[16] = aa(Quat::from_rotation_x(swing) * Quat::from_rotation_z(-down));
-        pose[17] = aa(Quat::from_rotation_x(-swing) * Quat::from_rotation_z(down));
-        let bend = 0.35 + 0.45 * (0.5 + 0.5 * (arm + 1.0).sin());
-        let bend_r = 0.35 + 0.45 * (0.5 - 0.5 * (arm + 1.0).sin());
-        pose[18] = aa(Quat::from_rotation_y(-bend));
+        // Turn in place (0.15 Hz at medium), ±0.7 rad, and sway sideways ±0.12 m (0.4 Hz).
+        pose[0] = aa(Quat::from_rotation_y(0.7 * ph(0.15, 0).sin()));
+        let sway = 0.12 * ph(0.4, 3).sin();
+        // Arms: jumping-jack sweep in the body's frontal plane (elevation 10° above to 80° below
+        // horizontal) with a front/back swing a quarter period later, so hands trace ellipses.
+        let arm = ph(0.9, 1);
+        let elev = (35.0 + 45.0 * arm.sin()).to_radians() - self.arm_rest_elevation;
+        let swing = 0.35 * arm.cos();
+        pose[16] = aa(Quat::from_rotation_x(swing) * Quat::from_rotation_z(-elev));
+        pose[17] = aa(Quat::from_rotation_x(-swing) * Quat::from_rotation_z(elev));
+        let bend_l = 0.2 + 0.9 * (0.5 + 0.5 * (arm + 1.3).sin());
+        let bend_r = 0.2 + 0.9 * (0.5 + 0.5 * (arm + 2.8).sin());
+        pose[18] = aa(Quat::from_rotation_y(-bend_l));
         pose[19] = aa(Quat::from_rotation_y(bend_r));
-        // Legs: marching on the spot, thighs lift forward in turn, knees bend back.
-        let leg = ph(0.75, 2);
-        let lift_l = 0.7 * leg.sin().max(0.0);
-        let lift_r = 0.7 * (-leg.sin()).max(0.0);
-        pose[1] = aa(Quat::from_rotation_x(-lift_l));
-        pose[2] = aa(Quat::from_rotation_x(-lift_r));
+        // Legs: stepping on the spot (thighs lift forward in turn, knees bend back) and opening
+        // sideways with the arms.
+        let step = ph(0.6, 2);
+        let lift_l = 0.7 * step.sin().max(0.0);
+        let lift_r = 0.7 * (-step.sin()).max(0.0);
+        let open = 0.15 * (0.5 + 0.5 * arm.sin());
+        pose[1] = aa(Quat::from_rotation_z(open) * Quat::from_rotation_x(-lift_l));
+        pose[2] = aa(Quat::from_rotation_z(-open) * Quat::from_rotation_x(-lift_r));
         pose[4] = aa(Quat::from_rotation_x(1.6 * lift_l));
         pose[5] = aa(Quat::from_rotation_x(1.6 * lift_r));
-        // Spine counter-rotation and head sway.
-        let head = ph(0.5, 3);
-        pose[9] =
-            aa(Quat::from_rotation_y(0.25 * arm.sin()) * Quat::from_rotation_z(0.05 * leg.sin()));
-        pose[15] = aa(Quat::from_rotation_x(0.15 * head.sin())
-            * Quat::from_rotation_y(0.3 * (head * 0.5).cos()));
+        // Torso twist with the arms, sideways lean with the steps, head nods and turns.
+        let twist = 0.12 * (arm + 0.5).sin();
+        for j in [3, 6, 9] {
+            pose[j] = aa(Quat::from_rotation_y(twist) * Quat::from_rotation_z(0.04 * step.sin()));
+        }
+        let head = ph(0.4, 3);
+        pose[15] =
+            aa(Quat::from_rotation_x(0.15 * head.sin()) * Quat::from_rotation_y(0.3 * head.cos()));
         // Bobbing with the steps.
         let bob = -0.02 * (lift_l + lift_r);
-        let transl = Vec3::new(self.base[0], self.floor_offset + bob, self.base[1]);
+        let transl = Vec3::new(self.base[0] + sway, self.floor_offset + bob, self.base[1]);
         (pose.into_iter().flatten().collect(), transl.to_array())
     }
 }

@@ -112,14 +112,22 @@ pub(crate) fn write(path: &Path, rows: &[PreviewRow], w: usize, h: usize) -> Res
     {
         cv.text(GAP + c * (tw + GAP), GAP, label, font);
     }
-    let max_r = rows
+    // Colour scale: the 98th percentile of the valid moving pixels' flow magnitude (at least 1 px).
+    let mut mags: Vec<f32> = rows
         .iter()
         .flat_map(|r| {
             (0..n)
                 .filter(|&i| r.valid.get(i).copied().unwrap_or(false))
                 .map(|i| r.flow[i].hypot(r.flow[n + i]))
+                .filter(|m| *m > 0.1)
         })
-        .fold(1.0f32, f32::max);
+        .collect();
+    mags.sort_by(f32::total_cmp);
+    let max_r = mags
+        .get((mags.len() * 98) / 100)
+        .copied()
+        .unwrap_or(1.0)
+        .max(1.0);
     for (k, r) in rows.iter().enumerate() {
         let y0 = header + k * (th + GAP);
         let x = |c: usize| GAP + c * (tw + GAP);

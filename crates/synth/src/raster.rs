@@ -81,15 +81,22 @@ fn setup(
     cam: &PinholeCamera,
     wmax: i64,
     hmax: i64,
-) -> Vec<ScreenTri> {
+) -> [Option<ScreenTri>; 2] {
     let pc = vi.map(|i| p_cam[i as usize]);
     let corner_attr = [Vec3::X, Vec3::Y, Vec3::Z];
     // Clip the polygon against z >= NEAR (Sutherland–Hodgman, one plane).
-    let mut poly: Vec<(Vec3, Vec3)> = Vec::with_capacity(4);
+    let mut poly = [(Vec3::ZERO, Vec3::ZERO); 4];
+    let mut len = 0;
+    let mut push = |v: (Vec3, Vec3)| {
+        poly[len] = v;
+        len += 1;
+    };
     if pc.iter().all(|p| p.z >= NEAR) {
-        poly.extend((0..3).map(|k| (pc[k], corner_attr[k])));
+        for k in 0..3 {
+            push((pc[k], corner_attr[k]));
+        }
     } else if pc.iter().all(|p| p.z < NEAR) {
-        return Vec::new();
+        return [None, None];
     } else {
         for k in 0..3 {
             let (a, b) = (
@@ -98,11 +105,11 @@ fn setup(
             );
             let (ina, inb) = (a.0.z >= NEAR, b.0.z >= NEAR);
             if ina {
-                poly.push(a);
+                push(a);
             }
             if ina != inb {
                 let t = (NEAR - a.0.z) / (b.0.z - a.0.z);
-                poly.push((a.0.lerp(b.0, t), a.1.lerp(b.1, t)));
+                push((a.0.lerp(b.0, t), a.1.lerp(b.1, t)));
             }
         }
     }
@@ -110,8 +117,8 @@ fn setup(
         let [u, v] = cam.pixel_from_cam(p);
         Vec2::new(u * ss, v * ss)
     };
-    let mut out = Vec::new();
-    for k in 1..poly.len().saturating_sub(1) {
+    let mut out = [None, None];
+    for k in 1..len.saturating_sub(1) {
         let c = [poly[0], poly[k], poly[k + 1]];
         let p = c.map(|(q, _)| project(q));
         let area = (p[1] - p[0]).perp_dot(p[2] - p[0]);
@@ -130,7 +137,7 @@ fn setup(
         if x0 > x1 || y0 > y1 {
             continue;
         }
-        out.push(ScreenTri {
+        out[k - 1] = Some(ScreenTri {
             tri,
             p,
             iz: c.map(|(q, _)| 1.0 / q.z),
@@ -166,7 +173,11 @@ pub fn render(
         .tris
         .par_iter()
         .enumerate()
-        .flat_map_iter(|(t, &vi)| setup(&p_cam, t as u32, vi, ss as f32, cam, sw, sh))
+        .flat_map_iter(|(t, &vi)| {
+            setup(&p_cam, t as u32, vi, ss as f32, cam, sw, sh)
+                .into_iter()
+                .flatten()
+        })
         .collect();
     // Bin by bands of BAND pixel rows, in triangle order.
     let nbands = h.div_ceil(BAND);

@@ -16,6 +16,7 @@ fn small() -> SynthConfig {
         subframes: 4,
         supersample: 1,
         speed: Speed::Fast,
+        event_flow: true,
         ..SynthConfig::preset(Preset::Tiny)
     }
 }
@@ -78,6 +79,11 @@ fn small_run_loads_and_is_thread_independent() {
         s.frames[0].flow(scene::FlowKind::GroundTruth).unwrap().path,
         "flow/000000.flo"
     );
+    assert_eq!(
+        s.frames[2].flow(scene::FlowKind::EventsCm).unwrap().path,
+        "flow/000002_cm.flo"
+    );
+    assert!(sa.events_cm_flow.computed);
     // The person is visible and moving; the GT flow explains the motion better than zero flow.
     let f = &sa.flow;
     assert!(f.valid_fraction > 0.5, "{f:?}");
