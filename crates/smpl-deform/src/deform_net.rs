@@ -237,9 +237,12 @@ pub struct NonRigidNet<T: Real> {
 
 /// What [`NonRigidNet::backward`] needs from the forward pass.
 #[derive(Clone, Debug)]
-pub struct NonRigidCache<T> {
+pub struct NonRigidCache<T: Real> {
     points: Vec<[T; 3]>,
     mlp: MlpCache<T>,
+    /// The network with the pose code folded into the first layer's bias.
+    folded: Mlp<T>,
+    pose_code: Vec<T>,
 }
 
 impl<T: Real> NonRigidNet<T> {
@@ -276,7 +279,6 @@ impl<T: Real> NonRigidNet<T> {
         points: &[[T; 3]],
         pose_code: &[T],
     ) -> Result<(Vec<T>, NonRigidCache<T>), nn::NnError> {
-        let row = ENC_DIM + NUM_POSE_FEATURES;
         if pose_code.len() != NUM_POSE_FEATURES {
             return Err(nn::NnError::Length {
                 name: "non-rigid pose code",
@@ -284,18 +286,47 @@ impl<T: Real> NonRigidNet<T> {
                 actual: pose_code.len(),
             });
         }
-        let mut input = encode_points(&self.norm, points, row);
-        for i in 0..points.len() {
-            input[i * row + ENC_DIM..(i + 1) * row].copy_from_slice(pose_code);
-        }
-        let (out, mlp) = self.mlp.forward(&input, points.len())?;
+        // The pose code is the same for every point, so its share of the first layer is a bias:
+        // fold it once per call (W_pose · code) and run a network whose input is the 27-value
+        // position encoding only (8.7× fewer first-layer multiply-adds).
+        let folded = self.fold(pose_code);
+        let input = encode_points(&self.norm, points, ENC_DIM);
+        let (out, mlp) = folded.forward(&input, points.len())?;
         Ok((
             out,
             NonRigidCache {
                 points: points.to_vec(),
                 mlp,
+                folded,
+                pose_code: pose_code.to_vec(),
             },
         ))
+    }
+
+    fn fold(&self, pose_code: &[T]) -> Mlp<T> {
+        let full_in = ENC_DIM + NUM_POSE_FEATURES;
+        let h = self.mlp.sizes[1];
+        let mut sizes = self.mlp.sizes.clone();
+        sizes[0] = ENC_DIM;
+        let full0 = h * (full_in + 1);
+        let mut params = Vec::with_capacity(self.mlp.params.len() - h * NUM_POSE_FEATURES);
+        for r in 0..h {
+            params.extend_from_slice(&self.mlp.params[r * full_in..r * full_in + ENC_DIM]);
+        }
+        for r in 0..h {
+            let w = &self.mlp.params[r * full_in + ENC_DIM..(r + 1) * full_in];
+            let mut b = self.mlp.params[h * full_in + r];
+            for (wc, c) in w.iter().zip(pose_code) {
+                b = b + *wc * *c;
+            }
+            params.push(b);
+        }
+        params.extend_from_slice(&self.mlp.params[full0..]);
+        Mlp {
+            sizes,
+            activation: self.mlp.activation,
+            params,
+        }
     }
 
     /// Backward: accumulates `∂L/∂params` and returns `∂L/∂points` (the pose code is a constant).
@@ -305,15 +336,43 @@ impl<T: Real> NonRigidNet<T> {
         d_out: &[T],
         d_params: &mut [T],
     ) -> Result<Vec<[T; 3]>, nn::NnError> {
-        let row = ENC_DIM + NUM_POSE_FEATURES;
-        let mut d_input = vec![T::zero(); cache.points.len() * row];
-        self.mlp
-            .backward(&cache.mlp, d_out, d_params, Some(&mut d_input))?;
+        let full_in = ENC_DIM + NUM_POSE_FEATURES;
+        let h = self.mlp.sizes[1];
+        if d_params.len() != self.mlp.params.len() {
+            return Err(nn::NnError::Length {
+                name: "non-rigid d_params",
+                expected: self.mlp.params.len(),
+                actual: d_params.len(),
+            });
+        }
+        let mut d_folded = vec![T::zero(); cache.folded.params.len()];
+        let mut d_input = vec![T::zero(); cache.points.len() * ENC_DIM];
+        cache
+            .folded
+            .backward(&cache.mlp, d_out, &mut d_folded, Some(&mut d_input))?;
+        // Unfold: first-layer position columns and bias map back directly; the pose columns get
+        // ∂L/∂bias ⊗ code; later layers are identical.
+        for r in 0..h {
+            let db = d_folded[h * ENC_DIM + r];
+            for c in 0..ENC_DIM {
+                d_params[r * full_in + c] = d_params[r * full_in + c] + d_folded[r * ENC_DIM + c];
+            }
+            for (c, &code) in cache.pose_code.iter().enumerate() {
+                let k = r * full_in + ENC_DIM + c;
+                d_params[k] = d_params[k] + db * code;
+            }
+            d_params[h * full_in + r] = d_params[h * full_in + r] + db;
+        }
+        let fold0 = h * (ENC_DIM + 1);
+        let full0 = h * (full_in + 1);
+        for (dst, src) in d_params[full0..].iter_mut().zip(&d_folded[fold0..]) {
+            *dst = *dst + *src;
+        }
         Ok(encode_points_backward(
             &self.norm,
             &cache.points,
             &d_input,
-            row,
+            ENC_DIM,
         ))
     }
 }
@@ -369,7 +428,7 @@ pub struct PosedGaussians<T> {
 
 /// Everything the backward pass needs.
 #[derive(Clone, Debug)]
-pub struct DeformCache<T> {
+pub struct DeformCache<T: Real> {
     nr: NonRigidCache<T>,
     nr_out: Vec<T>,
     skin: SkinningCache<T>,
