@@ -5,6 +5,7 @@
 pub mod aiap;
 pub mod blend;
 pub mod colour;
+pub mod data;
 pub mod eval;
 pub mod fit;
 pub mod flow_loss;
@@ -18,6 +19,9 @@ pub enum TrainError {
     /// A network op rejected its inputs.
     #[error(transparent)]
     Nn(#[from] nn::NnError),
+    /// The dataset is invalid (every problem is listed with its path).
+    #[error(transparent)]
+    Scene(#[from] scene::SceneError),
     /// The rasterizer rejected its inputs.
     #[error(transparent)]
     Raster(#[from] rasterize_cpu::RasterError),

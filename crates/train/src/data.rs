@@ -1,0 +1,111 @@
+//! Loading a scene-format-v1 directory into what training needs: the rasterizer camera, every frame's
+//! decoded images (linear, planar), masks and SMPL parameters, with the split.
+//!
+//! All validation is `scene::load`'s (every problem reported with its path, nothing skipped); this
+//! module only converts, and reports which file failed to decode if one does.
+
+use crate::TrainError;
+use rasterize_cpu::Camera;
+use scene::{Scene, Split};
+use smpl_deform::SmplParams;
+use std::path::{Path, PathBuf};
+
+/// One decoded frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainFrame {
+    /// Frame number from `scene.json`.
+    pub index: u32,
+    /// Mid-exposure time (s).
+    pub time_s: f64,
+    /// Train or test.
+    pub split: Split,
+    /// Observed (blurred) image, planar (3, H, W) linear.
+    pub image: Vec<f32>,
+    /// Sharp reference, if the scene has one.
+    pub sharp: Option<Vec<f32>>,
+    /// Human mask (H × W), if the scene has one.
+    pub mask: Option<Vec<bool>>,
+    /// SMPL parameters at mid exposure (betas from the scene's body spec).
+    pub smpl: SmplParams,
+}
+
+/// A loaded dataset.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    /// The scene directory.
+    pub dir: PathBuf,
+    /// The validated description.
+    pub scene: Scene,
+    /// The fixed camera as the rasterizer takes it.
+    pub camera: Camera,
+    /// Every frame, in time order.
+    pub frames: Vec<TrainFrame>,
+}
+
+impl Dataset {
+    /// Indices of the frames of a split.
+    pub fn split(&self, split: Split) -> Vec<usize> {
+        self.scene.split_indices(split)
+    }
+}
+
+/// The rasterizer camera of a scene camera.
+pub fn camera_of(c: &scene::Camera) -> Result<Camera, TrainError> {
+    let m = c.world_to_camera;
+    let world_to_camera = [m[0], m[1], m[2], [0.0, 0.0, 0.0, 1.0]];
+    Ok(Camera::new(
+        c.width.into(),
+        c.height.into(),
+        c.fx,
+        c.fy,
+        c.cx,
+        c.cy,
+        world_to_camera,
+    )?)
+}
+
+/// Loads and validates `dir` (see `scene::load`) and decodes every frame.
+pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
+    let scene = scene::load(dir)?;
+    let camera = camera_of(&scene.camera)?;
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let mut frames = Vec::with_capacity(scene.frames.len());
+    for f in &scene.frames {
+        let read = |rel: &str| -> Result<Vec<f32>, TrainError> {
+            let path = Scene::resolve(dir, rel);
+            let img = scene::read_rgb(&path, scene.images)?;
+            if img.width != w || img.height != h {
+                return Err(TrainError::Config(format!(
+                    "{}: image is {}x{}, the camera is {w}x{h}",
+                    path.display(),
+                    img.width,
+                    img.height
+                )));
+            }
+            Ok(img.data)
+        };
+        let mask = match &f.mask {
+            Some(rel) => Some(scene::read_mask(&Scene::resolve(dir, rel))?.2),
+            None => None,
+        };
+        frames.push(TrainFrame {
+            index: f.index,
+            time_s: f.time_s,
+            split: f.split,
+            image: read(&f.image)?,
+            sharp: f.sharp.as_deref().map(read).transpose()?,
+            mask,
+            smpl: SmplParams {
+                pose: f.pose_flat(),
+                betas: scene.body.betas.clone(),
+                transl: f.transl,
+            },
+        });
+    }
+    Ok(Dataset {
+        dir: dir.to_path_buf(),
+        scene,
+        camera,
+        frames,
+    })
+}

@@ -1,0 +1,103 @@
+//! Loading scene-format-v1 directories into training frames, and the errors for broken ones.
+
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns may panic
+
+use scene::{BodySpec, Camera, Frame, ImageEncoding, Rgb, Scene, Split, Transfer};
+use std::path::Path;
+
+fn write_scene(dir: &Path, frames: usize) -> Scene {
+    let (w, h) = (8u32, 6u32);
+    let enc = ImageEncoding {
+        bit_depth: 16,
+        transfer: Transfer::Srgb,
+    };
+    std::fs::create_dir_all(dir.join("images")).unwrap();
+    std::fs::create_dir_all(dir.join("masks")).unwrap();
+    let mut list = Vec::new();
+    for k in 0..frames {
+        let data: Vec<f32> = (0..3 * w * h)
+            .map(|i| ((i as usize + k) % 11) as f32 / 10.0)
+            .collect();
+        let img = Rgb {
+            width: w,
+            height: h,
+            data,
+        };
+        let rel = format!("images/{k:04}.png");
+        scene::write_rgb(&dir.join(&rel), &img, enc).unwrap();
+        let mask: Vec<bool> = (0..w * h).map(|i| i % 3 == 0).collect();
+        let mrel = format!("masks/{k:04}.png");
+        scene::write_mask(&dir.join(&mrel), w, h, &mask).unwrap();
+        list.push(Frame {
+            index: k as u32,
+            time_s: k as f64 / 30.0,
+            image: rel,
+            sharp: None,
+            mask: Some(mrel),
+            pose: vec![[0.0, 0.1 * k as f32, 0.0]; 24],
+            transl: [0.0, 0.0, 3.0],
+            flow_to_next: Vec::new(),
+            events: None,
+            split: if k % 2 == 0 {
+                Split::Train
+            } else {
+                Split::Test
+            },
+        });
+    }
+    let s = Scene {
+        format_version: 1,
+        camera: Camera {
+            width: w,
+            height: h,
+            fx: 10.0,
+            fy: 10.0,
+            cx: 4.0,
+            cy: 3.0,
+            world_to_camera: [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 0.0],
+            ],
+        },
+        body: BodySpec {
+            model: "builtin:makehuman".into(),
+            betas: vec![],
+        },
+        fps: 30.0,
+        exposure_s: 1.0 / 60.0,
+        images: enc,
+        frames: list,
+        generator: None,
+    };
+    s.write(dir).unwrap();
+    s
+}
+
+#[test]
+fn a_written_scene_loads_with_decoded_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    write_scene(dir.path(), 3);
+    let data = train::data::load_dataset(dir.path()).unwrap();
+    assert_eq!(data.frames.len(), 3);
+    assert_eq!(data.split(Split::Train), vec![0, 2]);
+    assert_eq!((data.camera.width, data.camera.height), (8, 6));
+    let f = &data.frames[1];
+    assert_eq!(f.image.len(), 3 * 8 * 6);
+    // 16-bit sRGB round trip of a linear value.
+    assert!((f.image[0] - 0.1).abs() < 1e-3, "{}", f.image[0]);
+    assert_eq!(f.mask.as_ref().unwrap().iter().filter(|&&m| m).count(), 16);
+    assert_eq!(f.smpl.pose.len(), 72);
+    assert!((f.smpl.pose[1] - 0.1).abs() < 1e-7);
+}
+
+#[test]
+fn a_missing_image_is_reported_with_its_path() {
+    let dir = tempfile::tempdir().unwrap();
+    write_scene(dir.path(), 2);
+    std::fs::remove_file(dir.path().join("images/0001.png")).unwrap();
+    let err = train::data::load_dataset(dir.path())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("0001.png"), "{err}");
+}
