@@ -88,10 +88,13 @@ pub fn run(args: Args) -> Result<()> {
             bar.set_message(format!("level {level} epe {mean:.3}"));
             bar.inc(1);
         }
-        bar.println(format!(
-            "level {level}: {n} steps, last-20 mean EPE {:.3} (level pixels)",
-            recent.iter().sum::<f64>() / recent.len().max(1) as f64
-        ));
+        let line = format!(
+            "level {level}: {n} steps, last-20 mean EPE {:.3} (level pixels), {:.0} s",
+            recent.iter().sum::<f64>() / recent.len().max(1) as f64,
+            start.elapsed().as_secs_f64()
+        );
+        // `suspend` prints whether or not the bar is drawn (it is hidden when stderr is not a terminal).
+        bar.suspend(|| eprintln!("{line}"));
     }
     bar.finish();
     let train_s = start.elapsed().as_secs_f64();
