@@ -474,21 +474,22 @@ fn forward_tile<T: Real>(
         let [ca, cb, cc] = p.conic;
         let mx = p.mean2d[0] - ox;
         let my = p.mean2d[1] - oy;
+        let o = p.opacity;
         for y in y0..y1 {
             let dy = my - centre[y];
             let row = y * TILE_SIZE;
+            // Branch-free falloff for the row span (vectorisable); power > 0 maps to α = 0.
+            let mut alphas = [T::zero(); TILE_SIZE];
             for x in x0..x1 {
-                let idx = row + x;
-                if done[idx] {
-                    continue;
-                }
                 let dx = mx - centre[x];
                 let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-                if power > T::zero() {
-                    continue;
-                }
-                let alpha = (p.opacity * power.exp()).min(max_alpha);
-                if alpha < min_alpha {
+                let a = (o * power.splat_exp()).min(max_alpha);
+                alphas[x] = if power > T::zero() { T::zero() } else { a };
+            }
+            for x in x0..x1 {
+                let idx = row + x;
+                let alpha = alphas[x];
+                if done[idx] || alpha < min_alpha {
                     continue;
                 }
                 let t = tbuf[idx];
@@ -809,17 +810,21 @@ fn backward_tile<T: Real>(
         for y in y0..y1 {
             let dy = my - centre[y];
             let row = y * TILE_SIZE;
+            let mut gauss_row = [T::zero(); TILE_SIZE];
+            let mut power_row = [T::zero(); TILE_SIZE];
+            for x in x0..x1 {
+                let dx = mx - centre[x];
+                let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
+                power_row[x] = power;
+                gauss_row[x] = power.splat_exp();
+            }
             for x in x0..x1 {
                 let idx = row + x;
-                if kk >= last[idx] {
+                if kk >= last[idx] || power_row[x] > T::zero() {
                     continue;
                 }
                 let dx = mx - centre[x];
-                let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-                if power > T::zero() {
-                    continue;
-                }
-                let gauss = power.exp();
+                let gauss = gauss_row[x];
                 let raw = p.opacity * gauss;
                 let alpha = raw.min(max_alpha);
                 if alpha < min_alpha {

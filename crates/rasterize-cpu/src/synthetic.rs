@@ -44,12 +44,12 @@ impl SplitMix {
 
 impl SyntheticScene {
     /// `n` Gaussians for a `width` × `height` view. Screen footprints are log-normal around
-    /// 1.2·√(pixels / n) pixels (σ), depths uniform in [2, 8] m, opacities sigmoid(U(−1, 3)).
+    /// 0.9·√(pixels / n) pixels (σ), depths uniform in [2, 8] m, opacities sigmoid(U(−1, 3)).
     pub fn new(n: usize, width: u32, height: u32, seed: u64) -> Result<Self, RasterError> {
         let f = f64::from(width) * 0.85;
         let camera = Camera::looking_down_z(width, height, f, f)?;
         let mut rng = SplitMix(seed);
-        let sigma_px = 1.2 * (f64::from(width) * f64::from(height) / n.max(1) as f64).sqrt();
+        let sigma_px = 0.9 * (f64::from(width) * f64::from(height) / n.max(1) as f64).sqrt();
         let mut s = Self {
             camera,
             means: Vec::with_capacity(n),
@@ -97,4 +97,73 @@ impl SyntheticScene {
             num_channels: 3,
         }
     }
+}
+
+/// Median timings of one benchmark case (milliseconds).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Timing {
+    /// Median forward time.
+    pub fwd_ms: f64,
+    /// Median forward + backward time (constant cotangent 1 on the image).
+    pub fwd_bwd_ms: f64,
+    /// (tile, Gaussian) pairs of the render.
+    pub pairs: usize,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Times `render` and `render` + `render_backward` on `scene` in a rayon pool of `threads` threads:
+/// one warm-up, then `repeats` timed runs of each; returns medians.
+pub fn time_case(
+    scene: &SyntheticScene,
+    threads: usize,
+    repeats: usize,
+) -> Result<Timing, RasterError> {
+    use std::time::Instant;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| {
+            RasterError::InvalidSettings(format!("rayon pool of {threads} threads: {e}"))
+        })?;
+    let settings = crate::RenderSettings::default();
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let d_image = vec![1.0f32; 3 * w * h];
+    pool.install(|| {
+        let (mut fwd, mut both, mut pairs) = (Vec::new(), Vec::new(), 0);
+        for rep in 0..=repeats {
+            let t0 = Instant::now();
+            let out = crate::render(&scene.camera, &scene.splats(), &settings)?;
+            let t_fwd = t0.elapsed().as_secs_f64() * 1e3;
+            pairs = out.num_pairs;
+            drop(out);
+            let t0 = Instant::now();
+            let out = crate::render(&scene.camera, &scene.splats(), &settings)?;
+            let grads = crate::render_backward(
+                &scene.camera,
+                &scene.splats(),
+                &settings,
+                &out,
+                &crate::Cotangents {
+                    image: &d_image,
+                    alpha: None,
+                    depth: None,
+                },
+            )?;
+            let t_both = t0.elapsed().as_secs_f64() * 1e3;
+            drop(grads);
+            if rep > 0 {
+                fwd.push(t_fwd);
+                both.push(t_both);
+            }
+        }
+        Ok(Timing {
+            fwd_ms: median(fwd),
+            fwd_bwd_ms: median(both),
+            pairs,
+        })
+    })
 }
