@@ -1,0 +1,64 @@
+//! `cargo xtask bench raster [--quick]`: times the rasterizer on seeded random scenes and prints one
+//! JSON line per case `{"case","gaussians","width","height","threads","fwd_ms","fwd_bwd_ms"}`
+//! (medians over repeats; plus `pairs`, the number of tile–Gaussian pairs), for 1 thread and for the
+//! machine's threads. Scene generation and timing live in `rasterize_cpu::synthetic`.
+
+use anyhow::{Context, Result};
+use rasterize_cpu::synthetic::{time_case, SyntheticScene};
+
+/// Arguments of `bench raster`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Fewer repeats and no 1M-Gaussian case (a smoke run).
+    #[arg(long)]
+    pub quick: bool,
+    /// Thread counts to run (default: 1 and all available).
+    #[arg(long, value_delimiter = ',')]
+    pub threads: Vec<usize>,
+    /// Scene seed.
+    #[arg(long, default_value_t = 42)]
+    pub seed: u64,
+}
+
+/// Runs the benchmark cases.
+pub fn run(args: Args) -> Result<()> {
+    let mut cases = vec![
+        ("50k_256", 50_000usize, 256u32, 256u32, 15usize),
+        ("100k_256", 100_000, 256, 256, 11),
+    ];
+    if !args.quick {
+        cases.push(("1m_1080p", 1_000_000, 1920, 1080, 5));
+    }
+    let threads = if args.threads.is_empty() {
+        let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if all > 1 {
+            vec![1, all]
+        } else {
+            vec![1]
+        }
+    } else {
+        args.threads.clone()
+    };
+    for (name, n, w, h, repeats) in cases {
+        let scene = SyntheticScene::new(n, w, h, args.seed).context("building the benchmark scene")?;
+        for &t in &threads {
+            let r = time_case(&scene, t, if args.quick { 3 } else { repeats })
+                .with_context(|| format!("timing case {name} with {t} threads"))?;
+            let round = |v: f64| (v * 100.0).round() / 100.0;
+            println!(
+                "{}",
+                serde_json::json!({
+                    "case": name,
+                    "gaussians": n,
+                    "width": w,
+                    "height": h,
+                    "threads": t,
+                    "fwd_ms": round(r.fwd_ms),
+                    "fwd_bwd_ms": round(r.fwd_bwd_ms),
+                    "pairs": r.pairs,
+                })
+            );
+        }
+    }
+    Ok(())
+}
