@@ -6,10 +6,11 @@
 //! - Human colour MLP (3DGS-Avatar): feature 32 ⊕ degree-3 SH basis without DC (15) of the view direction
 //!   rotated into canonical space ⊕ non-rigid feature 16 ⊕ per-frame latent 16 → 64 → 64 → RGB (sigmoid).
 //!
-//! The view direction is treated as a constant (no gradient flows into it), as in 3DGS-Avatar's colour
-//! network; gradients reach the network weights, the features, the extra inputs and the latent.
+//! Gradients reach the network weights, the features, the extra inputs, the latent and the (unnormalised)
+//! view directions, through the SH encoding and the normalisation, as colour gradients reach the means
+//! through the view direction in 3DGS.
 
-use gaussians::sh::{num_sh_coeffs, sh_basis, MAX_SH_COEFFS};
+use gaussians::sh::{num_sh_coeffs, sh_basis, sh_basis_backward, MAX_SH_COEFFS};
 use nn::mlp::{Activation, Mlp, MlpCache};
 use nn::{NnError, Real};
 
@@ -90,6 +91,8 @@ pub struct ColourGradients<T> {
     pub extra: Vec<T>,
     /// dL/d latent (summed over the N Gaussians).
     pub latent: Vec<T>,
+    /// dL/d view directions (unnormalised, as passed in), N.
+    pub directions: Vec<[T; 3]>,
 }
 
 /// Forward state kept for the backward.
@@ -98,6 +101,8 @@ pub struct ColourCache<T> {
     n: usize,
     mlp: MlpCache<T>,
     rgb: Vec<T>,
+    /// Unit directions and the norms they were divided by (0 for a zero direction).
+    units: Vec<([T; 3], T)>,
 }
 
 /// A colour network (see the module docs).
@@ -147,6 +152,7 @@ impl<T: Real> ColourNet<T> {
         let k = num_sh_coeffs(c.sh_degree);
         let mut input = Vec::with_capacity(n * width);
         let mut basis = [T::zero(); MAX_SH_COEFFS];
+        let mut units = Vec::with_capacity(n);
         for i in 0..n {
             input.extend_from_slice(&x.features[i * c.feature_dim..(i + 1) * c.feature_dim]);
             let d = x.directions[i];
@@ -156,6 +162,7 @@ impl<T: Real> ColourNet<T> {
             } else {
                 [T::zero(); 3]
             };
+            units.push((unit, norm));
             sh_basis(c.sh_degree, unit, &mut basis);
             input.extend_from_slice(&basis[skip..k]);
             input.extend_from_slice(&x.extra[i * c.extra_dim..(i + 1) * c.extra_dim]);
@@ -172,6 +179,7 @@ impl<T: Real> ColourNet<T> {
                 n,
                 mlp: mlp_cache,
                 rgb,
+                units,
             },
         ))
     }
@@ -207,10 +215,23 @@ impl<T: Real> ColourNet<T> {
             features: Vec::with_capacity(n * c.feature_dim),
             extra: Vec::with_capacity(n * c.extra_dim),
             latent: vec![T::zero(); c.latent_dim],
+            directions: Vec::with_capacity(n),
         };
-        for row in d_input.chunks_exact(width.max(1)) {
+        let skip = usize::from(!c.include_dc);
+        let mut d_basis = [T::zero(); MAX_SH_COEFFS];
+        for (row, &(unit, norm)) in d_input.chunks_exact(width.max(1)).zip(&cache.units) {
             let (f, rest) = row.split_at(c.feature_dim);
-            let (_, rest) = rest.split_at(sh_dim);
+            let (d_sh, rest) = rest.split_at(sh_dim);
+            // Through the SH basis and the normalisation: dv = (g − û (û·g)) / |v|.
+            d_basis[..skip].iter_mut().for_each(|v| *v = T::zero());
+            d_basis[skip..skip + sh_dim].copy_from_slice(d_sh);
+            let g = sh_basis_backward(c.sh_degree, unit, &d_basis);
+            grads.directions.push(if norm > T::zero() {
+                let dot = unit[0] * g[0] + unit[1] * g[1] + unit[2] * g[2];
+                [0, 1, 2].map(|a| (g[a] - unit[a] * dot) / norm)
+            } else {
+                [T::zero(); 3]
+            });
             let (e, l) = rest.split_at(c.extra_dim);
             grads.features.extend_from_slice(f);
             grads.extra.extend_from_slice(e);

@@ -11,6 +11,7 @@ pub mod fit;
 pub mod flow_loss;
 pub mod image_loss;
 pub mod init;
+pub mod model;
 pub mod step;
 
 /// Errors of the training crate.
@@ -22,6 +23,9 @@ pub enum TrainError {
     /// The dataset is invalid (every problem is listed with its path).
     #[error(transparent)]
     Scene(#[from] scene::SceneError),
+    /// The body model or deformation failed.
+    #[error(transparent)]
+    SmplDeform(#[from] smpl_deform::SmplDeformError),
     /// The rasterizer rejected its inputs.
     #[error(transparent)]
     Raster(#[from] rasterize_cpu::RasterError),

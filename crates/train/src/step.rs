@@ -62,8 +62,8 @@ pub struct StepOutput<T> {
     pub grads: Option<StaticGradients<T>>,
 }
 
-/// Renders the Gaussians coloured by `net` (view direction = mean − camera centre) from `camera` and
-/// compares with `target` (3, H, W) using (1 − `ssim_weight`)·L1 + `ssim_weight`·(1 − SSIM).
+/// Renders the Gaussians coloured by `net` (view direction = mean − camera centre, differentiated) from
+/// `camera` and compares with `target` (3, H, W) using (1 − `ssim_weight`)·L1 + `ssim_weight`·(1 − SSIM).
 /// With `with_grads` the backward runs through SSIM/L1, the rasterizer and the colour network.
 pub fn photometric_step<T>(
     camera: &Camera,
@@ -146,8 +146,15 @@ where
         let g = render_backward(camera, &splats, settings, &out, &cot)?;
         let cg = net.backward(&colour_cache, &g.channels)?;
         debug_assert_eq!(g.means.len(), n);
+        // The view direction is mean − camera centre, so its gradient adds to the means'.
+        let mut means = g.means;
+        for (m, d) in means.iter_mut().zip(&cg.directions) {
+            for a in 0..3 {
+                m[a] = m[a] + d[a];
+            }
+        }
         Some(StaticGradients {
-            means: g.means,
+            means,
             log_scales: g.log_scales,
             quats: g.quats,
             opacity_logits: g.opacity_logits,

@@ -1,5 +1,6 @@
 //! Finite-difference check of the colour networks (`train::colour`): gradients w.r.t. the MLP
-//! parameters, the per-Gaussian features, the extra inputs and the per-frame latent, for both the scene
+//! parameters, the per-Gaussian features, the extra inputs, the per-frame latent and the unnormalised
+//! view directions (through the SH encoding and the normalisation), for both the scene
 //! and the human layouts (shrunk widths so the check is fast; the code paths are the same).
 //!
 //! The network is smooth away from LeakyReLU kinks; random weights and inputs put a hidden
@@ -37,11 +38,12 @@ proptest! {
         let cot = values[100..100 + n * 3].to_vec();
         let dirs = dirs[..n].to_vec();
         prop_assume!(dirs.iter().all(|d| d.iter().map(|v| v * v).sum::<f64>() > 0.01));
-        let loss = |net: &ColourNet<f64>, f: &[f64], e: &[f64], l: &[f64]| {
-            let x = ColourInputs { features: f, directions: &dirs, extra: e, latent: l };
+        let loss_dirs = |net: &ColourNet<f64>, f: &[f64], e: &[f64], l: &[f64], dirs: &[[f64; 3]]| {
+            let x = ColourInputs { features: f, directions: dirs, extra: e, latent: l };
             let (rgb, _) = net.forward(&x).expect("forward");
             rgb.iter().zip(&cot).map(|(a, b)| a * b).sum::<f64>()
         };
+        let loss = |net: &ColourNet<f64>, f: &[f64], e: &[f64], l: &[f64]| loss_dirs(net, f, e, l, &dirs);
         let x = ColourInputs { features: &features, directions: &dirs, extra: &extra, latent: &latent };
         let (_, cache) = net.forward(&x).expect("forward");
         let g = net.backward(&cache, &cot).expect("backward");
@@ -57,11 +59,22 @@ proptest! {
         let num_f = central_differences(|f| loss(&net, f, &extra, &latent), &features, H);
         let num_e = central_differences(|e| loss(&net, &features, e, &latent), &extra, H);
         let num_l = central_differences(|l| loss(&net, &features, &extra, l), &latent, H);
+        let flat_dirs: Vec<f64> = dirs.iter().flatten().copied().collect();
+        let num_d = central_differences(
+            |d| {
+                let d: Vec<[f64; 3]> = d.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+                loss_dirs(&net, &features, &extra, &latent, &d)
+            },
+            &flat_dirs,
+            H,
+        );
         let mut checker = GradientChecker::new();
         checker.check("colour params", &num_params, &g.params, TOL);
         checker.check("colour features", &num_f, &g.features, TOL);
         checker.check("colour extra", &num_e, &g.extra, TOL);
         checker.check("colour latent", &num_l, &g.latent, TOL);
+        let ana_d: Vec<f64> = g.directions.iter().flatten().copied().collect();
+        checker.check("colour directions", &num_d, &ana_d, TOL);
         checker.finish();
     }
 }

@@ -1,0 +1,433 @@
+//! The E-Sem3DGS model for one frame, up to rasterization: every Gaussian is read twice — deformed as a
+//! human Gaussian (non-rigid network, learned skinning weights, LBS with the frame's bones) and static
+//! as a scene Gaussian — coloured by the human and the scene colour networks, and blended by its human
+//! probability (see [`crate::blend`]) into one position, covariance and colour. The human probability
+//! itself is an output too (rendered as the semantic mask).
+//!
+//! The backward pass takes cotangents of those four outputs and returns gradients for every learnable
+//! quantity: the stored Gaussian parameters, the semantic logits, the four networks, the per-frame
+//! latent and the bone transforms (for pose refinement).
+//!
+//! View directions: `x − camera centre` (world) for the scene network; for the human network the
+//! direction to the deformed mean rotated back into canonical space by the transpose of the
+//! skinning-blended bone rotation R = Σ_b w_b R_b at the canonical mean (w from the skinning field), as
+//! 3DGS-Avatar canonicalises it. Both are differentiated (into the means, the skinning field and the
+//! bones), so the gradients are those of the function computed.
+
+use crate::blend::{blend, blend_backward, BlendInputs, Blended, SemanticMode};
+use crate::colour::{ColourInputs, ColourNet};
+use crate::TrainError;
+use gaussians::covariance::{covariance_3d, covariance_3d_backward};
+use nn::Real;
+use smpl_deform::deform_net::{
+    deform_gaussians, deform_gaussians_backward, CanonicalGaussians, DeformCache, NonRigidNet,
+    SkinningCache, SkinningField, NR_FEATURE_DIM,
+};
+use smpl_deform::math::{Affine, Mat3};
+
+/// The four networks of the model.
+#[derive(Clone, Debug)]
+pub struct ModelNets<T: Real> {
+    /// Pose-conditioned non-rigid deformation.
+    pub nonrigid: NonRigidNet<T>,
+    /// Learned skinning weights.
+    pub skinning: SkinningField<T>,
+    /// Human colour network (feature ⊕ canonical-direction SH ⊕ non-rigid feature ⊕ frame latent).
+    pub human_colour: ColourNet<T>,
+    /// Scene colour network (feature ⊕ world-direction SH).
+    pub scene_colour: ColourNet<T>,
+}
+
+/// Stored per-Gaussian parameters (conventions of `gaussians::GaussianSet`).
+#[derive(Clone, Copy, Debug)]
+pub struct GaussianParams<'a, T> {
+    /// Means: canonical position when read as human, world position when read as scene (m).
+    pub means: &'a [[T; 3]],
+    /// Log-scales (ln m).
+    pub log_scales: &'a [[T; 3]],
+    /// Unnormalised (w, x, y, z) quaternions.
+    pub quats: &'a [[T; 4]],
+    /// Colour features, N × feature_dim (shared by both colour networks).
+    pub features: &'a [T],
+    /// Semantic logits, N × `SemanticMode::logits_per_gaussian`.
+    pub semantic_logits: &'a [T],
+}
+
+/// What a frame contributes.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInputs<'a, T> {
+    /// The 207-value pose feature of the frame.
+    pub pose_code: &'a [T],
+    /// `frame_from_canonical` transform per bone (24).
+    pub bones: &'a [Affine<T>],
+    /// Camera centre in world coordinates (m).
+    pub camera_centre: [T; 3],
+    /// Per-frame latent of the human colour network.
+    pub latent: &'a [T],
+}
+
+/// Blended attributes of every Gaussian in the frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PosedFrame<T> {
+    /// World positions (m).
+    pub means: Vec<[T; 3]>,
+    /// World covariances (m²).
+    pub covariances: Vec<[[T; 3]; 3]>,
+    /// Linear RGB, N × 3.
+    pub colours: Vec<T>,
+    /// Human probability per Gaussian.
+    pub human_probability: Vec<T>,
+}
+
+/// Forward state kept for the backward pass.
+#[derive(Clone, Debug)]
+pub struct FrameCache<T: Real> {
+    deform: DeformCache<T>,
+    posed_mats: Vec<Mat3<T>>,
+    posed_log_scales: Vec<[T; 3]>,
+    human_colour: crate::colour::ColourCache<T>,
+    scene_colour: crate::colour::ColourCache<T>,
+    inputs: Vec<BlendInputs<T>>,
+    /// Skinning weights at the canonical means (for the canonicalised direction) and their cache.
+    direction_weights: Vec<T>,
+    direction_skinning: SkinningCache<T>,
+    /// World direction x_def − c and the blended rotation R (row-major) per Gaussian.
+    human_world_dirs: Vec<[T; 3]>,
+    human_rotations: Vec<Mat3<T>>,
+}
+
+/// Cotangents of the four outputs.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameCotangents<'a, T> {
+    /// dL/d means.
+    pub means: &'a [[T; 3]],
+    /// dL/d covariances (nine independent entries).
+    pub covariances: &'a [[[T; 3]; 3]],
+    /// dL/d colours, N × 3.
+    pub colours: &'a [T],
+    /// dL/d human probability.
+    pub human_probability: &'a [T],
+}
+
+/// Gradients of one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelGradients<T> {
+    /// dL/d means.
+    pub means: Vec<[T; 3]>,
+    /// dL/d log-scales.
+    pub log_scales: Vec<[T; 3]>,
+    /// dL/d quaternions.
+    pub quats: Vec<[T; 4]>,
+    /// dL/d features.
+    pub features: Vec<T>,
+    /// dL/d semantic logits.
+    pub semantic_logits: Vec<T>,
+    /// dL/d non-rigid network parameters.
+    pub nonrigid: Vec<T>,
+    /// dL/d skinning-field parameters.
+    pub skinning: Vec<T>,
+    /// dL/d human colour network parameters.
+    pub human_colour: Vec<T>,
+    /// dL/d scene colour network parameters.
+    pub scene_colour: Vec<T>,
+    /// dL/d frame latent.
+    pub latent: Vec<T>,
+    /// dL/d bone transforms.
+    pub bones: Vec<Affine<T>>,
+}
+
+/// Σ = M diag(e^{2s}) Mᵀ for a row-major M.
+fn deformed_covariance<T: Real>(m: &Mat3<T>, s: &[T; 3]) -> [[T; 3]; 3] {
+    let d = s.map(|v| (v + v).exp());
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            (0..3).fold(T::zero(), |acc, k| acc + m[i * 3 + k] * d[k] * m[j * 3 + k])
+        })
+    })
+}
+
+/// Backward of [`deformed_covariance`]: (dL/dM, dL/ds).
+fn deformed_covariance_backward<T: Real>(
+    m: &Mat3<T>,
+    s: &[T; 3],
+    g: &[[T; 3]; 3],
+) -> (Mat3<T>, [T; 3]) {
+    let d = s.map(|v| (v + v).exp());
+    let two = T::one() + T::one();
+    let mut d_m = [T::zero(); 9];
+    for i in 0..3 {
+        for k in 0..3 {
+            // ∂/∂M_ik of Σ_ab G_ab M_ak d_k M_bk = d_k (Σ_b G_ib M_bk + Σ_a G_ai M_ak).
+            let mut acc = T::zero();
+            for b in 0..3 {
+                acc = acc + (g[i][b] + g[b][i]) * m[b * 3 + k];
+            }
+            d_m[i * 3 + k] = acc * d[k];
+        }
+    }
+    let d_s = std::array::from_fn(|k| {
+        let mut acc = T::zero();
+        for a in 0..3 {
+            for b in 0..3 {
+                acc = acc + g[a][b] * m[a * 3 + k] * m[b * 3 + k];
+            }
+        }
+        acc * two * d[k]
+    });
+    (d_m, d_s)
+}
+
+/// The model's per-Gaussian attributes for one frame.
+pub fn pose_frame<T: Real>(
+    nets: &ModelNets<T>,
+    mode: SemanticMode,
+    g: &GaussianParams<'_, T>,
+    frame: &FrameInputs<'_, T>,
+) -> Result<(PosedFrame<T>, FrameCache<T>), TrainError> {
+    let n = g.means.len();
+    let k = mode.logits_per_gaussian();
+    if g.semantic_logits.len() != n * k {
+        return Err(TrainError::Shape {
+            what: "semantic logits".into(),
+            expected: n * k,
+            found: g.semantic_logits.len(),
+        });
+    }
+    let canonical = CanonicalGaussians {
+        positions: g.means,
+        log_scales: g.log_scales,
+        quats: g.quats,
+    };
+    let (posed, deform) = deform_gaussians(
+        &nets.nonrigid,
+        &nets.skinning,
+        &canonical,
+        frame.pose_code,
+        frame.bones,
+    )?;
+    // Canonicalised view directions for the human colour network: Rᵀ (x_def − c), R = Σ_b w_b R_b.
+    let (direction_weights, direction_skinning) = nets.skinning.forward(g.means)?;
+    let c = frame.camera_centre;
+    let nb = frame.bones.len();
+    let mut human_world_dirs = Vec::with_capacity(n);
+    let mut human_rotations = Vec::with_capacity(n);
+    let human_dirs: Vec<[T; 3]> = (0..n)
+        .map(|i| {
+            let v = [0, 1, 2].map(|a| posed.positions[i][a] - c[a]);
+            let mut r = [T::zero(); 9];
+            for (b, bone) in frame.bones.iter().enumerate() {
+                let w = direction_weights[i * nb + b];
+                for row in 0..3 {
+                    for col in 0..3 {
+                        r[row * 3 + col] = r[row * 3 + col] + w * bone[row * 4 + col];
+                    }
+                }
+            }
+            human_world_dirs.push(v);
+            human_rotations.push(r);
+            [0, 1, 2].map(|col| (0..3).fold(T::zero(), |acc, row| acc + r[row * 3 + col] * v[row]))
+        })
+        .collect();
+    let scene_dirs: Vec<[T; 3]> = g
+        .means
+        .iter()
+        .map(|m| [m[0] - c[0], m[1] - c[1], m[2] - c[2]])
+        .collect();
+    let (human_rgb, human_colour) = nets.human_colour.forward(&ColourInputs {
+        features: g.features,
+        directions: &human_dirs,
+        extra: &posed.features,
+        latent: frame.latent,
+    })?;
+    let (scene_rgb, scene_colour) = nets.scene_colour.forward(&ColourInputs {
+        features: g.features,
+        directions: &scene_dirs,
+        extra: &[],
+        latent: &[],
+    })?;
+    let mut out = PosedFrame {
+        means: Vec::with_capacity(n),
+        covariances: Vec::with_capacity(n),
+        colours: Vec::with_capacity(n * 3),
+        human_probability: Vec::with_capacity(n),
+    };
+    let mut inputs = Vec::with_capacity(n);
+    for i in 0..n {
+        let p = mode.probability(&g.semantic_logits[i * k..(i + 1) * k]);
+        let input = BlendInputs {
+            x_def: posed.positions[i],
+            x_static: g.means[i],
+            cov_def: deformed_covariance(&posed.mats[i], &posed.log_scales[i]),
+            cov_static: covariance_3d(g.log_scales[i], g.quats[i]),
+            c_human: [human_rgb[i * 3], human_rgb[i * 3 + 1], human_rgb[i * 3 + 2]],
+            c_scene: [scene_rgb[i * 3], scene_rgb[i * 3 + 1], scene_rgb[i * 3 + 2]],
+        };
+        let b = blend(p, &input);
+        out.means.push(b.x);
+        out.covariances.push(b.cov);
+        out.colours.extend_from_slice(&b.c);
+        out.human_probability.push(p);
+        inputs.push(input);
+    }
+    Ok((
+        out,
+        FrameCache {
+            deform,
+            posed_mats: posed.mats,
+            posed_log_scales: posed.log_scales,
+            human_colour,
+            scene_colour,
+            inputs,
+            direction_weights,
+            direction_skinning,
+            human_world_dirs,
+            human_rotations,
+        },
+    ))
+}
+
+/// Backward of [`pose_frame`].
+pub fn pose_frame_backward<T: Real>(
+    nets: &ModelNets<T>,
+    mode: SemanticMode,
+    g: &GaussianParams<'_, T>,
+    frame: &FrameInputs<'_, T>,
+    cache: &FrameCache<T>,
+    cot: &FrameCotangents<'_, T>,
+) -> Result<ModelGradients<T>, TrainError> {
+    let n = g.means.len();
+    let k = mode.logits_per_gaussian();
+    let mut d_semantic = vec![T::zero(); n * k];
+    let mut d_x_def = Vec::with_capacity(n);
+    let mut d_mats = Vec::with_capacity(n);
+    let mut d_s_def = Vec::with_capacity(n);
+    let mut d_human_rgb = Vec::with_capacity(n * 3);
+    let mut d_scene_rgb = Vec::with_capacity(n * 3);
+    let mut d_means = Vec::with_capacity(n);
+    let mut d_log_scales = Vec::with_capacity(n);
+    let mut d_quats = Vec::with_capacity(n);
+    for i in 0..n {
+        let logits = &g.semantic_logits[i * k..(i + 1) * k];
+        let p = mode.probability(logits);
+        let d_out = Blended {
+            x: cot.means[i],
+            cov: cot.covariances[i],
+            c: [
+                cot.colours[i * 3],
+                cot.colours[i * 3 + 1],
+                cot.colours[i * 3 + 2],
+            ],
+        };
+        let (d_p, d_in) = blend_backward(p, &cache.inputs[i], &d_out);
+        mode.probability_backward(
+            logits,
+            d_p + cot.human_probability[i],
+            &mut d_semantic[i * k..(i + 1) * k],
+        );
+        d_x_def.push(d_in.x_def);
+        let (dm, ds) = deformed_covariance_backward(
+            &cache.posed_mats[i],
+            &cache.posed_log_scales[i],
+            &d_in.cov_def,
+        );
+        d_mats.push(dm);
+        d_s_def.push(ds);
+        d_human_rgb.extend_from_slice(&d_in.c_human);
+        d_scene_rgb.extend_from_slice(&d_in.c_scene);
+        let (ds_static, dq_static) =
+            covariance_3d_backward(g.log_scales[i], g.quats[i], &d_in.cov_static);
+        d_means.push(d_in.x_static);
+        d_log_scales.push(ds_static);
+        d_quats.push(dq_static);
+    }
+    let human = nets
+        .human_colour
+        .backward(&cache.human_colour, &d_human_rgb)?;
+    let scene = nets
+        .scene_colour
+        .backward(&cache.scene_colour, &d_scene_rgb)?;
+    // Scene direction x − c: its gradient is the means'.
+    for (dm, dd) in d_means.iter_mut().zip(&scene.directions) {
+        for a in 0..3 {
+            dm[a] = dm[a] + dd[a];
+        }
+    }
+    // Human direction d = Rᵀ v with v = x_def − c and R = Σ_b w_b R_b:
+    // dv = R dd, dR[row][col] = v[row]·dd[col], dw_b = ⟨dR, R_b⟩, dR_b += w_b dR.
+    let nb = frame.bones.len();
+    let mut d_direction_weights = vec![T::zero(); n * nb];
+    let mut d_bone_rotations = vec![[T::zero(); 9]; nb];
+    for i in 0..n {
+        let dd = human.directions[i];
+        let v = cache.human_world_dirs[i];
+        let r = &cache.human_rotations[i];
+        for a in 0..3 {
+            let dv = (0..3).fold(T::zero(), |acc, col| acc + r[a * 3 + col] * dd[col]);
+            d_x_def[i][a] = d_x_def[i][a] + dv;
+        }
+        let d_r: [T; 9] = std::array::from_fn(|e| v[e / 3] * dd[e % 3]);
+        for (b, bone) in frame.bones.iter().enumerate() {
+            let w = cache.direction_weights[i * nb + b];
+            let mut dw = T::zero();
+            for e in 0..9 {
+                dw = dw + d_r[e] * bone[(e / 3) * 4 + e % 3];
+                d_bone_rotations[b][e] = d_bone_rotations[b][e] + w * d_r[e];
+            }
+            d_direction_weights[i * nb + b] = dw;
+        }
+    }
+    let mut d_nonrigid = vec![T::zero(); nets.nonrigid.mlp.num_params()];
+    let mut d_skinning = vec![T::zero(); nets.skinning.mlp.num_params()];
+    let d_means_from_weights = nets.skinning.backward(
+        &cache.direction_skinning,
+        &d_direction_weights,
+        &mut d_skinning,
+    )?;
+    debug_assert_eq!(human.extra.len(), n * NR_FEATURE_DIM);
+    let deform = deform_gaussians_backward(
+        &nets.nonrigid,
+        &nets.skinning,
+        frame.bones,
+        &cache.deform,
+        &d_x_def,
+        &d_s_def,
+        &d_mats,
+        &human.extra,
+        &mut d_nonrigid,
+        &mut d_skinning,
+    )?;
+    for i in 0..n {
+        for a in 0..3 {
+            d_means[i][a] = d_means[i][a] + deform.positions[i][a] + d_means_from_weights[i][a];
+            d_log_scales[i][a] = d_log_scales[i][a] + deform.log_scales[i][a];
+        }
+        for a in 0..4 {
+            d_quats[i][a] = d_quats[i][a] + deform.quats[i][a];
+        }
+    }
+    let mut d_bones = deform.bones;
+    for (db, dr) in d_bones.iter_mut().zip(&d_bone_rotations) {
+        for e in 0..9 {
+            db[(e / 3) * 4 + e % 3] = db[(e / 3) * 4 + e % 3] + dr[e];
+        }
+    }
+    let features = human
+        .features
+        .iter()
+        .zip(&scene.features)
+        .map(|(&a, &b)| a + b)
+        .collect();
+    Ok(ModelGradients {
+        means: d_means,
+        log_scales: d_log_scales,
+        quats: d_quats,
+        features,
+        semantic_logits: d_semantic,
+        nonrigid: d_nonrigid,
+        skinning: d_skinning,
+        human_colour: human.params,
+        scene_colour: scene.params,
+        latent: human.latent,
+        bones: d_bones,
+    })
+}
