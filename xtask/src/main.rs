@@ -4,6 +4,7 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+mod bench_deform;
 mod bench_flow;
 mod body;
 mod body_convert;
@@ -44,6 +45,8 @@ enum Command {
 enum BenchCommand {
     /// SPyNet forward and forward + input-gradient times.
     Flow(bench_flow::Args),
+    /// Posing N human Gaussians (non-rigid net + skinning field + LBS), forward and backward times.
+    Deform(bench_deform::Args),
 }
 
 fn main() -> Result<()> {
@@ -56,5 +59,6 @@ fn main() -> Result<()> {
         Command::FlowImportT7(args) => flow_import_t7::run(args),
         Command::TrainFlow(args) => train_flow::run(args),
         Command::Bench(BenchCommand::Flow(args)) => bench_flow::run(args),
+        Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
     }
 }
