@@ -5,9 +5,11 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod bench_deform;
+mod bench_events;
 mod bench_flow;
 mod body;
 mod body_convert;
+mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
 mod ply_info;
@@ -35,6 +37,8 @@ enum Command {
     FlowImportT7(flow_import_t7::Args),
     /// Train SPyNet-style weights on procedural pairs (coarse to fine, EPE loss).
     TrainFlow(train_flow::Args),
+    /// Event streams: info, convert, voxelize, simulate, flow (contrast maximisation).
+    Events(events_cmd::Args),
     /// Benchmarks, printed as JSON lines.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -43,6 +47,8 @@ enum Command {
 /// `cargo xtask bench <what>`.
 #[derive(Subcommand, Debug)]
 enum BenchCommand {
+    /// Event voxelising and reading throughput (text, npz).
+    Events(bench_events::Args),
     /// SPyNet forward and forward + input-gradient times.
     Flow(bench_flow::Args),
     /// Posing N human Gaussians (non-rigid net + skinning field + LBS), forward and backward times.
@@ -58,6 +64,8 @@ fn main() -> Result<()> {
         Command::Flow(args) => flow_estimate::run(args),
         Command::FlowImportT7(args) => flow_import_t7::run(args),
         Command::TrainFlow(args) => train_flow::run(args),
+        Command::Events(args) => events_cmd::run(args),
+        Command::Bench(BenchCommand::Events(args)) => bench_events::run(args),
         Command::Bench(BenchCommand::Flow(args)) => bench_flow::run(args),
         Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
     }

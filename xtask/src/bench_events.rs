@@ -1,0 +1,91 @@
+//! `cargo xtask bench events [--quick]`: throughput of the `events` crate on seeded synthetic
+//! streams, one JSON line per case `{"bench":"events","case","events","threads","seconds","mev_per_s",
+//! "target_mev_per_s"}`: voxelising (5 bins, 640x480), reading text, reading npz (binary).
+//! Files go to a temporary directory that is removed afterwards.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use events::{Event, EventStream, SensorSize};
+
+/// Arguments of `bench events`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Fewer events (a smoke run: 2 M instead of 20 M).
+    #[arg(long)]
+    pub quick: bool,
+}
+
+fn synthetic(n: usize, sensor: SensorSize) -> EventStream {
+    let mut s = EventStream::with_capacity(n);
+    s.sensor = Some(sensor);
+    let mut st = 0x9E37_79B9u64;
+    let mut t = 0i64;
+    for _ in 0..n {
+        st = st
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        t += ((st >> 60) & 1) as i64;
+        s.push(Event {
+            t,
+            x: ((st >> 20) % sensor.width as u64) as u16,
+            y: ((st >> 40) % sensor.height as u64) as u16,
+            p: if (st >> 33) & 1 == 1 { 1 } else { -1 },
+        });
+    }
+    s
+}
+
+fn line(case: &str, n: usize, secs: f64, target: f64) {
+    let threads = rayon::current_num_threads();
+    println!(
+        "{}",
+        serde_json::json!({
+            "bench": "events", "case": case, "events": n, "threads": threads,
+            "seconds": secs, "mev_per_s": n as f64 / secs / 1e6, "target_mev_per_s": target,
+        })
+    );
+}
+
+fn best_of(repeats: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    let mut best = f64::INFINITY;
+    for _ in 0..repeats {
+        let t = Instant::now();
+        f()?;
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    Ok(best)
+}
+
+/// Runs the benchmark cases.
+pub fn run(args: Args) -> Result<()> {
+    let n = if args.quick { 2_000_000 } else { 20_000_000 };
+    let repeats = if args.quick { 2 } else { 3 };
+    let sensor = SensorSize::new(640, 480);
+    let s = synthetic(n, sensor);
+    let (t0, t1) = (s.t[0], s.t[n - 1] + 1);
+    let secs = best_of(repeats, || {
+        let g = events::voxel_grid(&s.as_slice(), sensor, 5, t0, t1, false)?;
+        std::hint::black_box(g);
+        Ok(())
+    })?;
+    line("voxelize_5bins_640x480", n, secs, 50.0);
+
+    let dir = std::env::temp_dir().join(format!("xtask-bench-events-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let result = (|| -> Result<()> {
+        for (case, file, target) in [("read_text", "e.txt", 5.0), ("read_npz", "e.npz", 30.0)] {
+            let p = dir.join(file);
+            events::write_events(&p, &s).with_context(|| format!("writing {}", p.display()))?;
+            let secs = best_of(repeats, || {
+                let r = events::read_events(&p)?;
+                anyhow::ensure!(r.len() == n, "{case}: read {} of {n} events", r.len());
+                Ok(())
+            })?;
+            line(case, n, secs, target);
+        }
+        Ok(())
+    })();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
