@@ -71,7 +71,6 @@ pub enum EventsError {
 /// Result alias of the crate.
 pub type Result<T> = std::result::Result<T, EventsError>;
 
-#[allow(dead_code)] // used by the readers added next
 impl EventsError {
     /// A [`EventsError::Format`] error for `path`.
     pub(crate) fn format(path: impl AsRef<Path>, message: impl Into<String>) -> Self {
