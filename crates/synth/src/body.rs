@@ -18,7 +18,7 @@ use crate::texture;
 /// Clothing region of a body vertex or triangle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Region {
-    /// Striped shirt (torso, collars, upper arms).
+    /// Plaid shirt (torso, collars, upper arms).
     Shirt = 0,
     /// Denim trousers (pelvis, thighs, shins).
     Trousers = 1,
@@ -175,7 +175,7 @@ impl DressedBody {
         let shirt_a = Vec3::new(0.6 + 0.3 * h(1), 0.15 + 0.2 * h(2), 0.1);
         let shirt_b = Vec3::new(0.85, 0.82, 0.7);
         let mats = [
-            texture::stripes(seed ^ 1, size, shirt_a, shirt_b, 8),
+            texture::plaid(seed ^ 1, size, shirt_a, shirt_b, 6),
             texture::denim(seed ^ 2, size, Vec3::new(0.08, 0.14, 0.35 + 0.1 * h(3))),
             texture::mottled(seed ^ 3, size, Vec3::new(0.62, 0.42, 0.32), 0.12, false),
             texture::mottled(seed ^ 4, size, Vec3::new(0.12, 0.07, 0.04), 0.4, true),

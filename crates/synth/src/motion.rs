@@ -4,8 +4,8 @@
 //! in front of the person, so it blurs.
 //!
 //! Pose parameters are axis-angle in each joint's parent frame, in the SMPL rest frame (y up, x to
-//! the body's left, z forward). [`Speed`] scales every angular frequency (slow ×0.5, medium ×1,
-//! fast ×2), hence the blur; amplitudes do not change. The motion is a smooth, closed-form function
+//! the body's left, z forward). [`Speed`] scales every angular frequency (slow ×1, medium ×2,
+//! fast ×4), hence the blur; amplitudes do not change. The motion is a smooth, closed-form function
 //! of time, so any sub-frame time can be evaluated exactly.
 
 use glam::{Quat, Vec3};
@@ -16,11 +16,11 @@ use std::f32::consts::TAU;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Speed {
-    /// Frequencies ×0.5.
+    /// Frequencies ×1 (arm sweep 0.9 Hz, steps 0.6 Hz, sway 0.4 Hz, turn 0.15 Hz).
     Slow,
-    /// Frequencies ×1 (arm swing 1 Hz).
-    Medium,
     /// Frequencies ×2.
+    Medium,
+    /// Frequencies ×4 (arm sweep 3.6 Hz).
     Fast,
 }
 
@@ -28,9 +28,9 @@ impl Speed {
     /// Frequency multiplier.
     pub fn factor(self) -> f32 {
         match self {
-            Self::Slow => 0.5,
-            Self::Medium => 1.0,
-            Self::Fast => 2.0,
+            Self::Slow => 1.0,
+            Self::Medium => 2.0,
+            Self::Fast => 4.0,
         }
     }
 

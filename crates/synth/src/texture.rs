@@ -236,6 +236,26 @@ pub fn stripes(seed: u32, size: usize, a: Vec3, b: Vec3, count: u32) -> Texture 
     })
 }
 
+/// Bold plaid: alternating bands of two colours along u and v (their product gives checks) with thin
+/// dark lines and a fine weave; blurs under motion in any direction.
+pub fn plaid(seed: u32, size: usize, a: Vec3, b: Vec3, count: u32) -> Texture {
+    Texture::from_fn(size, size, move |u, v| {
+        let (su, sv) = ((u * count as f32).fract(), (v * count as f32).fract());
+        let (bu, bv) = (su < 0.5, sv < 0.5);
+        let mut c = match (bu, bv) {
+            (true, true) => a,
+            (false, false) => b,
+            _ => (a + b) * 0.5,
+        };
+        if (su - 0.75).abs() < 0.04 || (sv - 0.75).abs() < 0.04 {
+            c = Vec3::splat(0.05);
+        }
+        let weave = 0.5 + 0.5 * ((u * 300.0).sin() * (v * 300.0).sin());
+        let n = fbm(seed, u, v, 8, 4);
+        (c * (0.8 + 0.15 * weave + 0.2 * n)).clamp(Vec3::ZERO, Vec3::ONE)
+    })
+}
+
 /// Denim-like fabric: a base colour with diagonal twill and mottling.
 pub fn denim(seed: u32, size: usize, base: Vec3) -> Texture {
     Texture::from_fn(size, size, move |u, v| {
