@@ -13,6 +13,7 @@ mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
 mod ply_info;
+mod synth;
 mod train_flow;
 
 /// E-Sem3DGS driver: reconstruct people and scenes from blurred video + events, on the CPU.
@@ -31,6 +32,8 @@ enum Command {
     Body(body::Args),
     /// Convert the CC0 MakeHuman assets into data-fixtures/body/makehuman.npz.
     BodyConvert(body_convert::Args),
+    /// Generate the synthetic motion-blur benchmark (scene format v1) into a directory.
+    Synth(synth::Args),
     /// Optical flow between two images with the SPyNet-style network.
     Flow(flow_estimate::Args),
     /// Convert the original SPyNet Torch7 files into a safetensors weights file.
@@ -61,6 +64,7 @@ fn main() -> Result<()> {
         Command::PlyInfo(args) => ply_info::run(args),
         Command::Body(args) => body::run(args),
         Command::BodyConvert(args) => body_convert::run(args),
+        Command::Synth(args) => synth::run(args),
         Command::Flow(args) => flow_estimate::run(args),
         Command::FlowImportT7(args) => flow_import_t7::run(args),
         Command::TrainFlow(args) => train_flow::run(args),
