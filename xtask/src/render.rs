@@ -9,6 +9,7 @@ use std::io::{BufReader, BufWriter};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use npyz::WriterBuilder;
 use rasterize_cpu::{render_sh, render_sh_backward, Camera, Cotangents, RenderSettings, ShSplats};
 
 /// Arguments of `render`.
