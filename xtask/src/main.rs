@@ -7,12 +7,14 @@ use clap::{Parser, Subcommand};
 mod bench_deform;
 mod bench_events;
 mod bench_flow;
+mod bench_raster;
 mod body;
 mod body_convert;
 mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
 mod ply_info;
+mod render;
 mod synth;
 mod train_flow;
 
@@ -40,6 +42,8 @@ enum Command {
     FlowImportT7(flow_import_t7::Args),
     /// Train SPyNet-style weights on procedural pairs (coarse to fine, EPE loss).
     TrainFlow(train_flow::Args),
+    /// Render a 3DGS PLY from a camera to PNG/EXR (optionally with gradients of Σ render·W to .npz).
+    Render(render::Args),
     /// Event streams: info, convert, voxelize, simulate, flow (contrast maximisation).
     Events(events_cmd::Args),
     /// Benchmarks, printed as JSON lines.
@@ -56,6 +60,8 @@ enum BenchCommand {
     Flow(bench_flow::Args),
     /// Posing N human Gaussians (non-rigid net + skinning field + LBS), forward and backward times.
     Deform(bench_deform::Args),
+    /// Rasterizer forward and forward + backward times on seeded random scenes.
+    Raster(bench_raster::Args),
 }
 
 fn main() -> Result<()> {
@@ -72,5 +78,7 @@ fn main() -> Result<()> {
         Command::Bench(BenchCommand::Events(args)) => bench_events::run(args),
         Command::Bench(BenchCommand::Flow(args)) => bench_flow::run(args),
         Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
+        Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
+        Command::Render(args) => render::run(args),
     }
 }
