@@ -486,27 +486,26 @@ fn forward_tile<T: Real>(
                 let a = (o * power.splat_exp()).min(max_alpha);
                 alphas[x] = if power > T::zero() { T::zero() } else { a };
             }
+            // Branch-free blend: a skipped or stopping pixel gets weight 0, which leaves every sum
+            // bit-identical to skipping it (all values are finite).
             for x in x0..x1 {
                 let idx = row + x;
                 let alpha = alphas[x];
-                if done[idx] || alpha < min_alpha {
-                    continue;
-                }
+                let live = !done[idx] & (alpha >= min_alpha);
                 let t = tbuf[idx];
                 let test_t = t * (T::one() - alpha);
-                if test_t < min_t {
-                    done[idx] = true;
-                    n_done += 1;
-                    continue;
-                }
-                let w = alpha * t;
+                let stop = live & (test_t < min_t);
+                let contrib = live & !stop;
+                let w = if contrib { alpha * t } else { T::zero() };
                 for (j, &v) in ch.iter().enumerate() {
                     let s = &mut cbuf[j * TILE_PIXELS + idx];
                     *s = *s + w * v;
                 }
                 dbuf[idx] = dbuf[idx] + w * p.depth;
-                tbuf[idx] = test_t;
-                last[idx] = k as u32 + 1;
+                tbuf[idx] = if contrib { test_t } else { t };
+                last[idx] = if contrib { k as u32 + 1 } else { last[idx] };
+                done[idx] |= stop;
+                n_done += usize::from(stop);
             }
         }
         if n_done == n_pixels {
