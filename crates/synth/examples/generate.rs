@@ -1,5 +1,5 @@
 //! Minimal driver for timing the generator without the xtask (which pulls in every crate):
-//! `cargo run --release -p synth --example generate -- OUT [tiny|default|paper] [slow|medium|fast]`.
+//! `cargo run --release -p synth --example generate -- OUT [tiny|default|paper] [slow|medium|fast] [cm|nocm] [FRAMES]`.
 
 use std::time::Instant;
 
@@ -19,6 +19,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some("medium") => cfg.speed = Speed::Medium,
         Some("fast") | None => cfg.speed = Speed::Fast,
         Some(other) => return Err(format!("unknown speed {other}").into()),
+    }
+    if args.get(4).map(String::as_str) == Some("nocm") {
+        cfg.event_flow = false;
+    }
+    if let Some(f) = args.get(5) {
+        cfg.frames = f.parse()?;
     }
     std::fs::create_dir_all(out)?;
     let start = Instant::now();
