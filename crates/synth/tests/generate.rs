@@ -11,10 +11,10 @@ use synth::{generate_with_body, Preset, Speed, SynthConfig, SynthError};
 fn small() -> SynthConfig {
     SynthConfig {
         frames: 4,
-        width: 32,
-        height: 24,
+        width: 48,
+        height: 40,
         subframes: 4,
-        supersample: 1,
+        supersample: 3,
         speed: Speed::Fast,
         event_flow: true,
         ..SynthConfig::preset(Preset::Tiny)
@@ -74,7 +74,7 @@ fn small_run_loads_and_is_thread_independent() {
 
     let s = scene::load(a.path()).unwrap();
     assert_eq!(s.frames.len(), 4);
-    assert_eq!(s.camera.width, 32);
+    assert_eq!(s.camera.width, 48);
     assert!(s.frames[3].flow_to_next.is_empty());
     assert_eq!(
         s.frames[0].flow(scene::FlowKind::GroundTruth).unwrap().path,
