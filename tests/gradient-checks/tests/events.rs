@@ -10,7 +10,9 @@ use events::{CmaxConfig, CmaxProblem, Event, EventStream, SensorSize};
 use gradient_checks::{central_differences, GradientChecker, Tolerance};
 
 fn lcg(state: &mut u64) -> f64 {
-    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
     (*state >> 11) as f64 / (1u64 << 53) as f64
 }
 
@@ -40,17 +42,36 @@ fn cmax_objective_gradient_matches_finite_differences() {
     {
         let ev = stream(600, w, h, 11 + case as u64);
         let t_b = ev.t[ev.len() - 1] + 1;
-        let cfg = CmaxConfig { smoothness: smooth, divergence: div, ..CmaxConfig::default() };
-        let p = CmaxProblem::new(&ev.as_slice(), SensorSize::new(w as u32, h as u32), 0, t_b, tx, ty, &cfg)
-            .expect("problem");
+        let cfg = CmaxConfig {
+            smoothness: smooth,
+            divergence: div,
+            ..CmaxConfig::default()
+        };
+        let p = CmaxProblem::new(
+            &ev.as_slice(),
+            SensorSize::new(w as u32, h as u32),
+            0,
+            t_b,
+            tx,
+            ty,
+            &cfg,
+        )
+        .expect("problem");
         let mut st = 99 + case as u64;
-        let v: Vec<f64> = (0..p.num_params()).map(|_| 3.0 * lcg(&mut st) - 1.5).collect();
+        let v: Vec<f64> = (0..p.num_params())
+            .map(|_| 3.0 * lcg(&mut st) - 1.5)
+            .collect();
         let (f, ana) = p.objective_and_gradient(&v);
         assert!((f - p.objective(&v)).abs() <= 1e-12 * f.abs().max(1.0));
         let num = central_differences(|x| p.objective(x), &v, 1e-6);
         // Objective ~1, smooth except at measure-zero kinks: truncation O(h²) ~ 1e-12, rounding
         // O(ε·f/h) ~ 1e-10. abs 1e-7 / rel 1e-5 leaves room for both and nothing more.
-        checker.check(&format!("cmax {tx}x{ty} tiles"), &num, &ana, Tolerance::new(1e-7, 1e-5));
+        checker.check(
+            &format!("cmax {tx}x{ty} tiles"),
+            &num,
+            &ana,
+            Tolerance::new(1e-7, 1e-5),
+        );
     }
     checker.finish();
 }
