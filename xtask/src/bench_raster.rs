@@ -40,7 +40,8 @@ pub fn run(args: Args) -> Result<()> {
         args.threads.clone()
     };
     for (name, n, w, h, repeats) in cases {
-        let scene = SyntheticScene::new(n, w, h, args.seed).context("building the benchmark scene")?;
+        let scene =
+            SyntheticScene::new(n, w, h, args.seed).context("building the benchmark scene")?;
         for &t in &threads {
             let r = time_case(&scene, t, if args.quick { 3 } else { repeats })
                 .with_context(|| format!("timing case {name} with {t} threads"))?;
