@@ -1,9 +1,10 @@
 //! 2-D convolution (cross-correlation, as PyTorch's `Conv2d`): any square kernel size, stride 1,
 //! symmetric zero padding, by im2col + GEMM over chunks of output rows.
 //!
-//! im2col + GEMM was chosen over a direct kernel because the GEMM crate's packed micro-kernels run the
-//! 7×7 SPyNet layers several times faster than a hand-written direct loop here (see docs/BENCHMARKS.md,
-//! section "flow"). Chunks of output rows (a fixed number of rows, independent of the thread count) keep
+//! im2col + GEMM was chosen over a direct kernel so that the inner products run in the GEMM crate's
+//! packed micro-kernels; a direct kernel has not been written or measured against it yet (open work,
+//! together with the flow network's speed targets in docs/BENCHMARKS.md, section "flow"). Chunks of
+//! output rows (a fixed number of rows, independent of the thread count) keep
 //! the im2col buffer in cache and give parallelism even for a batch of one.
 //!
 //! The input gradient is itself a convolution of the output gradient with the flipped, transposed

@@ -2,7 +2,7 @@
 //! σ = 1.5, zero padding, C1 = 0.01², C2 = 0.03², as in the 3DGS training code), PSNR and mask IoU.
 //!
 //! Images are planar (C, H, W) linear values with data range 1. The SSIM here is the one the loss
-//! optimises and the one the metrics report (documented in docs/BENCHMARKS.md); it is the 3DGS variant
+//! optimises and the one the metrics report; it is the 3DGS variant
 //! (zero-padded "same" convolution, mean over every pixel), not skimage's valid-region variant.
 //! Everything is generic over [`num_traits::Float`] so the f64 instantiation can be finite-difference
 //! checked; parallel work splits by channel and reduces in a fixed order (bit-identical for any thread
