@@ -237,47 +237,22 @@ pub fn rodrigues_backward<T: Float>(r: [T; 3], d_rot: &Mat3<T>) -> [T; 3] {
 }
 
 /// Rotation matrix of a quaternion `(w, x, y, z)`, stored unnormalised and normalised here
-/// (the workspace convention). A zero quaternion gives NaNs.
+/// (the workspace convention), in this module's flat row-major layout. The math is
+/// `gaussians::covariance::rotation_from_quat` (a zero quaternion gives the identity).
 pub fn quat_to_mat3<T: Float>(q: [T; 4]) -> Mat3<T> {
-    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let (w, x, y, z) = (q[0] / n, q[1] / n, q[2] / n, q[3] / n);
-    let (one, two) = (T::one(), lit::<T>(2.0));
+    let r = gaussians::covariance::rotation_from_quat(q);
     [
-        one - two * (y * y + z * z),
-        two * (x * y - w * z),
-        two * (x * z + w * y),
-        two * (x * y + w * z),
-        one - two * (x * x + z * z),
-        two * (y * z - w * x),
-        two * (x * z - w * y),
-        two * (y * z + w * x),
-        one - two * (x * x + y * y),
+        r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2],
     ]
 }
 
-/// Backward of [`quat_to_mat3`] including the normalisation: `∂L/∂q` from `∂L/∂R`.
+/// Backward of [`quat_to_mat3`] including the normalisation: `∂L/∂q` from `∂L/∂R`
+/// (`gaussians::covariance::rotation_from_quat_backward`).
 pub fn quat_to_mat3_backward<T: Float>(q: [T; 4], d_rot: &Mat3<T>) -> [T; 4] {
-    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let (w, x, y, z) = (q[0] / n, q[1] / n, q[2] / n, q[3] / n);
-    let two = lit::<T>(2.0);
-    let zero = T::zero();
-    let dw = [zero, -z, y, z, zero, -x, -y, x, zero];
-    let dx = [zero, y, z, y, -two * x, -w, z, w, -two * x];
-    let dy = [-two * y, x, w, x, zero, z, -w, z, -two * y];
-    let dz = [-two * z, -w, x, w, -two * z, y, x, y, zero];
-    let g_hat = [
-        two * mat3_dot(d_rot, &dw),
-        two * mat3_dot(d_rot, &dx),
-        two * mat3_dot(d_rot, &dy),
-        two * mat3_dot(d_rot, &dz),
+    let g = [
+        [d_rot[0], d_rot[1], d_rot[2]],
+        [d_rot[3], d_rot[4], d_rot[5]],
+        [d_rot[6], d_rot[7], d_rot[8]],
     ];
-    // q̂ = q / |q|: ∂L/∂q = (g − q̂ (q̂·g)) / |q|.
-    let qh = [w, x, y, z];
-    let dot = qh[0] * g_hat[0] + qh[1] * g_hat[1] + qh[2] * g_hat[2] + qh[3] * g_hat[3];
-    [
-        (g_hat[0] - qh[0] * dot) / n,
-        (g_hat[1] - qh[1] * dot) / n,
-        (g_hat[2] - qh[2] * dot) / n,
-        (g_hat[3] - qh[3] * dot) / n,
-    ]
+    gaussians::covariance::rotation_from_quat_backward(q, &g)
 }
