@@ -20,7 +20,7 @@ mod train_flow;
 
 /// E-Sem3DGS driver: reconstruct people and scenes from blurred video + events, on the CPU.
 #[derive(Parser, Debug)]
-#[command(name = "cargo xtask", version, about, long_about = None)]
+#[command(name = "cargo xtask", bin_name = "cargo xtask", version, long_about = None)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
