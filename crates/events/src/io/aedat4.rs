@@ -280,7 +280,7 @@ impl<R: Read> Aedat4Reader<R> {
                 return Ok(false);
             }
             let mut hdr = [0u8; 8];
-            match read_full(&mut self.reader, &mut hdr) {
+            match super::read_full(&mut self.reader, &mut hdr) {
                 Ok(0) => return Ok(false),
                 Ok(8) => {}
                 Ok(n) => {
@@ -373,19 +373,6 @@ impl<R: Read> Aedat4Reader<R> {
             }
         }
     }
-}
-
-fn read_full(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match r.read(&mut buf[n..]) {
-            Ok(0) => break,
-            Ok(k) => n += k,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
-    Ok(n)
 }
 
 impl<R: Read> EventReader for Aedat4Reader<R> {

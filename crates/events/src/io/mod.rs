@@ -110,3 +110,19 @@ pub fn write_events(path: impl AsRef<Path>, events: &EventStream) -> Result<()> 
         )),
     }
 }
+
+/// Reads until `buf` is full or the reader is at end of file, retrying on `Interrupted`; returns the
+/// number of bytes read (less than `buf.len()` only at end of file). Shared by the binary readers so a
+/// short final record is detected the same way everywhere.
+pub(crate) fn read_full(r: &mut impl std::io::Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match r.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(n)
+}

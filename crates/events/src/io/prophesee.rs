@@ -310,7 +310,7 @@ impl<R: BufRead> EventReader for PropheseeReader<R> {
         while n < max && !self.eof {
             let words = ((max - n) / if ws == 2 { 4 } else { 1 }).clamp(1, 1 << 16);
             self.buf.resize(words * ws, 0);
-            let got = read_fill(&mut self.reader, &mut self.buf)
+            let got = super::read_full(&mut self.reader, &mut self.buf)
                 .map_err(|e| EventsError::io(&self.path, e))?;
             self.bytes += got as u64;
             if got % ws != 0 {
@@ -335,17 +335,4 @@ impl<R: BufRead> EventReader for PropheseeReader<R> {
     fn total_bytes(&self) -> Option<u64> {
         self.total
     }
-}
-
-fn read_fill(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match r.read(&mut buf[n..]) {
-            Ok(0) => break,
-            Ok(k) => n += k,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
-    Ok(n)
 }
