@@ -8,6 +8,14 @@
 //! quantity: the stored Gaussian parameters, the semantic logits, the four networks, the per-frame
 //! latent and the bone transforms (for pose refinement).
 //!
+//! Semantic gate: a Gaussian whose human probability is below `gate` is read as a scene Gaussian only
+//! (its human branch — deformation, skinning, human colour — is not evaluated, and the blend's human
+//! term, weighted by p < gate, is dropped together with its contribution to dL/dp through the blend).
+//! The rendered probability and its gradient are kept exactly. With `gate = 0` the function is the
+//! exact blend of every Gaussian; the trainer uses a small gate (default 0.01) because deforming the
+//! scene Gaussians, whose p stays ≈ 0.0025 from the ±3 initial logits, would dominate the step's cost
+//! while changing its result by less than 1% of one Gaussian's displacement.
+//!
 //! View directions: `x − camera centre` (world) for the scene network; for the human network the
 //! direction to the deformed mean rotated back into canonical space by the transpose of the
 //! skinning-blended bone rotation R = Σ_b w_b R_b at the canonical mean (w from the skinning field), as
@@ -82,6 +90,8 @@ pub struct PosedFrame<T> {
 /// Forward state kept for the backward pass.
 #[derive(Clone, Debug)]
 pub struct FrameCache<T: Real> {
+    /// Indices of the Gaussians whose human branch was evaluated (p ≥ gate), ascending.
+    active: Vec<usize>,
     deform: DeformCache<T>,
     posed_mats: Vec<Mat3<T>>,
     posed_log_scales: Vec<[T; 3]>,
@@ -177,10 +187,31 @@ fn deformed_covariance_backward<T: Real>(
     (d_m, d_s)
 }
 
-/// The model's per-Gaussian attributes for one frame.
+/// The model's per-Gaussian attributes for one frame (every Gaussian blended exactly: `gate = 0`).
 pub fn pose_frame<T: Real>(
     nets: &ModelNets<T>,
     mode: SemanticMode,
+    g: &GaussianParams<'_, T>,
+    frame: &FrameInputs<'_, T>,
+) -> Result<(PosedFrame<T>, FrameCache<T>), TrainError> {
+    pose_frame_gated(nets, mode, T::zero(), g, frame)
+}
+
+/// Copies the rows `idx` of `v` (row length `stride`).
+fn gather<T: Copy>(v: &[T], stride: usize, idx: &[usize]) -> Vec<T> {
+    let mut out = Vec::with_capacity(idx.len() * stride);
+    for &i in idx {
+        out.extend_from_slice(&v[i * stride..(i + 1) * stride]);
+    }
+    out
+}
+
+/// The model's per-Gaussian attributes for one frame, evaluating the human branch only for Gaussians
+/// with human probability ≥ `gate` (see the module documentation).
+pub fn pose_frame_gated<T: Real>(
+    nets: &ModelNets<T>,
+    mode: SemanticMode,
+    gate: T,
     g: &GaussianParams<'_, T>,
     frame: &FrameInputs<'_, T>,
 ) -> Result<(PosedFrame<T>, FrameCache<T>), TrainError> {
@@ -193,10 +224,26 @@ pub fn pose_frame<T: Real>(
             found: g.semantic_logits.len(),
         });
     }
+    let fd = nets.scene_colour.config.feature_dim;
+    if g.features.len() != n * fd {
+        return Err(TrainError::Shape {
+            what: "Gaussian features".into(),
+            expected: n * fd,
+            found: g.features.len(),
+        });
+    }
+    let probability: Vec<T> = (0..n)
+        .map(|i| mode.probability(&g.semantic_logits[i * k..(i + 1) * k]))
+        .collect();
+    let active: Vec<usize> = (0..n).filter(|&i| probability[i] >= gate).collect();
+    let a_means = gather(g.means, 1, &active);
+    let a_log_scales = gather(g.log_scales, 1, &active);
+    let a_quats = gather(g.quats, 1, &active);
+    let a_features = gather(g.features, fd, &active);
     let canonical = CanonicalGaussians {
-        positions: g.means,
-        log_scales: g.log_scales,
-        quats: g.quats,
+        positions: &a_means,
+        log_scales: &a_log_scales,
+        quats: &a_quats,
     };
     let (posed, deform) = deform_gaussians(
         &nets.nonrigid,
@@ -206,12 +253,13 @@ pub fn pose_frame<T: Real>(
         frame.bones,
     )?;
     // Canonicalised view directions for the human colour network: Rᵀ (x_def − c), R = Σ_b w_b R_b.
-    let (direction_weights, direction_skinning) = nets.skinning.forward(g.means)?;
+    let (direction_weights, direction_skinning) = nets.skinning.forward(&a_means)?;
     let c = frame.camera_centre;
     let nb = frame.bones.len();
-    let mut human_world_dirs = Vec::with_capacity(n);
-    let mut human_rotations = Vec::with_capacity(n);
-    let human_dirs: Vec<[T; 3]> = (0..n)
+    let na = active.len();
+    let mut human_world_dirs = Vec::with_capacity(na);
+    let mut human_rotations = Vec::with_capacity(na);
+    let human_dirs: Vec<[T; 3]> = (0..na)
         .map(|i| {
             let v = [0, 1, 2].map(|a| posed.positions[i][a] - c[a]);
             let mut r = [T::zero(); 9];
@@ -234,7 +282,7 @@ pub fn pose_frame<T: Real>(
         .map(|m| [m[0] - c[0], m[1] - c[1], m[2] - c[2]])
         .collect();
     let (human_rgb, human_colour) = nets.human_colour.forward(&ColourInputs {
-        features: g.features,
+        features: &a_features,
         directions: &human_dirs,
         extra: &posed.features,
         latent: frame.latent,
@@ -246,32 +294,33 @@ pub fn pose_frame<T: Real>(
         latent: &[],
     })?;
     let mut out = PosedFrame {
-        means: Vec::with_capacity(n),
-        covariances: Vec::with_capacity(n),
-        colours: Vec::with_capacity(n * 3),
-        human_probability: Vec::with_capacity(n),
+        means: g.means.to_vec(),
+        covariances: (0..n)
+            .map(|i| covariance_3d(g.log_scales[i], g.quats[i]))
+            .collect(),
+        colours: scene_rgb.clone(),
+        human_probability: probability,
     };
-    let mut inputs = Vec::with_capacity(n);
-    for i in 0..n {
-        let p = mode.probability(&g.semantic_logits[i * k..(i + 1) * k]);
+    let mut inputs = Vec::with_capacity(na);
+    for (a, &i) in active.iter().enumerate() {
         let input = BlendInputs {
-            x_def: posed.positions[i],
+            x_def: posed.positions[a],
             x_static: g.means[i],
-            cov_def: deformed_covariance(&posed.mats[i], &posed.log_scales[i]),
-            cov_static: covariance_3d(g.log_scales[i], g.quats[i]),
-            c_human: [human_rgb[i * 3], human_rgb[i * 3 + 1], human_rgb[i * 3 + 2]],
+            cov_def: deformed_covariance(&posed.mats[a], &posed.log_scales[a]),
+            cov_static: out.covariances[i],
+            c_human: [human_rgb[a * 3], human_rgb[a * 3 + 1], human_rgb[a * 3 + 2]],
             c_scene: [scene_rgb[i * 3], scene_rgb[i * 3 + 1], scene_rgb[i * 3 + 2]],
         };
-        let b = blend(p, &input);
-        out.means.push(b.x);
-        out.covariances.push(b.cov);
-        out.colours.extend_from_slice(&b.c);
-        out.human_probability.push(p);
+        let b = blend(out.human_probability[i], &input);
+        out.means[i] = b.x;
+        out.covariances[i] = b.cov;
+        out.colours[i * 3..i * 3 + 3].copy_from_slice(&b.c);
         inputs.push(input);
     }
     Ok((
         out,
         FrameCache {
+            active,
             deform,
             posed_mats: posed.mats,
             posed_log_scales: posed.log_scales,
@@ -286,7 +335,14 @@ pub fn pose_frame<T: Real>(
     ))
 }
 
-/// Backward of [`pose_frame`].
+impl<T: Real> FrameCache<T> {
+    /// Indices of the Gaussians whose human branch was evaluated (ascending).
+    pub fn active(&self) -> &[usize] {
+        &self.active
+    }
+}
+
+/// Backward of [`pose_frame`] / [`pose_frame_gated`] (the gate is read from the cache).
 pub fn pose_frame_backward<T: Real>(
     nets: &ModelNets<T>,
     mode: SemanticMode,
@@ -297,18 +353,21 @@ pub fn pose_frame_backward<T: Real>(
 ) -> Result<ModelGradients<T>, TrainError> {
     let n = g.means.len();
     let k = mode.logits_per_gaussian();
+    let active = &cache.active;
+    let na = active.len();
     let mut d_semantic = vec![T::zero(); n * k];
-    let mut d_x_def = Vec::with_capacity(n);
-    let mut d_mats = Vec::with_capacity(n);
-    let mut d_s_def = Vec::with_capacity(n);
-    let mut d_human_rgb = Vec::with_capacity(n * 3);
-    let mut d_scene_rgb = Vec::with_capacity(n * 3);
-    let mut d_means = Vec::with_capacity(n);
-    let mut d_log_scales = Vec::with_capacity(n);
-    let mut d_quats = Vec::with_capacity(n);
-    for i in 0..n {
-        let logits = &g.semantic_logits[i * k..(i + 1) * k];
-        let p = mode.probability(logits);
+    // Static path of every Gaussian (inactive ones are exactly static; active ones get the blend's
+    // (1 − p) share below, so start from the direct cotangents and correct).
+    let mut d_means: Vec<[T; 3]> = cot.means.to_vec();
+    let mut d_cov_static: Vec<[[T; 3]; 3]> = cot.covariances.to_vec();
+    let mut d_scene_rgb: Vec<T> = cot.colours.to_vec();
+    let mut d_p: Vec<T> = cot.human_probability.to_vec();
+    let mut d_x_def = Vec::with_capacity(na);
+    let mut d_mats = Vec::with_capacity(na);
+    let mut d_s_def = Vec::with_capacity(na);
+    let mut d_human_rgb = Vec::with_capacity(na * 3);
+    for (a, &i) in active.iter().enumerate() {
+        let p = mode.probability(&g.semantic_logits[i * k..(i + 1) * k]);
         let d_out = Blended {
             x: cot.means[i],
             cov: cot.covariances[i],
@@ -318,25 +377,31 @@ pub fn pose_frame_backward<T: Real>(
                 cot.colours[i * 3 + 2],
             ],
         };
-        let (d_p, d_in) = blend_backward(p, &cache.inputs[i], &d_out);
-        mode.probability_backward(
-            logits,
-            d_p + cot.human_probability[i],
-            &mut d_semantic[i * k..(i + 1) * k],
-        );
+        let (dp, d_in) = blend_backward(p, &cache.inputs[a], &d_out);
+        d_p[i] = d_p[i] + dp;
         d_x_def.push(d_in.x_def);
         let (dm, ds) = deformed_covariance_backward(
-            &cache.posed_mats[i],
-            &cache.posed_log_scales[i],
+            &cache.posed_mats[a],
+            &cache.posed_log_scales[a],
             &d_in.cov_def,
         );
         d_mats.push(dm);
         d_s_def.push(ds);
         d_human_rgb.extend_from_slice(&d_in.c_human);
-        d_scene_rgb.extend_from_slice(&d_in.c_scene);
+        d_scene_rgb[i * 3..i * 3 + 3].copy_from_slice(&d_in.c_scene);
+        d_means[i] = d_in.x_static;
+        d_cov_static[i] = d_in.cov_static;
+    }
+    let mut d_log_scales = Vec::with_capacity(n);
+    let mut d_quats = Vec::with_capacity(n);
+    for i in 0..n {
+        mode.probability_backward(
+            &g.semantic_logits[i * k..(i + 1) * k],
+            d_p[i],
+            &mut d_semantic[i * k..(i + 1) * k],
+        );
         let (ds_static, dq_static) =
-            covariance_3d_backward(g.log_scales[i], g.quats[i], &d_in.cov_static);
-        d_means.push(d_in.x_static);
+            covariance_3d_backward(g.log_scales[i], g.quats[i], &d_cov_static[i]);
         d_log_scales.push(ds_static);
         d_quats.push(dq_static);
     }
@@ -355,25 +420,25 @@ pub fn pose_frame_backward<T: Real>(
     // Human direction d = Rᵀ v with v = x_def − c and R = Σ_b w_b R_b:
     // dv = R dd, dR[row][col] = v[row]·dd[col], dw_b = ⟨dR, R_b⟩, dR_b += w_b dR.
     let nb = frame.bones.len();
-    let mut d_direction_weights = vec![T::zero(); n * nb];
+    let mut d_direction_weights = vec![T::zero(); na * nb];
     let mut d_bone_rotations = vec![[T::zero(); 9]; nb];
-    for i in 0..n {
-        let dd = human.directions[i];
-        let v = cache.human_world_dirs[i];
-        let r = &cache.human_rotations[i];
-        for a in 0..3 {
-            let dv = (0..3).fold(T::zero(), |acc, col| acc + r[a * 3 + col] * dd[col]);
-            d_x_def[i][a] = d_x_def[i][a] + dv;
+    for a in 0..na {
+        let dd = human.directions[a];
+        let v = cache.human_world_dirs[a];
+        let r = &cache.human_rotations[a];
+        for ax in 0..3 {
+            let dv = (0..3).fold(T::zero(), |acc, col| acc + r[ax * 3 + col] * dd[col]);
+            d_x_def[a][ax] = d_x_def[a][ax] + dv;
         }
         let d_r: [T; 9] = std::array::from_fn(|e| v[e / 3] * dd[e % 3]);
         for (b, bone) in frame.bones.iter().enumerate() {
-            let w = cache.direction_weights[i * nb + b];
+            let w = cache.direction_weights[a * nb + b];
             let mut dw = T::zero();
             for e in 0..9 {
                 dw = dw + d_r[e] * bone[(e / 3) * 4 + e % 3];
                 d_bone_rotations[b][e] = d_bone_rotations[b][e] + w * d_r[e];
             }
-            d_direction_weights[i * nb + b] = dw;
+            d_direction_weights[a * nb + b] = dw;
         }
     }
     let mut d_nonrigid = vec![T::zero(); nets.nonrigid.mlp.num_params()];
@@ -383,7 +448,7 @@ pub fn pose_frame_backward<T: Real>(
         &d_direction_weights,
         &mut d_skinning,
     )?;
-    debug_assert_eq!(human.extra.len(), n * NR_FEATURE_DIM);
+    debug_assert_eq!(human.extra.len(), na * NR_FEATURE_DIM);
     let deform = deform_gaussians_backward(
         &nets.nonrigid,
         &nets.skinning,
@@ -396,13 +461,18 @@ pub fn pose_frame_backward<T: Real>(
         &mut d_nonrigid,
         &mut d_skinning,
     )?;
-    for i in 0..n {
-        for a in 0..3 {
-            d_means[i][a] = d_means[i][a] + deform.positions[i][a] + d_means_from_weights[i][a];
-            d_log_scales[i][a] = d_log_scales[i][a] + deform.log_scales[i][a];
+    let fd = nets.scene_colour.config.feature_dim;
+    let mut features = scene.features;
+    for (a, &i) in active.iter().enumerate() {
+        for ax in 0..3 {
+            d_means[i][ax] = d_means[i][ax] + deform.positions[a][ax] + d_means_from_weights[a][ax];
+            d_log_scales[i][ax] = d_log_scales[i][ax] + deform.log_scales[a][ax];
         }
-        for a in 0..4 {
-            d_quats[i][a] = d_quats[i][a] + deform.quats[i][a];
+        for ax in 0..4 {
+            d_quats[i][ax] = d_quats[i][ax] + deform.quats[a][ax];
+        }
+        for f in 0..fd {
+            features[i * fd + f] = features[i * fd + f] + human.features[a * fd + f];
         }
     }
     let mut d_bones = deform.bones;
@@ -411,12 +481,6 @@ pub fn pose_frame_backward<T: Real>(
             db[(e / 3) * 4 + e % 3] = db[(e / 3) * 4 + e % 3] + dr[e];
         }
     }
-    let features = human
-        .features
-        .iter()
-        .zip(&scene.features)
-        .map(|(&a, &b)| a + b)
-        .collect();
     Ok(ModelGradients {
         means: d_means,
         log_scales: d_log_scales,

@@ -1,7 +1,9 @@
 //! End-to-end finite-difference check of the per-frame model (`train::model`): non-rigid network →
 //! learned skinning → LBS → deformed covariance, static covariance, both colour networks, semantic
 //! blend — w.r.t. every learnable quantity (Gaussian parameters, logits, the four networks, the frame
-//! latent and the bone transforms), for the one-hot and scalar semantics.
+//! latent and the bone transforms), for the one-hot and scalar semantics, with the exact blend
+//! (gate 0) and with a semantic gate of 0.5 (some Gaussians then skip the human branch: the gated
+//! function is what is differentiated; probes crossing the gate have probability ~1e-6).
 //!
 //! Tolerance: the loss L = Σ cot·outputs is O(10); in f64 with h = 1e-6 the rounding error of a central
 //! difference is ≈ ε·|L|/h ≈ 2e-9 and the truncation error ≈ h²·|L'''| ≪ 1e-9, so
@@ -15,7 +17,7 @@ use smpl_deform::deform_net::{NonRigidNet, SkinningField, NR_FEATURE_DIM};
 use train::blend::SemanticMode;
 use train::colour::{ColourNet, ColourNetConfig};
 use train::model::{
-    pose_frame, pose_frame_backward, FrameCotangents, FrameInputs, GaussianParams, ModelNets,
+    pose_frame_backward, pose_frame_gated, FrameCotangents, FrameInputs, GaussianParams, ModelNets,
 };
 
 const TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
@@ -35,6 +37,7 @@ struct Case {
     latent: Vec<f64>,
     centre: [f64; 3],
     mode: SemanticMode,
+    gate: f64,
 }
 
 fn lcg(seed: &mut u64) -> f64 {
@@ -44,7 +47,7 @@ fn lcg(seed: &mut u64) -> f64 {
     ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
 }
 
-fn case(seed: u64, scalar: bool) -> Case {
+fn case(seed: u64, scalar: bool, gate: f64) -> Case {
     let mut s = seed | 1;
     let mut r = || lcg(&mut s);
     let verts: Vec<[f32; 3]> = (0..20)
@@ -111,6 +114,7 @@ fn case(seed: u64, scalar: bool) -> Case {
         latent: vec![r(), r()],
         centre: [0.2 * r(), 0.1 * r(), -3.0],
         mode,
+        gate,
     }
 }
 
@@ -128,7 +132,7 @@ fn outputs(c: &Case) -> (train::model::PosedFrame<f64>, train::model::FrameCache
         camera_centre: c.centre,
         latent: &c.latent,
     };
-    pose_frame(&c.nets, c.mode, &g, &f).expect("forward")
+    pose_frame_gated(&c.nets, c.mode, c.gate, &g, &f).expect("forward")
 }
 
 fn loss(c: &Case, cot: &[f64]) -> f64 {
@@ -171,6 +175,7 @@ fn clone_case(c: &Case) -> Case {
         latent: c.latent.clone(),
         centre: c.centre,
         mode: c.mode,
+        gate: c.gate,
     }
 }
 
@@ -181,11 +186,11 @@ fn rows<const D: usize>(p: &[f64]) -> Vec<[f64; D]> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(6))]
+    #![proptest_config(ProptestConfig::with_cases(8))]
 
     #[test]
-    fn model_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>()) {
-        let c = case(seed, scalar);
+    fn model_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>()) {
+        let c = case(seed, scalar, if gated { 0.5 } else { 0.0 });
         let outputs_len = N * (3 + 9 + 3 + 1);
         let mut s = seed ^ 0xabc;
         let cot: Vec<f64> = (0..outputs_len).map(|_| lcg(&mut s)).collect();
