@@ -6,17 +6,16 @@
 //! semantic blend, skinning and AIAP losses) around the same skeleton. Deterministic for a seed: the
 //! view order and every split come from explicit seeds, and every kernel is thread-count invariant.
 
+use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, CheckpointWriter};
 use crate::colour::ColourNet;
 use crate::step::{photometric_step, StaticGaussians};
 use crate::TrainError;
-use gaussians::adam::{AdamConfig, AdamState, GaussianAdam, GaussianLearningRates};
+use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
 use gaussians::density::{densify_and_prune, reset_opacity, DensifyConfig, DensityStats};
 use gaussians::GaussianSet;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rasterize_cpu::{Camera, RenderSettings};
-use safetensors::tensor::{Dtype, TensorView};
-use safetensors::SafeTensors;
 use std::path::Path;
 
 /// One training view: a camera and its target image, (3, H, W) linear RGB.
@@ -284,86 +283,30 @@ impl StaticTrainer {
 
     /// Writes the whole state to one safetensors file, atomically (temporary sibling + rename).
     pub fn save_checkpoint(&self, path: &Path) -> Result<(), TrainError> {
-        let mut tensors: Vec<(String, Vec<f32>)> = Vec::new();
-        let s = &self.set;
-        tensors.push(("set.means".into(), s.means.as_flattened().to_vec()));
-        tensors.push((
-            "set.log_scales".into(),
-            s.log_scales.as_flattened().to_vec(),
-        ));
-        tensors.push(("set.quats".into(), s.quats.as_flattened().to_vec()));
-        tensors.push(("set.opacity_logits".into(), s.opacity_logits.clone()));
-        tensors.push(("set.sh".into(), s.sh.clone()));
-        tensors.push(("set.features".into(), s.features.clone()));
-        tensors.push(("set.semantic_logits".into(), s.semantic_logits.clone()));
-        for (name, g) in adam_groups(&self.adam) {
-            tensors.push((format!("adam.{name}.m"), g.m.clone()));
-            tensors.push((format!("adam.{name}.v"), g.v.clone()));
-        }
-        tensors.push(("net.params".into(), self.net.mlp.params.clone()));
-        let (m, v) = self.net_adam.moments();
-        tensors.push(("net_adam.m".into(), m.to_vec()));
-        tensors.push(("net_adam.v".into(), v.to_vec()));
-        tensors.push(("stats.grad_accum".into(), self.stats.grad_accum.clone()));
-        tensors.push(("stats.max_radius".into(), self.stats.max_radius.clone()));
-        let counts: Vec<f32> = self.stats.visible_count.iter().map(|&c| c as f32).collect();
-        tensors.push(("stats.visible_count".into(), counts));
+        let mut w = CheckpointWriter::default();
+        w.push_set("set", &self.set);
+        let adam_steps = w.push_gaussian_adam("adam", &self.adam);
+        w.push("net.params", self.net.mlp.params.clone());
+        let net_adam_steps = w.push_adam("net_adam", &self.net_adam);
+        w.push_stats("stats", &self.stats);
+        let (rng_seed, rng_word_pos) = rng_to_strings(&self.rng);
         let meta = CheckpointMeta {
             format: CHECKPOINT_FORMAT.into(),
             step: self.step,
-            sh_degree: s.sh_degree,
-            feature_dim: s.feature_dim,
-            semantic_classes: s.semantic_classes,
-            adam_steps: adam_groups(&self.adam)
-                .iter()
-                .map(|(_, g)| g.step)
-                .collect(),
-            net_adam_steps: self.net_adam.steps(),
-            rng_seed: self
-                .rng
-                .get_seed()
-                .iter()
-                .map(|b| format!("{b:02x}"))
-                .collect(),
-            rng_word_pos: self.rng.get_word_pos().to_string(),
+            sh_degree: self.set.sh_degree,
+            feature_dim: self.set.feature_dim,
+            semantic_classes: self.set.semantic_classes,
+            adam_steps,
+            net_adam_steps,
+            rng_seed,
+            rng_word_pos,
             order: self.order.clone(),
         };
         let meta_json = serde_json::to_string(&meta).map_err(|e| TrainError::Checkpoint {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        let bytes: Vec<(String, Vec<u8>, Vec<usize>)> = tensors
-            .into_iter()
-            .map(|(name, values)| {
-                let len = values.len();
-                (
-                    name,
-                    values.iter().flat_map(|v| v.to_le_bytes()).collect(),
-                    vec![len],
-                )
-            })
-            .collect();
-        let views = bytes
-            .iter()
-            .map(|(name, data, shape)| {
-                TensorView::new(Dtype::F32, shape.clone(), data).map(|v| (name.clone(), v))
-            })
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| TrainError::Checkpoint {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            })?;
-        let mut metadata = std::collections::HashMap::new();
-        metadata.insert("trainer".to_string(), meta_json);
-        let file =
-            safetensors::serialize(views, Some(metadata)).map_err(|e| TrainError::Checkpoint {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            })?;
-        gaussians::ply::write_atomically(path, &file).map_err(|e| TrainError::Checkpoint {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })
+        w.write(path, &meta_json)
     }
 
     /// Restores a trainer saved by [`StaticTrainer::save_checkpoint`]; `net` supplies the colour
@@ -373,123 +316,31 @@ impl StaticTrainer {
         net: ColourNet<f32>,
         config: FitConfig,
     ) -> Result<Self, TrainError> {
-        let err = |message: String| TrainError::Checkpoint {
-            path: path.to_path_buf(),
-            message,
-        };
-        let bytes = std::fs::read(path).map_err(|e| err(e.to_string()))?;
-        let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| err(e.to_string()))?;
-        let meta_json = header
-            .metadata()
-            .as_ref()
-            .and_then(|m| m.get("trainer"))
-            .ok_or_else(|| err("missing `trainer` metadata".into()))?;
+        let r = CheckpointReader::open(path)?;
         let meta: CheckpointMeta =
-            serde_json::from_str(meta_json).map_err(|e| err(format!("metadata: {e}")))?;
+            serde_json::from_str(&r.metadata).map_err(|e| r.error(format!("metadata: {e}")))?;
         if meta.format != CHECKPOINT_FORMAT {
-            return Err(err(format!("unknown checkpoint format `{}`", meta.format)));
+            return Err(r.error(format!("unknown checkpoint format `{}`", meta.format)));
         }
-        let st = SafeTensors::deserialize(&bytes).map_err(|e| err(e.to_string()))?;
-        let get = |name: &str| -> Result<Vec<f32>, TrainError> {
-            let t = st
-                .tensor(name)
-                .map_err(|_| err(format!("missing tensor `{name}`")))?;
-            if t.dtype() != Dtype::F32 {
-                return Err(err(format!("tensor `{name}` is not float32")));
-            }
-            Ok(t.data()
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect())
-        };
-        let rows3 = |v: Vec<f32>, name: &str| -> Result<Vec<[f32; 3]>, TrainError> {
-            if !v.len().is_multiple_of(3) {
-                return Err(err(format!(
-                    "tensor `{name}` length {} is not a multiple of 3",
-                    v.len()
-                )));
-            }
-            Ok(v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
-        };
-        let mut set = GaussianSet::new(meta.sh_degree, meta.feature_dim, meta.semantic_classes);
-        set.means = rows3(get("set.means")?, "set.means")?;
-        set.log_scales = rows3(get("set.log_scales")?, "set.log_scales")?;
-        let quats = get("set.quats")?;
-        if !quats.len().is_multiple_of(4) {
-            return Err(err(
-                "tensor `set.quats` length is not a multiple of 4".into()
-            ));
-        }
-        set.quats = quats
-            .chunks_exact(4)
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect();
-        set.opacity_logits = get("set.opacity_logits")?;
-        set.sh = get("set.sh")?;
-        set.features = get("set.features")?;
-        set.semantic_logits = get("set.semantic_logits")?;
-        set.validate().map_err(|e| err(e.to_string()))?;
+        let set = r.set(
+            "set",
+            meta.sh_degree,
+            meta.feature_dim,
+            meta.semantic_classes,
+        )?;
         let mut trainer = Self::new(set, net, config)?;
-        let n_groups = adam_groups(&trainer.adam).len();
-        if meta.adam_steps.len() != n_groups {
-            return Err(err(format!(
-                "expected {n_groups} Adam step counts, found {}",
-                meta.adam_steps.len()
-            )));
-        }
-        for (k, name) in ADAM_GROUP_NAMES.iter().enumerate() {
-            let m = get(&format!("adam.{name}.m"))?;
-            let v = get(&format!("adam.{name}.v"))?;
-            let group = adam_group_mut(&mut trainer.adam, k);
-            if m.len() != group.m.len() || v.len() != group.v.len() {
-                return Err(err(format!(
-                    "Adam moments of `{name}` do not match the Gaussians"
-                )));
-            }
-            group.m = m;
-            group.v = v;
-            group.step = meta.adam_steps[k];
-        }
-        let params = get("net.params")?;
-        if params.len() != trainer.net.mlp.num_params() {
-            return Err(err(format!(
-                "colour network has {} parameters in the checkpoint, {} in the architecture",
-                params.len(),
-                trainer.net.mlp.num_params()
-            )));
-        }
-        trainer.net.mlp.params = params;
-        trainer.net_adam = nn::Adam::from_parts(
+        r.gaussian_adam("adam", &mut trainer.adam, &meta.adam_steps)?;
+        let n_params = trainer.net.mlp.num_params();
+        trainer.net.mlp.params = r.get_len("net.params", n_params)?;
+        trainer.net_adam = r.adam(
+            "net_adam",
             net_adam_config(&trainer.config),
-            get("net_adam.m")?,
-            get("net_adam.v")?,
+            n_params,
             meta.net_adam_steps,
         )?;
-        let n = trainer.set.len();
-        let stats_grad = get("stats.grad_accum")?;
-        let stats_radius = get("stats.max_radius")?;
-        let stats_count = get("stats.visible_count")?;
-        if stats_grad.len() != n || stats_radius.len() != n || stats_count.len() != n {
-            return Err(err("density statistics do not match the Gaussians".into()));
-        }
-        trainer.stats = DensityStats {
-            grad_accum: stats_grad,
-            visible_count: stats_count.iter().map(|&c| c as u32).collect(),
-            max_radius: stats_radius,
-        };
-        let seed_bytes: Vec<u8> = (0..meta.rng_seed.len() / 2)
-            .map(|i| u8::from_str_radix(&meta.rng_seed[2 * i..2 * i + 2], 16))
-            .collect::<Result<_, _>>()
-            .map_err(|e| err(format!("rng seed: {e}")))?;
-        let seed: [u8; 32] = seed_bytes
-            .try_into()
-            .map_err(|_| err("rng seed must be 32 bytes".into()))?;
-        trainer.rng = rand_chacha::ChaCha8Rng::from_seed(seed);
-        trainer.rng.set_word_pos(
-            meta.rng_word_pos
-                .parse()
-                .map_err(|e| err(format!("rng position: {e}")))?,
-        );
+        trainer.stats = r.stats("stats", trainer.set.len())?;
+        trainer.rng =
+            rng_from_strings(&meta.rng_seed, &meta.rng_word_pos).map_err(|e| r.error(e))?;
         trainer.order = meta.order;
         trainer.step = meta.step;
         Ok(trainer)
@@ -498,40 +349,6 @@ impl StaticTrainer {
 
 /// Identifier stored in every checkpoint's metadata.
 pub const CHECKPOINT_FORMAT: &str = "e-sem3dgs-static-trainer-v1";
-
-const ADAM_GROUP_NAMES: [&str; 7] = [
-    "means",
-    "log_scales",
-    "quats",
-    "opacity_logits",
-    "sh",
-    "features",
-    "semantic_logits",
-];
-
-fn adam_groups(adam: &GaussianAdam) -> [(&'static str, &AdamState); 7] {
-    [
-        (ADAM_GROUP_NAMES[0], &adam.means),
-        (ADAM_GROUP_NAMES[1], &adam.log_scales),
-        (ADAM_GROUP_NAMES[2], &adam.quats),
-        (ADAM_GROUP_NAMES[3], &adam.opacity_logits),
-        (ADAM_GROUP_NAMES[4], &adam.sh),
-        (ADAM_GROUP_NAMES[5], &adam.features),
-        (ADAM_GROUP_NAMES[6], &adam.semantic_logits),
-    ]
-}
-
-fn adam_group_mut(adam: &mut GaussianAdam, k: usize) -> &mut AdamState {
-    match k {
-        0 => &mut adam.means,
-        1 => &mut adam.log_scales,
-        2 => &mut adam.quats,
-        3 => &mut adam.opacity_logits,
-        4 => &mut adam.sh,
-        5 => &mut adam.features,
-        _ => &mut adam.semantic_logits,
-    }
-}
 
 fn net_adam_config(config: &FitConfig) -> nn::AdamConfig {
     nn::AdamConfig {

@@ -22,9 +22,11 @@ use rand::{Rng, SeedableRng};
 use rasterize_cpu::Camera;
 
 /// Where the initial Gaussians come from (`--init`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum InitMode {
     /// Body surface samples plus a scene cube (the paper).
+    #[serde(rename = "smpl+cube")]
     SmplCube,
     /// Uniform in the scene cube, unlabelled.
     Random,
@@ -33,7 +35,8 @@ pub enum InitMode {
 }
 
 /// Initial semantic logits (`--semantic-init`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum SemanticInit {
     /// ±λ_logit for the labelled class.
     OneHot,

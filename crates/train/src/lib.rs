@@ -4,7 +4,9 @@
 
 pub mod aiap;
 pub mod blend;
+pub mod checkpoint;
 pub mod colour;
+pub mod config;
 pub mod data;
 pub mod eval;
 pub mod fit;

@@ -227,7 +227,10 @@ fn bad_checkpoints_are_reported_with_their_path() {
     let err = StaticTrainer::load_checkpoint(&path, ColourNet::new(other, 1).unwrap(), config(10))
         .unwrap_err()
         .to_string();
-    assert!(err.contains("parameters"), "{err}");
+    assert!(
+        err.contains("net.params") && err.contains("expected"),
+        "{err}"
+    );
     // Missing file.
     let err = StaticTrainer::load_checkpoint(&dir.path().join("nope"), net(), config(10))
         .unwrap_err()

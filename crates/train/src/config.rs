@@ -1,0 +1,315 @@
+//! Every hyper-parameter of a reconstruction, with its documented default, as one serde structure
+//! (TOML or JSON on disk). Two presets: [`Preset::Quick`] (the default: a useful result in minutes on
+//! two cores) and [`Preset::Full`] (the longer schedule the benchmark numbers are also reported for).
+//!
+//! Learning rates follow 3DGS / 3DGS-Avatar (positions 1.6e-4 × scene extent decayed log-linearly to
+//! 1 %, scales 5e-3, rotations 1e-3, opacity 5e-2, networks 1e-3); the loss weights follow 3DGS-Avatar
+//! (skinning 10 for the first part of training, AIAP on positions 1 and on covariances 100, D-SSIM 0.2
+//! as in 3DGS because LPIPS — 3DGS-Avatar's perceptual term — is not available without downloaded
+//! weights).
+
+use crate::blend::SemanticMode;
+use crate::init::{InitMode, SemanticInit};
+use crate::TrainError;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A named set of defaults.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// Short schedule, fewer Gaussians (the default of `cargo xtask reconstruct`).
+    Quick,
+    /// Longer schedule and more Gaussians.
+    Full,
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "quick" => Ok(Self::Quick),
+            "full" => Ok(Self::Full),
+            _ => Err(format!("unknown preset `{s}` (expected quick or full)")),
+        }
+    }
+}
+
+/// All hyper-parameters of a reconstruction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Optimisation steps (one training frame each).
+    pub steps: usize,
+    /// Seed of the initial samples, the networks, the frame order and the density-control splits.
+    pub seed: u64,
+    /// Semantic parameterisation (`one-hot`, `scalar`, `none`).
+    pub semantic: SemanticMode,
+    /// Initial points (`smpl+cube`, `random`, `smpl-only`).
+    pub init: InitMode,
+    /// Initial semantic logits (`one-hot`, `half`).
+    pub semantic_init: SemanticInit,
+    /// Initial human Gaussians (on and just inside the canonical body surface).
+    pub human_gaussians: usize,
+    /// Initial scene Gaussians (uniform in the visible part of the scene cube).
+    pub scene_gaussians: usize,
+    /// Density control never grows the set beyond this many Gaussians.
+    pub max_gaussians: usize,
+    /// λ_logit, the magnitude of the initial one-hot logits (paper: 3).
+    pub logit_magnitude: f32,
+    /// Initial opacity of every Gaussian (3DGS-Avatar: 0.1).
+    pub initial_opacity: f32,
+    /// Per-Gaussian colour-feature length (paper: 32).
+    pub feature_dim: usize,
+    /// Per-frame latent length of the human colour network (paper: 16).
+    pub latent_dim: usize,
+    /// Hidden width of the non-rigid network and of the skinning field.
+    pub deform_hidden: usize,
+    /// Gaussians with human probability below this skip the human branch (see `train::model`).
+    pub semantic_gate: f32,
+    /// Background colour (linear RGB) composited behind the Gaussians.
+    pub background: [f32; 3],
+    /// Weight λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
+    pub ssim_weight: f32,
+    /// Weight of the skinning loss (learned weights vs the body's, on surface samples).
+    pub skinning_weight: f32,
+    /// The skinning loss is applied before this step only.
+    pub skinning_until: usize,
+    /// Surface samples per step for the skinning loss.
+    pub skinning_samples: usize,
+    /// Weight of the AIAP loss on human Gaussians' positions.
+    pub aiap_position_weight: f32,
+    /// Weight of the AIAP loss on human Gaussians' covariances.
+    pub aiap_covariance_weight: f32,
+    /// Position learning rate at step 0 (× scene extent), metres per step.
+    pub lr_means: f32,
+    /// Final position rate as a fraction of the initial one.
+    pub lr_means_final_fraction: f32,
+    /// Log-scale learning rate.
+    pub lr_log_scales: f32,
+    /// Quaternion learning rate.
+    pub lr_quats: f32,
+    /// Opacity-logit learning rate.
+    pub lr_opacity: f32,
+    /// Colour-feature learning rate.
+    pub lr_features: f32,
+    /// Semantic-logit learning rate.
+    pub lr_semantic: f32,
+    /// Non-rigid network learning rate.
+    pub lr_nonrigid: f32,
+    /// Skinning-field learning rate.
+    pub lr_skinning: f32,
+    /// Learning rate of both colour networks.
+    pub lr_colour: f32,
+    /// Per-frame latent learning rate.
+    pub lr_latent: f32,
+    /// The non-rigid network is frozen (its zero-initialised output stays zero) before this step.
+    pub nonrigid_from: usize,
+    /// First step of density control.
+    pub densify_from: usize,
+    /// Last step of density control.
+    pub densify_until: usize,
+    /// Steps between density-control passes.
+    pub densify_every: usize,
+    /// Mean screen-space (NDC) gradient above which a Gaussian is densified (3DGS: 2e-4).
+    pub densify_grad_threshold: f32,
+    /// Gaussians with opacity below this are pruned (3DGS-Avatar: 0.05, 3DGS: 0.005).
+    pub prune_min_opacity: f32,
+    /// Steps between opacity resets (0: never).
+    pub opacity_reset_every: usize,
+    /// Steps between checkpoints (0: only at the end).
+    pub checkpoint_every: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self::preset(Preset::Quick)
+    }
+}
+
+impl TrainConfig {
+    /// The defaults of a preset.
+    pub fn preset(preset: Preset) -> Self {
+        let quick = Self {
+            steps: 1500,
+            seed: 0,
+            semantic: SemanticMode::OneHot,
+            init: InitMode::SmplCube,
+            semantic_init: SemanticInit::OneHot,
+            human_gaussians: 6_000,
+            scene_gaussians: 20_000,
+            max_gaussians: 60_000,
+            logit_magnitude: 3.0,
+            initial_opacity: 0.1,
+            feature_dim: 32,
+            latent_dim: 16,
+            deform_hidden: 64,
+            semantic_gate: 0.01,
+            background: [0.0; 3],
+            ssim_weight: 0.2,
+            skinning_weight: 10.0,
+            skinning_until: 500,
+            skinning_samples: 512,
+            aiap_position_weight: 1.0,
+            aiap_covariance_weight: 100.0,
+            lr_means: 1.6e-4,
+            lr_means_final_fraction: 0.01,
+            lr_log_scales: 5e-3,
+            lr_quats: 1e-3,
+            lr_opacity: 5e-2,
+            lr_features: 1e-3,
+            lr_semantic: 1e-2,
+            lr_nonrigid: 1e-3,
+            lr_skinning: 1e-3,
+            lr_colour: 1e-3,
+            lr_latent: 1e-3,
+            nonrigid_from: 300,
+            densify_from: 200,
+            densify_until: 1000,
+            densify_every: 100,
+            densify_grad_threshold: 2e-4,
+            prune_min_opacity: 0.005,
+            opacity_reset_every: 0,
+            checkpoint_every: 500,
+        };
+        match preset {
+            Preset::Quick => quick,
+            Preset::Full => Self {
+                steps: 6000,
+                human_gaussians: 10_000,
+                scene_gaussians: 40_000,
+                max_gaussians: 150_000,
+                deform_hidden: 128,
+                skinning_until: 1500,
+                nonrigid_from: 1000,
+                densify_from: 500,
+                densify_until: 4000,
+                opacity_reset_every: 3000,
+                checkpoint_every: 1000,
+                ..quick
+            },
+        }
+    }
+
+    /// Reads a TOML (`.toml`) or JSON (anything else) file; fields it omits keep `base`'s values.
+    pub fn load_over(path: &Path, base: &Self) -> Result<Self, TrainError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
+        // Merge: serialise the base, overlay the file's keys, deserialise the result (unknown keys
+        // are rejected by `deny_unknown_fields`).
+        let mut merged =
+            serde_json::to_value(base).map_err(|e| TrainError::Config(format!("config: {e}")))?;
+        let overlay: serde_json::Value = if path.extension().is_some_and(|e| e == "toml") {
+            let v: toml::Value = toml::from_str(&text)
+                .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
+            serde_json::to_value(v).map_err(|e| TrainError::Config(format!("config: {e}")))?
+        } else {
+            serde_json::from_str(&text)
+                .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?
+        };
+        let (Some(m), serde_json::Value::Object(o)) = (merged.as_object_mut(), overlay) else {
+            return Err(TrainError::Config(format!(
+                "config {}: the top level must be a table of settings",
+                path.display()
+            )));
+        };
+        for (k, v) in o {
+            m.insert(k, v);
+        }
+        let config: Self = serde_json::from_value(merged)
+            .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Rejects settings that cannot be trained with, naming the field.
+    pub fn validate(&self) -> Result<(), TrainError> {
+        let bad =
+            |field: &str, why: &str| Err(TrainError::Config(format!("config `{field}`: {why}")));
+        if self.steps == 0 {
+            return bad("steps", "must be at least 1");
+        }
+        if self.human_gaussians + self.scene_gaussians == 0 {
+            return bad("human_gaussians", "no Gaussians to initialise");
+        }
+        if self.max_gaussians < self.human_gaussians + self.scene_gaussians {
+            return bad("max_gaussians", "smaller than the initial count");
+        }
+        if self.feature_dim == 0 || self.deform_hidden == 0 {
+            return bad("feature_dim", "network sizes must be positive");
+        }
+        if !(0.0..1.0).contains(&self.semantic_gate) {
+            return bad("semantic_gate", "must be in [0, 1)");
+        }
+        if !(0.0..=1.0).contains(&self.ssim_weight) {
+            return bad("ssim_weight", "must be in [0, 1]");
+        }
+        if !(self.initial_opacity > 0.0 && self.initial_opacity < 1.0) {
+            return bad("initial_opacity", "must be in (0, 1)");
+        }
+        let rates = [
+            ("lr_means", self.lr_means),
+            ("lr_log_scales", self.lr_log_scales),
+            ("lr_quats", self.lr_quats),
+            ("lr_opacity", self.lr_opacity),
+            ("lr_features", self.lr_features),
+            ("lr_semantic", self.lr_semantic),
+            ("lr_nonrigid", self.lr_nonrigid),
+            ("lr_skinning", self.lr_skinning),
+            ("lr_colour", self.lr_colour),
+            ("lr_latent", self.lr_latent),
+            ("skinning_weight", self.skinning_weight),
+            ("aiap_position_weight", self.aiap_position_weight),
+            ("aiap_covariance_weight", self.aiap_covariance_weight),
+        ];
+        for (name, v) in rates {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(name, "must be a finite non-negative number");
+            }
+        }
+        if self.background.iter().any(|v| !v.is_finite()) {
+            return bad("background", "must be finite");
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_file_overrides_only_its_keys_and_unknown_keys_are_rejected() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(
+            &p,
+            "steps = 7\nsemantic = \"scalar\"\ninit = \"smpl+cube\"\n",
+        )
+        .unwrap();
+        let base = TrainConfig::preset(Preset::Full);
+        let c = TrainConfig::load_over(&p, &base).unwrap();
+        assert_eq!(c.steps, 7);
+        assert_eq!(c.semantic, SemanticMode::Scalar);
+        assert_eq!(c.scene_gaussians, base.scene_gaussians);
+        std::fs::write(&p, "stpes = 7\n").unwrap();
+        let e = TrainConfig::load_over(&p, &base).unwrap_err().to_string();
+        assert!(e.contains("stpes"), "{e}");
+        let j = dir.path().join("c.json");
+        std::fs::write(&j, "{\"ssim_weight\": 2.0}").unwrap();
+        let e = TrainConfig::load_over(&j, &base).unwrap_err().to_string();
+        assert!(e.contains("ssim_weight"), "{e}");
+    }
+
+    #[test]
+    fn presets_are_valid_and_round_trip_through_json() {
+        for p in [Preset::Quick, Preset::Full] {
+            let c = TrainConfig::preset(p);
+            c.validate().unwrap();
+            let back: TrainConfig =
+                serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+            assert_eq!(back, c);
+        }
+    }
+}
