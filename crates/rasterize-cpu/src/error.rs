@@ -94,6 +94,24 @@ pub enum RasterError {
         /// Field name.
         field: &'static str,
     },
+    /// A Gaussian's 3D covariance is not symmetric: |Σ_row,col − Σ_col,row| exceeds
+    /// [`crate::raster::COVARIANCE_SYMMETRY_TOLERANCE`] times its largest |diagonal| entry.
+    #[error(
+        "Gaussian {index}: covariance is not symmetric: |S[{row}][{col}] - S[{col}][{row}]| = {asymmetry:e} \
+         exceeds 1e-4 x max|diag| = {scale:e}"
+    )]
+    NonSymmetricCovariance {
+        /// Index of the Gaussian.
+        index: usize,
+        /// Row of the offending upper-triangle entry.
+        row: usize,
+        /// Column of the offending upper-triangle entry.
+        col: usize,
+        /// |Σ_row,col − Σ_col,row| (m²).
+        asymmetry: f64,
+        /// Largest |diagonal| entry (m²).
+        scale: f64,
+    },
     /// Render settings are invalid.
     #[error("render settings: {0}")]
     InvalidSettings(String),

@@ -22,7 +22,8 @@ pub mod synthetic;
 pub use camera::{Camera, CameraJson, InriaCameraJson, MAX_IMAGE_SIDE};
 pub use error::RasterError;
 pub use raster::{
-    render, render_backward, Cotangents, Gradients, RenderOutput, RenderSettings, Splats,
+    render, render_backward, render_cov, render_cov_backward, Cotangents, CovSplats, Gradients,
+    RenderOutput, RenderSettings, Splats,
 };
 pub use sh::{render_sh, render_sh_backward, ShGradients, ShRender, ShSplats};
 

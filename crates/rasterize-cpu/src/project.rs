@@ -110,7 +110,7 @@ struct Ewa<T> {
 }
 
 #[inline]
-fn ewa<T: Real>(cam: &CameraParams<T>, mean: [T; 3], log_scale: [T; 3], quat: [T; 4]) -> Ewa<T> {
+fn ewa<T: Real>(cam: &CameraParams<T>, mean: [T; 3], sigma: Mat3<T>) -> Ewa<T> {
     let p = to_camera(cam, mean);
     let z = p[2];
     let xz = p[0] / z;
@@ -132,7 +132,6 @@ fn ewa<T: Real>(cam: &CameraParams<T>, mean: [T; 3], log_scale: [T; 3], quat: [T
         jr[0][k] = j00 * r[0][k] + j02 * r[2][k];
         jr[1][k] = j11 * r[1][k] + j12 * r[2][k];
     }
-    let sigma = covariance_3d(log_scale, quat);
     let mut s0 = [T::zero(); 3];
     let mut s1 = [T::zero(); 3];
     for k in 0..3 {
@@ -154,8 +153,9 @@ fn ewa<T: Real>(cam: &CameraParams<T>, mean: [T; 3], log_scale: [T; 3], quat: [T
     }
 }
 
-/// Projects one Gaussian; `None` when it is culled (behind the near plane, det = 0, opacity below
-/// 1/255, or an empty tile rectangle).
+/// Projects one Gaussian given by log-scales and a quaternion; `None` when it is culled (behind the
+/// near plane, det = 0, opacity below 1/255, or an empty tile rectangle). Same as [`project_cov`]
+/// with Σ = `covariance_3d(log_scale, quat)` (computed only when the cheap culls pass).
 #[inline]
 pub fn project<T: Real>(
     cam: &CameraParams<T>,
@@ -163,6 +163,30 @@ pub fn project<T: Real>(
     log_scale: [T; 3],
     quat: [T; 4],
     opacity_logit: T,
+) -> Option<Projected<T>> {
+    project_with(cam, mean, opacity_logit, || covariance_3d(log_scale, quat))
+}
+
+/// Projects one Gaussian given by its world-frame 3D covariance `sigma` (m², row-major, all nine
+/// entries used as given: cov2d = J W Σ Wᵀ Jᵀ); `None` when it is culled (see [`project`]).
+#[inline]
+pub fn project_cov<T: Real>(
+    cam: &CameraParams<T>,
+    mean: [T; 3],
+    sigma: &Mat3<T>,
+    opacity_logit: T,
+) -> Option<Projected<T>> {
+    project_with(cam, mean, opacity_logit, || *sigma)
+}
+
+/// Shared body of [`project`] and [`project_cov`]; `sigma` is evaluated after the depth and opacity
+/// culls.
+#[inline(always)]
+fn project_with<T: Real>(
+    cam: &CameraParams<T>,
+    mean: [T; 3],
+    opacity_logit: T,
+    sigma: impl FnOnce() -> Mat3<T>,
 ) -> Option<Projected<T>> {
     let p = to_camera(cam, mean);
     if !(p[2] > cam.near) {
@@ -173,7 +197,7 @@ pub fn project<T: Real>(
     if !(opacity >= cut) {
         return None;
     }
-    let e = ewa(cam, mean, log_scale, quat);
+    let e = ewa(cam, mean, sigma());
     let [a, b, c] = e.cov;
     let det = a * c - b * b;
     if !(det > T::zero()) {
@@ -256,7 +280,24 @@ pub fn project_backward<T: Real>(
     opacity_logit: T,
     g: &ProjectedGrad<T>,
 ) -> ([T; 3], [T; 3], [T; 4], T) {
-    let e = ewa(cam, mean, log_scale, quat);
+    let sigma = covariance_3d(log_scale, quat);
+    let (d_mean, d_sigma, d_logit) = project_cov_backward(cam, mean, &sigma, opacity_logit, g);
+    let (d_log_scale, d_quat) = covariance_3d_backward(log_scale, quat, &d_sigma);
+    (d_mean, d_log_scale, d_quat, d_logit)
+}
+
+/// Backward of [`project_cov`] for a visible Gaussian: returns dL/d(mean, Σ, opacity logit), where
+/// dL/dΣ treats the nine entries of Σ as independent variables of cov2d = J W Σ Wᵀ Jᵀ (it is not
+/// symmetrised; a caller building Σ from its own parameters chains it entry by entry).
+#[inline]
+pub fn project_cov_backward<T: Real>(
+    cam: &CameraParams<T>,
+    mean: [T; 3],
+    sigma: &Mat3<T>,
+    opacity_logit: T,
+    g: &ProjectedGrad<T>,
+) -> ([T; 3], Mat3<T>, T) {
+    let e = ewa(cam, mean, *sigma);
     let [a, b, c] = e.cov;
     let det = a * c - b * b;
     let det2 = det * det;
@@ -329,8 +370,7 @@ pub fn project_backward<T: Real>(
         r[0][1] * dx + r[1][1] * dy + r[2][1] * dz,
         r[0][2] * dx + r[1][2] * dy + r[2][2] * dz,
     ];
-    let (d_log_scale, d_quat) = covariance_3d_backward(log_scale, quat, &d_sigma);
     let o = T::one() / (T::one() + (-opacity_logit).exp());
     let d_logit = g.opacity * o * (T::one() - o);
-    (d_mean, d_log_scale, d_quat, d_logit)
+    (d_mean, d_sigma, d_logit)
 }

@@ -18,7 +18,11 @@
 
 use rayon::prelude::*;
 
-use crate::project::{project, project_backward, CameraParams, Projected, ProjectedGrad};
+use gaussians::covariance::{covariance_3d_backward, Mat3};
+
+use crate::project::{
+    project, project_cov, project_cov_backward, CameraParams, Projected, ProjectedGrad,
+};
 use crate::{camera, lit, Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
 
 /// Gaussians to splat, as structure-of-arrays slices of equal length N.
@@ -47,6 +51,113 @@ impl<T> Splats<'_, T> {
     /// True when there are no Gaussians.
     pub fn is_empty(&self) -> bool {
         self.means.is_empty()
+    }
+}
+
+/// Gaussians given by precomputed world-frame 3D covariances instead of log-scales and quaternions
+/// (e.g. blended covariances Σ = p·Σ_a + (1 − p)·Σ_b), as structure-of-arrays slices of equal
+/// length N. Rendered by [`render_cov`] / [`render_cov_backward`] with exactly the rules of
+/// [`render`]: `render_cov` with Σ = `covariance_3d(log_scale, quat)` gives the same bits as
+/// `render`.
+#[derive(Clone, Copy, Debug)]
+pub struct CovSplats<'a, T> {
+    /// Means in world space (metres).
+    pub means: &'a [[T; 3]],
+    /// World-frame 3D covariances Σ (m², row-major `[row][col]`). Each must be finite and symmetric
+    /// up to rounding: |Σ_ij − Σ_ji| ≤ 1e-4 · max_k |Σ_kk| (see
+    /// [`RasterError::NonSymmetricCovariance`]). All nine entries are used as given.
+    pub covariances: &'a [[[T; 3]; 3]],
+    /// Opacity logits (opacity = sigmoid(logit)).
+    pub opacity_logits: &'a [T],
+    /// Per-Gaussian channels, N × C row-major (`channels[i * C + c]`).
+    pub channels: &'a [T],
+    /// Number of channels C (may be 0).
+    pub num_channels: usize,
+}
+
+impl<T> CovSplats<'_, T> {
+    /// Number of Gaussians N.
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// True when there are no Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+}
+
+/// Relative asymmetry |Σ_ij − Σ_ji| / max_k |Σ_kk| above which a covariance is rejected. Rounding of
+/// any reasonable f32 construction is ~1e-7; finite-difference probes of single entries stay below.
+pub const COVARIANCE_SYMMETRY_TOLERANCE: f64 = 1e-4;
+
+/// Where a Gaussian's 3D shape comes from: the only difference between [`render`] and
+/// [`render_cov`].
+#[derive(Clone, Copy, Debug)]
+enum Shapes<'a, T> {
+    /// Log-scales and unnormalised quaternions; Σ = `covariance_3d`.
+    ScaleRot {
+        log_scales: &'a [[T; 3]],
+        quats: &'a [[T; 4]],
+    },
+    /// Precomputed covariances.
+    Cov(&'a [[[T; 3]; 3]]),
+}
+
+/// The rasterizer's input, whatever the shape source.
+#[derive(Clone, Copy, Debug)]
+struct Inputs<'a, T> {
+    means: &'a [[T; 3]],
+    shapes: Shapes<'a, T>,
+    opacity_logits: &'a [T],
+    channels: &'a [T],
+    num_channels: usize,
+}
+
+impl<'a, T: Real> Inputs<'a, T> {
+    fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    #[inline]
+    fn project(&self, cam: &CameraParams<T>, i: usize) -> Option<Projected<T>> {
+        match self.shapes {
+            Shapes::ScaleRot { log_scales, quats } => project(
+                cam,
+                self.means[i],
+                log_scales[i],
+                quats[i],
+                self.opacity_logits[i],
+            ),
+            Shapes::Cov(covs) => project_cov(cam, self.means[i], &covs[i], self.opacity_logits[i]),
+        }
+    }
+}
+
+impl<'a, T> From<&Splats<'a, T>> for Inputs<'a, T> {
+    fn from(s: &Splats<'a, T>) -> Self {
+        Self {
+            means: s.means,
+            shapes: Shapes::ScaleRot {
+                log_scales: s.log_scales,
+                quats: s.quats,
+            },
+            opacity_logits: s.opacity_logits,
+            channels: s.channels,
+            num_channels: s.num_channels,
+        }
+    }
+}
+
+impl<'a, T> From<&CovSplats<'a, T>> for Inputs<'a, T> {
+    fn from(s: &CovSplats<'a, T>) -> Self {
+        Self {
+            means: s.means,
+            shapes: Shapes::Cov(s.covariances),
+            opacity_logits: s.opacity_logits,
+            channels: s.channels,
+            num_channels: s.num_channels,
+        }
     }
 }
 
@@ -123,15 +234,20 @@ pub struct Cotangents<'a, T> {
     pub depth: Option<&'a [T]>,
 }
 
-/// Gradients w.r.t. every input of [`render`], same layouts as [`Splats`].
+/// Gradients w.r.t. every input of [`render`] (or [`render_cov`]), same layouts as [`Splats`]
+/// (or [`CovSplats`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Gradients<T> {
     /// dL/d means (world).
     pub means: Vec<[T; 3]>,
-    /// dL/d log-scales.
+    /// dL/d log-scales ([`render_backward`] only; empty from [`render_cov_backward`]).
     pub log_scales: Vec<[T; 3]>,
-    /// dL/d unnormalised quaternions.
+    /// dL/d unnormalised quaternions ([`render_backward`] only; empty from [`render_cov_backward`]).
     pub quats: Vec<[T; 4]>,
+    /// dL/d covariances, N × 3 × 3, the nine entries treated as independent variables of
+    /// cov2d = J W Σ Wᵀ Jᵀ (not symmetrised: chain entry by entry). [`render_cov_backward`] only;
+    /// empty from [`render_backward`].
+    pub covariances: Vec<Mat3<T>>,
     /// dL/d opacity logits.
     pub opacity_logits: Vec<T>,
     /// dL/d channels, N × C.
@@ -143,14 +259,14 @@ pub struct Gradients<T> {
     pub background: Vec<T>,
 }
 
-/// One Gaussian's gradients: (mean, log-scale, quaternion, opacity logit, screen mean).
-type GaussianGrad<T> = ([T; 3], [T; 3], [T; 4], T, [T; 2]);
+/// One Gaussian's gradients: (mean, Σ, opacity logit, screen mean).
+type GaussianGrad<T> = ([T; 3], Mat3<T>, T, [T; 2]);
 
 const BUF_T: usize = 0;
 const BUF_D: usize = TILE_PIXELS;
 const BUF_C: usize = 2 * TILE_PIXELS;
 
-fn validate<T: Real>(splats: &Splats<'_, T>) -> Result<(), RasterError> {
+fn validate<T: Real>(splats: &Inputs<'_, T>) -> Result<(), RasterError> {
     let n = splats.len();
     let check_len = |field, got| {
         if got == n {
@@ -163,8 +279,13 @@ fn validate<T: Real>(splats: &Splats<'_, T>) -> Result<(), RasterError> {
             })
         }
     };
-    check_len("log_scales", splats.log_scales.len())?;
-    check_len("quats", splats.quats.len())?;
+    match splats.shapes {
+        Shapes::ScaleRot { log_scales, quats } => {
+            check_len("log_scales", log_scales.len())?;
+            check_len("quats", quats.len())?;
+        }
+        Shapes::Cov(covs) => check_len("covariances", covs.len())?,
+    }
     check_len("opacity_logits", splats.opacity_logits.len())?;
     let expected = n * splats.num_channels;
     if splats.channels.len() != expected {
@@ -180,38 +301,69 @@ fn validate<T: Real>(splats: &Splats<'_, T>) -> Result<(), RasterError> {
             u32::MAX
         )));
     }
-    let c = splats.num_channels;
     // Report the first bad Gaussian (lowest index), found in parallel.
-    let bad = (0..n).into_par_iter().find_first(|&i| {
-        let q = splats.quats[i];
-        !(splats.means[i].iter().all(|v| v.is_finite())
-            && splats.log_scales[i].iter().all(|v| v.is_finite())
-            && q.iter().all(|v| v.is_finite())
-            && splats.opacity_logits[i].is_finite()
-            && splats.channels[i * c..(i + 1) * c]
-                .iter()
-                .all(|v| v.is_finite())
-            && q.iter().any(|v| *v != T::zero()))
-    });
-    if let Some(i) = bad {
-        let q = splats.quats[i];
-        let field = if !splats.means[i].iter().all(|v| v.is_finite()) {
-            "means"
-        } else if !splats.log_scales[i].iter().all(|v| v.is_finite()) {
-            "log_scales"
-        } else if !q.iter().all(|v| v.is_finite()) {
-            "quats"
-        } else if !splats.opacity_logits[i].is_finite() {
-            "opacity_logits"
-        } else if !splats.channels[i * c..(i + 1) * c]
-            .iter()
-            .all(|v| v.is_finite())
-        {
-            "channels"
-        } else {
-            return Err(RasterError::ZeroQuaternion { index: i });
-        };
-        return Err(RasterError::NonFiniteParameter { index: i, field });
+    let first_error = (0..n)
+        .into_par_iter()
+        .map(|i| check_gaussian(splats, i))
+        .find_first(Result::is_err);
+    match first_error {
+        Some(e) => e,
+        None => Ok(()),
+    }
+}
+
+/// Checks Gaussian `i`'s parameters: all finite, quaternion non-zero, covariance symmetric.
+fn check_gaussian<T: Real>(splats: &Inputs<'_, T>, i: usize) -> Result<(), RasterError> {
+    let finite = |v: &[T]| v.iter().all(|x| x.is_finite());
+    let bad = |field| Err(RasterError::NonFiniteParameter { index: i, field });
+    if !finite(&splats.means[i]) {
+        return bad("means");
+    }
+    match splats.shapes {
+        Shapes::ScaleRot { log_scales, quats } => {
+            if !finite(&log_scales[i]) {
+                return bad("log_scales");
+            }
+            if !finite(&quats[i]) {
+                return bad("quats");
+            }
+        }
+        Shapes::Cov(covs) => {
+            if !covs[i].iter().all(|row| finite(row)) {
+                return bad("covariances");
+            }
+        }
+    }
+    if !splats.opacity_logits[i].is_finite() {
+        return bad("opacity_logits");
+    }
+    let c = splats.num_channels;
+    if !finite(&splats.channels[i * c..(i + 1) * c]) {
+        return bad("channels");
+    }
+    match splats.shapes {
+        Shapes::ScaleRot { quats, .. } => {
+            if quats[i].iter().all(|v| *v == T::zero()) {
+                return Err(RasterError::ZeroQuaternion { index: i });
+            }
+        }
+        Shapes::Cov(covs) => {
+            let m = &covs[i];
+            let scale = m[0][0].abs().max(m[1][1].abs()).max(m[2][2].abs());
+            let tol = scale * lit(COVARIANCE_SYMMETRY_TOLERANCE);
+            for (r, col) in [(0, 1), (0, 2), (1, 2)] {
+                let diff = (m[r][col] - m[col][r]).abs();
+                if !(diff <= tol) {
+                    return Err(RasterError::NonSymmetricCovariance {
+                        index: i,
+                        row: r,
+                        col,
+                        asymmetry: diff.to_f64().unwrap_or(f64::NAN),
+                        scale: scale.to_f64().unwrap_or(f64::NAN),
+                    });
+                }
+            }
+        }
     }
     Ok(())
 }
@@ -264,6 +416,24 @@ pub fn render<T: Real>(
     splats: &Splats<'_, T>,
     settings: &RenderSettings,
 ) -> Result<RenderOutput<T>, RasterError> {
+    render_inputs(camera, &Inputs::from(splats), settings)
+}
+
+/// Renders Gaussians given by precomputed 3D covariances, with exactly the rules and outputs of
+/// [`render`] (which equals this with Σ = `covariance_3d(log_scale, quat)`, bit for bit).
+pub fn render_cov<T: Real>(
+    camera: &Camera,
+    splats: &CovSplats<'_, T>,
+    settings: &RenderSettings,
+) -> Result<RenderOutput<T>, RasterError> {
+    render_inputs(camera, &Inputs::from(splats), settings)
+}
+
+fn render_inputs<T: Real>(
+    camera: &Camera,
+    splats: &Inputs<'_, T>,
+    settings: &RenderSettings,
+) -> Result<RenderOutput<T>, RasterError> {
     camera::check_image_size(camera.width.into(), camera.height.into())?;
     validate(splats)?;
     let c = splats.num_channels;
@@ -278,15 +448,7 @@ pub fn render<T: Real>(
     // 1. Project (parallel, order-preserving).
     let projected: Vec<Option<Projected<T>>> = (0..n)
         .into_par_iter()
-        .map(|i| {
-            project(
-                &cam,
-                splats.means[i],
-                splats.log_scales[i],
-                splats.quats[i],
-                splats.opacity_logits[i],
-            )
-        })
+        .map(|i| splats.project(&cam, i))
         .collect();
     let mut radii = vec![0u32; n];
     let mut visible = Vec::new();
@@ -516,10 +678,33 @@ fn forward_tile<T: Real>(
 
 /// Analytic backward of [`render`]: gradients of a scalar loss L w.r.t. every input, given
 /// `cot` = dL/d(image, alpha, depth). `forward` must be the output of `render` for the same camera,
-/// splats and settings.
+/// splats and settings. `Gradients::covariances` is left empty.
 pub fn render_backward<T: Real>(
     camera: &Camera,
     splats: &Splats<'_, T>,
+    settings: &RenderSettings,
+    forward: &RenderOutput<T>,
+    cot: &Cotangents<'_, T>,
+) -> Result<Gradients<T>, RasterError> {
+    backward_inputs(camera, &Inputs::from(splats), settings, forward, cot)
+}
+
+/// Analytic backward of [`render_cov`]: as [`render_backward`], with dL/dΣ in
+/// `Gradients::covariances` (nine independent entries) and `log_scales`/`quats` left empty.
+/// `forward` must be the output of `render_cov` for the same camera, splats and settings.
+pub fn render_cov_backward<T: Real>(
+    camera: &Camera,
+    splats: &CovSplats<'_, T>,
+    settings: &RenderSettings,
+    forward: &RenderOutput<T>,
+    cot: &Cotangents<'_, T>,
+) -> Result<Gradients<T>, RasterError> {
+    backward_inputs(camera, &Inputs::from(splats), settings, forward, cot)
+}
+
+fn backward_inputs<T: Real>(
+    camera: &Camera,
+    splats: &Inputs<'_, T>,
     settings: &RenderSettings,
     forward: &RenderOutput<T>,
     cot: &Cotangents<'_, T>,
@@ -630,12 +815,13 @@ pub fn render_backward<T: Real>(
         compact[id as usize] = ci as u32;
     }
     let zero3 = [T::zero(); 3];
+    let zero33 = [zero3; 3];
     let per_gaussian: Vec<GaussianGrad<T>> = (0..st.n)
         .into_par_iter()
         .map(|i| {
             let ci = compact[i];
             if ci == u32::MAX {
-                return (zero3, zero3, [T::zero(); 4], T::zero(), [T::zero(); 2]);
+                return (zero3, zero33, T::zero(), [T::zero(); 2]);
             }
             let ci = ci as usize;
             let mut acc = [T::zero(); 7];
@@ -651,15 +837,15 @@ pub fn render_backward<T: Real>(
                 opacity: acc[5],
                 depth: acc[6],
             };
-            let (dm, ds, dq, dl) = project_backward(
-                &cam,
-                splats.means[i],
-                splats.log_scales[i],
-                splats.quats[i],
-                splats.opacity_logits[i],
-                &g,
-            );
-            (dm, ds, dq, dl, g.mean2d)
+            let sigma = match splats.shapes {
+                Shapes::ScaleRot { log_scales, quats } => {
+                    gaussians::covariance::covariance_3d(log_scales[i], quats[i])
+                }
+                Shapes::Cov(covs) => covs[i],
+            };
+            let (dm, d_sigma, dl) =
+                project_cov_backward(&cam, splats.means[i], &sigma, splats.opacity_logits[i], &g);
+            (dm, d_sigma, dl, g.mean2d)
         })
         .collect();
     let mut d_channels = vec![T::zero(); st.n * c];
@@ -697,19 +883,36 @@ pub fn render_backward<T: Real>(
     }
     let mut out = Gradients {
         means: Vec::with_capacity(st.n),
-        log_scales: Vec::with_capacity(st.n),
-        quats: Vec::with_capacity(st.n),
+        log_scales: Vec::new(),
+        quats: Vec::new(),
+        covariances: Vec::new(),
         opacity_logits: Vec::with_capacity(st.n),
         channels: d_channels,
         means_2d: Vec::with_capacity(st.n),
         background: d_bg,
     };
-    for (dm, ds, dq, dl, d2) in per_gaussian {
+    for &(dm, _, dl, d2) in &per_gaussian {
         out.means.push(dm);
-        out.log_scales.push(ds);
-        out.quats.push(dq);
         out.opacity_logits.push(dl);
         out.means_2d.push(d2);
+    }
+    match splats.shapes {
+        // Chain dΣ into the log-scales and quaternions (zero for culled Gaussians, like before).
+        Shapes::ScaleRot { log_scales, quats } => {
+            let chained: Vec<([T; 3], [T; 4])> = per_gaussian
+                .par_iter()
+                .enumerate()
+                .map(|(i, g)| {
+                    if compact[i] == u32::MAX {
+                        (zero3, [T::zero(); 4])
+                    } else {
+                        covariance_3d_backward(log_scales[i], quats[i], &g.1)
+                    }
+                })
+                .collect();
+            (out.log_scales, out.quats) = chained.into_iter().unzip();
+        }
+        Shapes::Cov(_) => out.covariances = per_gaussian.iter().map(|g| g.1).collect(),
     }
     Ok(out)
 }

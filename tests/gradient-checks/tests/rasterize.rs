@@ -22,12 +22,12 @@
 //!
 //! Proptest case counts (dev profile, ~seconds each): 48 oracle scenes, 24 FD scenes, 12 SH scenes.
 
-use gaussians::covariance::covariance_3d;
+use gaussians::covariance::{covariance_3d, covariance_3d_backward, Mat3};
 use gradient_checks::{central_differences, GradientChecker, Tolerance};
 use proptest::prelude::*;
 use rasterize_cpu::{
-    render, render_backward, render_sh, render_sh_backward, Camera, Cotangents, RasterError,
-    RenderSettings, ShSplats, Splats,
+    render, render_backward, render_cov, render_cov_backward, render_sh, render_sh_backward,
+    Camera, Cotangents, CovSplats, RasterError, RenderSettings, ShSplats, Splats,
 };
 
 const NEAR: f64 = 0.2;
@@ -64,6 +64,9 @@ struct Scene {
     channels: Vec<f64>,
     c: usize,
     background: Vec<f64>,
+    /// Precomputed covariances overriding (log_scales, quats) in the oracle; rendered with
+    /// `render_cov` by [`cov_loss`].
+    covs: Option<Vec<Mat3<f64>>>,
 }
 
 impl Scene {
@@ -174,6 +177,7 @@ fn random_scene(seed: u64, kinds: &[usize], c: usize) -> Scene {
         channels: vec![],
         c,
         background: (0..c).map(|_| rng.uniform(0.0, 1.0)).collect(),
+        covs: None,
     };
     let mut prev_uvz = (w * 0.5, h * 0.5, 2.0);
     // Kind 8 = an anchor: an ordinary Gaussian in the middle of the image, so every scene has
@@ -284,8 +288,9 @@ struct OracleGauss {
     jac_clamp: [bool; 2],
 }
 
-/// INRIA `preprocess` written out plainly for one Gaussian.
-fn oracle_project(cam: &Camera, p: &[f64]) -> OracleGauss {
+/// INRIA `preprocess` written out plainly for one Gaussian; `cov` overrides Σ from the log-scales
+/// and quaternion in `p`.
+fn oracle_project(cam: &Camera, p: &[f64], cov: Option<&Mat3<f64>>) -> OracleGauss {
     let m = &cam.world_to_camera;
     let pc: [f64; 3] =
         [0, 1, 2].map(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3]);
@@ -318,7 +323,10 @@ fn oracle_project(cam: &Camera, p: &[f64]) -> OracleGauss {
     let tyz = yz.clamp(-lyn, lyp);
     let jac = [[fx / z, 0.0, -fx * txz / z], [0.0, fy / z, -fy * tyz / z]];
     let r: [[f64; 3]; 3] = [0, 1, 2].map(|i| [m[i][0], m[i][1], m[i][2]]);
-    let sigma = covariance_3d([p[3], p[4], p[5]], [p[6], p[7], p[8], p[9]]);
+    let sigma = match cov {
+        Some(m) => *m,
+        None => covariance_3d([p[3], p[4], p[5]], [p[6], p[7], p[8], p[9]]),
+    };
     // T = J R; cov = T Σ Tᵀ.
     let mut t = [[0.0; 3]; 2];
     for a in 0..2 {
@@ -387,7 +395,7 @@ fn oracle(s: &Scene, cot: Option<(&[f64], &[f64], &[f64])>) -> OracleOut {
     let (w, h) = (s.cam.width as usize, s.cam.height as usize);
     let c = s.c;
     let gs: Vec<OracleGauss> = (0..s.n())
-        .map(|i| oracle_project(&s.cam, &s.params(i)))
+        .map(|i| oracle_project(&s.cam, &s.params(i), s.covs.as_ref().map(|c| &c[i])))
         .collect();
     let mut out = OracleOut {
         image: vec![0.0; c * w * h],
@@ -507,9 +515,9 @@ fn oracle_param_grad(s: &Scene, i: usize, d_proj: &[f64; 7]) -> Vec<f64> {
     for k in 0..11 {
         let h = 1e-6;
         probe[k] = p[k] + h;
-        let plus = flat(&oracle_project(&s.cam, &probe));
+        let plus = flat(&oracle_project(&s.cam, &probe, None));
         probe[k] = p[k] - h;
-        let minus = flat(&oracle_project(&s.cam, &probe));
+        let minus = flat(&oracle_project(&s.cam, &probe, None));
         probe[k] = p[k];
         g[k] = (0..7)
             .map(|j| d_proj[j] * (plus[j] - minus[j]) / (2.0 * h))
@@ -752,6 +760,285 @@ proptest! {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Precomputed-covariance path (`render_cov`).
+
+fn cov_splats<'a>(s: &'a Scene, covs: &'a [Mat3<f64>]) -> CovSplats<'a, f64> {
+    CovSplats {
+        means: &s.means,
+        covariances: covs,
+        opacity_logits: &s.logits,
+        channels: &s.channels,
+        num_channels: s.c,
+    }
+}
+
+/// L = Σ cot · (image, alpha, depth) of `render_cov` with the scene's covariances.
+fn cov_loss(s: &Scene, cot: &(Vec<f64>, Vec<f64>, Vec<f64>)) -> f64 {
+    let covs = s
+        .covs
+        .as_deref()
+        .unwrap_or_else(|| panic!("scene has no covariances"));
+    let out = render_cov(&s.cam, &cov_splats(s, covs), &s.settings())
+        .unwrap_or_else(|e| panic!("render_cov: {e}"));
+    dot(&out.image, &cot.0) + dot(&out.alpha, &cot.1) + dot(&out.depth, &cot.2)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// dL/dΣ of `render_cov_backward` against central differences of `render_cov`, every one of the
+    /// nine entries perturbed on its own (so Σ is briefly non-symmetric, which `render_cov` accepts up
+    /// to 1e-4 relative). The step is relative: Σ_kl ± h·s with s = max_k Σ_kk and h = FD_H, and the
+    /// compared quantity is s·dL/dΣ_kl, which has the units and size of L; the FD_TOL argument above
+    /// then holds unchanged (the log-scales spread by ±0.7, so Σ's eigenvalues differ from s by at
+    /// most e^2.8 ≈ 16 and a probe moves cov2d by ≤ 16·h relative: truncation ≈ (16h)², rounding
+    /// ε·|L|/h ≈ 1e-9). Means, opacity logits and channels are checked on the same path too. Probes
+    /// whose ± steps flip any discrete decision of the oracle (run on the same covariances) are
+    /// discarded; at least 90% must remain.
+    #[test]
+    fn cov_gradients_match_finite_differences(
+        seed in any::<u64>(),
+        kinds in kinds_strategy(6),
+        c in 1usize..4,
+    ) {
+        let mut s = random_scene(seed, &kinds, c);
+        let covs: Vec<Mat3<f64>> =
+            (0..s.n()).map(|i| covariance_3d(s.log_scales[i], s.quats[i])).collect();
+        s.covs = Some(covs.clone());
+        let cot = random_cotangent(&s, seed);
+        let settings = s.settings();
+        let fwd = render_cov(&s.cam, &cov_splats(&s, &covs), &settings)
+            .unwrap_or_else(|e| panic!("render_cov: {e}"));
+        let g = render_cov_backward(
+            &s.cam,
+            &cov_splats(&s, &covs),
+            &settings,
+            &fwd,
+            &Cotangents { image: &cot.0, alpha: Some(&cot.1), depth: Some(&cot.2) },
+        )
+        .unwrap_or_else(|e| panic!("render_cov_backward: {e}"));
+        prop_assert_eq!(g.covariances.len(), s.n());
+        prop_assert!(g.log_scales.is_empty() && g.quats.is_empty());
+        let base = oracle(&s, None).decisions;
+        let mut checker = GradientChecker::new();
+        let (mut probes, mut valid) = (0usize, 0usize);
+        for i in 0..s.n() {
+            let scale = covs[i][0][0].max(covs[i][1][1]).max(covs[i][2][2]);
+            // Σ entries (relative step), then mean, logit, channels (the Scene::params layout).
+            let mut num = Vec::new();
+            let mut ana = Vec::new();
+            for kl in 0..9 {
+                let (k, l) = (kl / 3, kl % 3);
+                probes += 1;
+                let perturbed = |t: f64| {
+                    let mut s2 = s.clone();
+                    if let Some(cv) = s2.covs.as_mut() {
+                        cv[i][k][l] = covs[i][k][l] + t * scale;
+                    }
+                    s2
+                };
+                if oracle(&perturbed(FD_H), None).decisions != base
+                    || oracle(&perturbed(-FD_H), None).decisions != base
+                {
+                    continue;
+                }
+                valid += 1;
+                let d = central_differences(|t| cov_loss(&perturbed(t[0]), &cot), &[0.0], FD_H);
+                num.push(d[0]);
+                ana.push(scale * g.covariances[i][k][l]);
+            }
+            checker.check(&format!("gaussian {i} (kind {}) s*dL/dSigma vs FD", kind_of(&kinds, i)), &num, &ana, FD_TOL);
+            let x = s.params(i);
+            let mut num = Vec::new();
+            let mut ana = Vec::new();
+            let others = [0usize, 1, 2, 10].into_iter().chain(11..11 + c);
+            for k in others {
+                probes += 1;
+                let perturbed = |v: f64| {
+                    let mut p = x.clone();
+                    p[k] = v;
+                    let mut s2 = s.clone();
+                    s2.set_params(i, &p);
+                    s2
+                };
+                if oracle(&perturbed(x[k] + FD_H), None).decisions != base
+                    || oracle(&perturbed(x[k] - FD_H), None).decisions != base
+                {
+                    continue;
+                }
+                valid += 1;
+                let d = central_differences(|v| cov_loss(&perturbed(v[0]), &cot), &[x[k]], FD_H);
+                num.push(d[0]);
+                ana.push(match k {
+                    0..=2 => g.means[i][k],
+                    10 => g.opacity_logits[i],
+                    _ => g.channels[i * c + k - 11],
+                });
+            }
+            checker.check(&format!("gaussian {i} (kind {}) cov path mean/logit/channels vs FD", kind_of(&kinds, i)), &num, &ana, FD_TOL);
+        }
+        prop_assert!(valid * 10 >= probes * 9, "only {valid} of {probes} probes avoided a hard step");
+        checker.finish();
+    }
+}
+
+#[test]
+fn render_cov_of_scale_rotation_covariances_equals_render_bit_for_bit() {
+    // Same covariance_3d, same projection and raster code ⇒ identical bits, forward and backward; the
+    // cov-path dΣ chained through covariance_3d_backward gives render_backward's log-scale and
+    // quaternion gradients bit for bit (render_backward does exactly that chaining).
+    let (cam, m, ls, q, op, ch) = f32_scene(3000, 100, 76, 7);
+    let (o1, g1) = render_f32(&cam, &m, &ls, &q, &op, &ch);
+    let covs: Vec<Mat3<f32>> = ls
+        .iter()
+        .zip(&q)
+        .map(|(l, r)| covariance_3d(*l, *r))
+        .collect();
+    let splats = CovSplats {
+        means: &m,
+        covariances: &covs,
+        opacity_logits: &op,
+        channels: &ch,
+        num_channels: 3,
+    };
+    let settings = RenderSettings {
+        near_plane: 0.2,
+        background: vec![0.2, 0.3, 0.4],
+    };
+    let o2 = render_cov(&cam, &splats, &settings).unwrap_or_else(|e| panic!("{e}"));
+    let (ci, ca) = f32_cotangents(&cam);
+    let g2 = render_cov_backward(
+        &cam,
+        &splats,
+        &settings,
+        &o2,
+        &Cotangents {
+            image: &ci,
+            alpha: Some(&ca),
+            depth: Some(&ca),
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert!(
+        o1.num_pairs > 3000,
+        "scene too sparse: {} pairs",
+        o1.num_pairs
+    );
+    assert_eq!(o1.radii, o2.radii);
+    assert_eq!(bits(&o1.image), bits(&o2.image));
+    assert_eq!(bits(&o1.alpha), bits(&o2.alpha));
+    assert_eq!(bits(&o1.depth), bits(&o2.depth));
+    assert!(g1.covariances.is_empty());
+    assert!(g2.log_scales.is_empty() && g2.quats.is_empty());
+    assert_eq!(g2.covariances.len(), m.len());
+    assert!(g2.covariances.iter().any(|s| s[0][1] != 0.0));
+    let fmt = |g: &rasterize_cpu::Gradients<f32>| {
+        format!(
+            "{:?}",
+            (
+                &g.means,
+                &g.opacity_logits,
+                &g.channels,
+                &g.means_2d,
+                &g.background
+            )
+        )
+    };
+    assert_eq!(fmt(&g1), fmt(&g2));
+    for i in 0..m.len() {
+        let (dls, dq) = if o2.radii[i] == 0 {
+            ([0.0; 3], [0.0; 4])
+        } else {
+            covariance_3d_backward(ls[i], q[i], &g2.covariances[i])
+        };
+        assert_eq!(
+            dls.map(f32::to_bits),
+            g1.log_scales[i].map(f32::to_bits),
+            "gaussian {i}"
+        );
+        assert_eq!(
+            dq.map(f32::to_bits),
+            g1.quats[i].map(f32::to_bits),
+            "gaussian {i}"
+        );
+    }
+}
+
+#[test]
+fn bad_covariances_give_typed_errors() {
+    let cam = Camera::looking_down_z(32, 24, 30.0, 30.0).unwrap_or_else(|e| panic!("{e}"));
+    let good: Mat3<f32> = [
+        [0.01, 0.002, 0.0],
+        [0.002, 0.02, 0.001],
+        [0.0, 0.001, 0.015],
+    ];
+    let means = [[0.0f32, 0.0, 2.0], [0.1, 0.0, 2.0]];
+    let settings = RenderSettings::default();
+    let with = |bad: Mat3<f32>| {
+        let covs = [good, bad];
+        let splats = CovSplats {
+            means: &means,
+            covariances: &covs,
+            opacity_logits: &[0.0, 0.0],
+            channels: &[],
+            num_channels: 0,
+        };
+        render_cov(&cam, &splats, &settings).map(|o| o.alpha)
+    };
+    let mut nan = good;
+    nan[2][1] = f32::NAN;
+    assert!(matches!(
+        with(nan),
+        Err(RasterError::NonFiniteParameter {
+            index: 1,
+            field: "covariances"
+        })
+    ));
+    let mut inf = good;
+    inf[0][0] = f32::INFINITY;
+    assert!(matches!(
+        with(inf),
+        Err(RasterError::NonFiniteParameter {
+            index: 1,
+            field: "covariances"
+        })
+    ));
+    let mut skew = good;
+    skew[0][2] = 0.005;
+    assert!(matches!(
+        with(skew),
+        Err(RasterError::NonSymmetricCovariance {
+            index: 1,
+            row: 0,
+            col: 2,
+            ..
+        })
+    ));
+    // Rounding-level asymmetry (far below 1e-4 relative) is accepted and renders finitely.
+    let mut rounded = good;
+    rounded[1][0] = 0.002 * (1.0 + 4.0 * f32::EPSILON);
+    let alpha = with(rounded).unwrap_or_else(|e| panic!("{e}"));
+    assert!(alpha.iter().all(|a| a.is_finite()) && alpha.iter().any(|&a| a > 0.0));
+    let covs = [good];
+    let short = CovSplats {
+        means: &means,
+        covariances: &covs,
+        opacity_logits: &[0.0, 0.0],
+        channels: &[],
+        num_channels: 0,
+    };
+    assert!(matches!(
+        render_cov(&cam, &short, &settings),
+        Err(RasterError::LengthMismatch {
+            field: "covariances",
+            got: 1,
+            expected: 2
+        })
+    ));
+}
+
+// ---------------------------------------------------------------------------------------------
 // Invariances and determinism.
 
 #[allow(clippy::type_complexity)]
@@ -821,13 +1108,7 @@ fn render_f32(
         background: vec![0.2, 0.3, 0.4],
     };
     let out = render(cam, &splats, &settings).unwrap_or_else(|e| panic!("{e}"));
-    let hw = (cam.width * cam.height) as usize;
-    let ci: Vec<f32> = (0..3 * hw)
-        .map(|i| ((i * 7919) % 1000) as f32 / 1000.0 - 0.5)
-        .collect();
-    let ca: Vec<f32> = (0..hw)
-        .map(|i| ((i * 104_729) % 997) as f32 / 997.0 - 0.5)
-        .collect();
+    let (ci, ca) = f32_cotangents(cam);
     let g = render_backward(
         cam,
         &splats,
@@ -841,6 +1122,18 @@ fn render_f32(
     )
     .unwrap_or_else(|e| panic!("{e}"));
     (out, g)
+}
+
+/// Fixed pseudo-random cotangents (image with 3 channels, and alpha/depth) for f32 scenes.
+fn f32_cotangents(cam: &Camera) -> (Vec<f32>, Vec<f32>) {
+    let hw = (cam.width * cam.height) as usize;
+    let ci: Vec<f32> = (0..3 * hw)
+        .map(|i| ((i * 7919) % 1000) as f32 / 1000.0 - 0.5)
+        .collect();
+    let ca: Vec<f32> = (0..hw)
+        .map(|i| ((i * 104_729) % 997) as f32 / 997.0 - 0.5)
+        .collect();
+    (ci, ca)
 }
 
 #[test]
