@@ -233,6 +233,9 @@ impl TrainConfig {
         if self.human_gaussians + self.scene_gaussians == 0 {
             return bad("human_gaussians", "no Gaussians to initialise");
         }
+        if self.max_gaussians >= 1 << 24 {
+            return bad("max_gaussians", "must be below 2^24 (16,777,216)");
+        }
         if self.max_gaussians < self.human_gaussians + self.scene_gaussians {
             return bad("max_gaussians", "smaller than the initial count");
         }

@@ -15,6 +15,7 @@ pub mod image_loss;
 pub mod init;
 pub mod model;
 pub mod step;
+pub mod trainer;
 
 /// Errors of the training crate.
 #[derive(Debug, thiserror::Error)]

@@ -1,0 +1,951 @@
+//! The E-Sem3DGS optimisation loop (paper §4.5 without the event-flow term): one set of semantic
+//! Gaussians, posed per training frame by [`crate::model`], rendered in one rasterization with the human
+//! probability as a fourth channel, and optimised with L1 + λ·D-SSIM, the skinning loss and the AIAP
+//! losses; Adam per parameter group, the 3DGS position-rate decay, density control on its schedule,
+//! opacity resets, atomic checkpoints that resume bit for bit, and a NaN guard.
+//!
+//! One step = one training frame from a seeded shuffled order (reshuffled each epoch). Everything that
+//! influences the parameters is deterministic for a seed and independent of the thread count; only the
+//! reported stage timings vary.
+
+use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, CheckpointWriter};
+use crate::colour::{ColourNet, ColourNetConfig};
+use crate::config::TrainConfig;
+use crate::data::Dataset;
+use crate::fit::exponential_rate;
+use crate::image_loss::{l1, psnr, ssim, ImageShape};
+use crate::init::{initialise, InitConfig};
+use crate::model::{
+    pose_frame_backward, pose_frame_gated, FrameCotangents, FrameInputs, GaussianParams, ModelNets,
+    PosedFrame,
+};
+use crate::TrainError;
+use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
+use gaussians::covariance::{covariance_3d, covariance_3d_backward};
+use gaussians::density::{densify_and_prune, reset_opacity, DensifyConfig, DensityStats};
+use gaussians::GaussianSet;
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rasterize_cpu::{
+    render_cov, render_cov_backward, Camera, Cotangents, CovSplats, RenderOutput, RenderSettings,
+};
+use scene::Split;
+use smpl_deform::deform_net::{pose_code, skinning_loss, NonRigidNet, SkinningField};
+use smpl_deform::math::Affine;
+use smpl_deform::{BodyModel, CanonicalBody, SmplParams};
+use std::path::Path;
+use std::time::Instant;
+
+/// Identifier stored in every checkpoint of this trainer.
+pub const CHECKPOINT_FORMAT: &str = "e-sem3dgs-trainer-v1";
+
+/// Number of rendered channels: linear RGB and the human probability.
+pub const RENDER_CHANNELS: usize = 4;
+
+/// A body pose prepared for the model: the pose feature and the canonical-to-frame bone transforms.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PreparedPose {
+    /// The 207-value pose feature (R[1:] − I).
+    pub pose_code: Vec<f32>,
+    /// `frame_from_canonical` per bone (24, row-major 3×4).
+    pub bones: Vec<Affine<f32>>,
+    /// World position of the root joint (m).
+    pub root: [f32; 3],
+}
+
+/// The body in canonical space, able to prepare any SMPL pose for the model.
+#[derive(Clone, Debug)]
+pub struct Body {
+    /// The body model.
+    pub model: BodyModel,
+    /// Its canonical (Da-) pose.
+    pub canonical: CanonicalBody,
+    /// Shape parameters used for every pose.
+    pub betas: Vec<f32>,
+}
+
+impl Body {
+    /// Loads the canonical body of `model` with `betas`.
+    pub fn new(model: BodyModel, betas: Vec<f32>) -> Result<Self, TrainError> {
+        let canonical = CanonicalBody::new(&model, &betas)?;
+        Ok(Self {
+            model,
+            canonical,
+            betas,
+        })
+    }
+
+    /// Pose feature and bone transforms of SMPL parameters (`params.betas` is replaced by the body's).
+    pub fn prepare(&self, params: &SmplParams) -> Result<PreparedPose, TrainError> {
+        let params = SmplParams {
+            betas: self.betas.clone(),
+            ..params.clone()
+        };
+        let posed = self.model.pose(&params)?;
+        Ok(PreparedPose {
+            pose_code: pose_code(&posed.local_rotations),
+            bones: self.canonical.frame_from_canonical(&posed),
+            root: posed.joints.first().copied().unwrap_or(params.transl),
+        })
+    }
+}
+
+/// One training frame as the loop uses it.
+#[derive(Clone, Debug)]
+pub struct TrainingFrame {
+    /// Frame number in `scene.json`.
+    pub index: u32,
+    /// Observed (blurred) image, planar (3, H, W) linear RGB.
+    pub image: Vec<f32>,
+    /// The frame's pose.
+    pub pose: PreparedPose,
+}
+
+/// Everything fixed during training: camera, training frames, body and skinning-loss samples.
+#[derive(Clone, Debug)]
+pub struct TrainContext {
+    /// The fixed camera.
+    pub camera: Camera,
+    /// Training frames in time order (their position is the latent slot).
+    pub frames: Vec<TrainingFrame>,
+    /// The body.
+    pub body: Body,
+    /// Canonical surface samples for the skinning loss and their body weights (N × 24).
+    pub skin_points: Vec<[f32; 3]>,
+    /// Body skinning weights of `skin_points`, row-major (N, 24).
+    pub skin_weights: Vec<f32>,
+}
+
+impl TrainContext {
+    /// Prepares the training split of `data` with `body` (surface samples drawn with `seed`).
+    pub fn new(data: &Dataset, body: Body, seed: u64) -> Result<Self, TrainError> {
+        let mut frames = Vec::new();
+        for f in data.frames.iter().filter(|f| f.split == Split::Train) {
+            frames.push(TrainingFrame {
+                index: f.index,
+                image: f.image.clone(),
+                pose: body.prepare(&f.smpl)?,
+            });
+        }
+        if frames.is_empty() {
+            return Err(TrainError::Config(format!(
+                "{}: the scene has no training frames",
+                data.dir.display()
+            )));
+        }
+        let samples = smpl_deform::sample_surface(
+            &body.canonical.posed.vertices,
+            &body.model.faces,
+            &body.model.weights,
+            16_384,
+            seed ^ 0x5c1_0000,
+        );
+        Ok(Self {
+            camera: data.camera.clone(),
+            frames,
+            body,
+            skin_points: samples.points,
+            skin_weights: samples.weights,
+        })
+    }
+
+    /// Number of pixels per channel.
+    pub fn pixels(&self) -> usize {
+        self.camera.width as usize * self.camera.height as usize
+    }
+}
+
+/// Wall-clock seconds per stage of one step (for the cost breakdown; not deterministic).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageTimes {
+    /// Deformation, colour networks and blend.
+    pub pose: f64,
+    /// Rasterization forward.
+    pub render: f64,
+    /// Photometric loss and its gradient.
+    pub loss: f64,
+    /// Rasterization backward.
+    pub render_backward: f64,
+    /// Model backward (networks, blend, deformation) plus skinning and AIAP losses.
+    pub model_backward: f64,
+    /// Optimiser updates.
+    pub adam: f64,
+    /// Density control and opacity reset.
+    pub density: f64,
+}
+
+/// What one step did.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct StepReport {
+    /// 0-based step index.
+    pub step: usize,
+    /// Frame number trained on.
+    pub frame: u32,
+    /// Total loss.
+    pub loss: f32,
+    /// The L1 term.
+    pub l1: f32,
+    /// SSIM (not 1 − SSIM).
+    pub ssim: f32,
+    /// The weighted skinning loss.
+    pub skinning: f32,
+    /// The weighted AIAP loss (positions + covariances).
+    pub aiap: f32,
+    /// PSNR (dB) of the render against the (blurred) training frame.
+    pub psnr: f64,
+    /// Gaussians with human probability ≥ 0.5 after the step.
+    pub gaussians_human: usize,
+    /// Other Gaussians after the step.
+    pub gaussians_scene: usize,
+    /// Gaussians whose human branch was evaluated.
+    pub active: usize,
+    /// Stage timings.
+    pub times: StageTimes,
+}
+
+/// A rendered frame of the model.
+#[derive(Clone, Debug)]
+pub struct Rendered {
+    /// Linear RGB, planar (3, H, W).
+    pub rgb: Vec<f32>,
+    /// Rendered human probability (H, W) (alpha-composited, 0 where nothing is drawn).
+    pub human: Vec<f32>,
+    /// The posed per-Gaussian attributes.
+    pub posed: PosedFrame<f32>,
+}
+
+/// All state of a reconstruction: parameters, optimiser moments, density statistics, the frame-order
+/// RNG and the step count. Saving and loading it resumes a run bit for bit.
+#[derive(Clone, Debug)]
+pub struct Trainer {
+    /// Hyper-parameters.
+    pub config: TrainConfig,
+    /// The Gaussians (human ones in canonical space, scene ones in world space).
+    pub set: GaussianSet,
+    /// The four networks.
+    pub nets: ModelNets<f32>,
+    /// Per-training-frame latents, (frames, latent_dim).
+    pub latents: Vec<f32>,
+    /// Steps taken.
+    pub step: usize,
+    /// Scene extent (m): scales the position rate and the density thresholds.
+    pub scene_extent: f32,
+    adam: GaussianAdam,
+    nonrigid_adam: nn::Adam<f32>,
+    skinning_adam: nn::Adam<f32>,
+    human_colour_adam: nn::Adam<f32>,
+    scene_colour_adam: nn::Adam<f32>,
+    latent_adam: nn::Adam<f32>,
+    stats: DensityStats,
+    rng: ChaCha8Rng,
+    order: Vec<usize>,
+    aiap_index: Vec<usize>,
+    aiap_neighbours: Vec<u32>,
+}
+
+fn net_adam(lr: f32, len: usize) -> nn::Adam<f32> {
+    nn::Adam::new(
+        len,
+        nn::AdamConfig {
+            lr: f64::from(lr),
+            ..nn::AdamConfig::default()
+        },
+    )
+}
+
+fn adam_config(lr: f32) -> nn::AdamConfig {
+    nn::AdamConfig {
+        lr: f64::from(lr),
+        ..nn::AdamConfig::default()
+    }
+}
+
+/// Builds the four networks of `config` for the canonical body `vertices`.
+pub fn build_nets(
+    config: &TrainConfig,
+    vertices: &[[f32; 3]],
+) -> Result<ModelNets<f32>, TrainError> {
+    let mut human = ColourNetConfig::human();
+    human.feature_dim = config.feature_dim;
+    human.latent_dim = config.latent_dim;
+    let mut scene = ColourNetConfig::scene();
+    scene.feature_dim = config.feature_dim;
+    Ok(ModelNets {
+        nonrigid: NonRigidNet::new(vertices, config.deform_hidden, config.seed ^ 0x11)?,
+        skinning: SkinningField::new(vertices, config.deform_hidden, config.seed ^ 0x22)?,
+        human_colour: ColourNet::new(human, config.seed ^ 0x33)?,
+        scene_colour: ColourNet::new(scene, config.seed ^ 0x44)?,
+    })
+}
+
+/// Scene extent of an initial cube: half its diagonal.
+fn extent_of(cube: &([f32; 3], [f32; 3])) -> f32 {
+    let (lo, hi) = cube;
+    let d2: f32 = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum();
+    (0.5 * d2.sqrt()).max(1e-3)
+}
+
+impl Trainer {
+    /// Initialises the model (paper §4.2) for `ctx` and fresh optimiser state.
+    pub fn new(ctx: &TrainContext, config: TrainConfig) -> Result<Self, TrainError> {
+        config.validate()?;
+        let vertices = &ctx.body.canonical.posed.vertices;
+        let roots: Vec<[f32; 3]> = ctx.frames.iter().map(|f| f.pose.root).collect();
+        let init = initialise(
+            vertices,
+            &ctx.body.model.faces,
+            &ctx.body.model.weights,
+            std::slice::from_ref(&ctx.camera),
+            &roots,
+            &InitConfig {
+                mode: config.init,
+                semantic: config.semantic,
+                semantic_init: config.semantic_init,
+                human_count: config.human_gaussians,
+                scene_count: config.scene_gaussians,
+                logit_magnitude: config.logit_magnitude,
+                feature_dim: config.feature_dim,
+                opacity: config.initial_opacity,
+                seed: config.seed,
+                ..InitConfig::default()
+            },
+        );
+        let nets = build_nets(&config, vertices)?;
+        let latents = vec![0.0; ctx.frames.len() * config.latent_dim];
+        Self::assemble(config, init.set, nets, latents, extent_of(&init.cube))
+    }
+
+    fn assemble(
+        config: TrainConfig,
+        set: GaussianSet,
+        nets: ModelNets<f32>,
+        latents: Vec<f32>,
+        scene_extent: f32,
+    ) -> Result<Self, TrainError> {
+        let adam = GaussianAdam::new(&set, AdamConfig::default());
+        let mut t = Self {
+            nonrigid_adam: net_adam(config.lr_nonrigid, nets.nonrigid.mlp.num_params()),
+            skinning_adam: net_adam(config.lr_skinning, nets.skinning.mlp.num_params()),
+            human_colour_adam: net_adam(config.lr_colour, nets.human_colour.mlp.num_params()),
+            scene_colour_adam: net_adam(config.lr_colour, nets.scene_colour.mlp.num_params()),
+            latent_adam: net_adam(config.lr_latent, latents.len()),
+            stats: DensityStats::new(set.len()),
+            rng: ChaCha8Rng::seed_from_u64(config.seed ^ 0x0dde_0000),
+            order: Vec::new(),
+            aiap_index: Vec::new(),
+            aiap_neighbours: Vec::new(),
+            adam,
+            config,
+            set,
+            nets,
+            latents,
+            step: 0,
+            scene_extent,
+        };
+        t.refresh_neighbours();
+        Ok(t)
+    }
+
+    /// Human probability of Gaussian `i`.
+    pub fn probability(&self, i: usize) -> f32 {
+        let k = self.config.semantic.logits_per_gaussian();
+        self.config
+            .semantic
+            .probability(&self.set.semantic_logits[i * k..(i + 1) * k])
+    }
+
+    /// Number of Gaussians with human probability ≥ 0.5.
+    pub fn human_count(&self) -> usize {
+        (0..self.set.len())
+            .filter(|&i| self.probability(i) >= 0.5)
+            .count()
+    }
+
+    /// Recomputes the AIAP neighbourhoods (K nearest human Gaussians in canonical space).
+    fn refresh_neighbours(&mut self) {
+        self.aiap_index = (0..self.set.len())
+            .filter(|&i| self.probability(i) >= 0.5)
+            .collect();
+        let points: Vec<[f32; 3]> = self.aiap_index.iter().map(|&i| self.set.means[i]).collect();
+        self.aiap_neighbours = if points.len() > crate::aiap::AIAP_NEIGHBOURS {
+            gaussians::init::knn_indices(&points, crate::aiap::AIAP_NEIGHBOURS)
+        } else {
+            Vec::new()
+        };
+    }
+
+    fn params(&self) -> GaussianParams<'_, f32> {
+        GaussianParams {
+            means: &self.set.means,
+            log_scales: &self.set.log_scales,
+            quats: &self.set.quats,
+            features: &self.set.features,
+            semantic_logits: &self.set.semantic_logits,
+        }
+    }
+
+    fn settings(&self) -> RenderSettings {
+        let mut background: Vec<f64> = self
+            .config
+            .background
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect();
+        background.push(0.0);
+        RenderSettings {
+            near_plane: 0.2,
+            background,
+        }
+    }
+
+    /// Renders the model in `pose` with the frame latent `latent` from `camera`.
+    pub fn render(
+        &self,
+        camera: &Camera,
+        pose: &PreparedPose,
+        latent: &[f32],
+    ) -> Result<Rendered, TrainError> {
+        let (posed, _, out) = self.forward(camera, pose, latent)?;
+        let hw = camera.width as usize * camera.height as usize;
+        Ok(Rendered {
+            rgb: out.image[..3 * hw].to_vec(),
+            human: out.image[3 * hw..4 * hw].to_vec(),
+            posed,
+        })
+    }
+
+    /// The latent of the training frame nearest in frame number to `index` (for unseen frames).
+    pub fn latent_for(&self, ctx: &TrainContext, index: u32) -> &[f32] {
+        let d = self.config.latent_dim;
+        let slot = ctx
+            .frames
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, f)| (i64::from(f.index) - i64::from(index)).abs())
+            .map_or(0, |(s, _)| s);
+        &self.latents[slot * d..(slot + 1) * d]
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn forward(
+        &self,
+        camera: &Camera,
+        pose: &PreparedPose,
+        latent: &[f32],
+    ) -> Result<
+        (
+            PosedFrame<f32>,
+            crate::model::FrameCache<f32>,
+            RenderOutput<f32>,
+        ),
+        TrainError,
+    > {
+        let centre = camera.center_world().map(|v| v as f32);
+        let frame = FrameInputs {
+            pose_code: &pose.pose_code,
+            bones: &pose.bones,
+            camera_centre: centre,
+            latent,
+        };
+        let (posed, cache) = pose_frame_gated(
+            &self.nets,
+            self.config.semantic,
+            self.config.semantic_gate,
+            &self.params(),
+            &frame,
+        )?;
+        let channels = interleave_channels(&posed);
+        let splats = CovSplats {
+            means: &posed.means,
+            covariances: &posed.covariances,
+            opacity_logits: &self.set.opacity_logits,
+            channels: &channels,
+            num_channels: RENDER_CHANNELS,
+        };
+        let out = render_cov(camera, &splats, &self.settings())?;
+        Ok((posed, cache, out))
+    }
+
+    /// Runs steps until `self.step == until`, calling `on_step` after each.
+    pub fn run(
+        &mut self,
+        ctx: &TrainContext,
+        until: usize,
+        mut on_step: impl FnMut(&Self, &StepReport) -> Result<(), TrainError>,
+    ) -> Result<(), TrainError> {
+        while self.step < until {
+            let report = self.train_step(ctx)?;
+            on_step(self, &report)?;
+        }
+        Ok(())
+    }
+
+    /// One optimisation step on the next training frame of the seeded order. On a non-finite loss or
+    /// gradient nothing is updated and [`TrainError::NonFinite`] is returned.
+    pub fn train_step(&mut self, ctx: &TrainContext) -> Result<StepReport, TrainError> {
+        let config = self.config.clone();
+        let step = self.step;
+        if self.order.is_empty() {
+            self.order = (0..ctx.frames.len()).collect();
+            self.order.shuffle(&mut self.rng);
+        }
+        let slot = self.order.pop().unwrap_or(0) % ctx.frames.len();
+        let frame = &ctx.frames[slot];
+        let camera = &ctx.camera;
+        let hw = ctx.pixels();
+        let d = config.latent_dim;
+        let latent = self.latents[slot * d..(slot + 1) * d].to_vec();
+        let mut times = StageTimes::default();
+
+        let t0 = Instant::now();
+        let centre = camera.center_world().map(|v| v as f32);
+        let frame_inputs = FrameInputs {
+            pose_code: &frame.pose.pose_code,
+            bones: &frame.pose.bones,
+            camera_centre: centre,
+            latent: &latent,
+        };
+        let (posed, cache) = pose_frame_gated(
+            &self.nets,
+            config.semantic,
+            config.semantic_gate,
+            &self.params(),
+            &frame_inputs,
+        )?;
+        let channels = interleave_channels(&posed);
+        times.pose = t0.elapsed().as_secs_f64();
+
+        let t0 = Instant::now();
+        let splats = CovSplats {
+            means: &posed.means,
+            covariances: &posed.covariances,
+            opacity_logits: &self.set.opacity_logits,
+            channels: &channels,
+            num_channels: RENDER_CHANNELS,
+        };
+        let settings = self.settings();
+        let out = render_cov(camera, &splats, &settings)?;
+        times.render = t0.elapsed().as_secs_f64();
+
+        let t0 = Instant::now();
+        let rgb = &out.image[..3 * hw];
+        let shape = ImageShape {
+            channels: 3,
+            height: camera.height as usize,
+            width: camera.width as usize,
+        };
+        let mut d_l1 = vec![0.0f32; 3 * hw];
+        let mut d_ssim = vec![0.0f32; 3 * hw];
+        let l1_value = l1(rgb, &frame.image, Some(&mut d_l1));
+        let ssim_value = ssim(rgb, &frame.image, shape, Some(&mut d_ssim));
+        let w = config.ssim_weight;
+        let photometric = (1.0 - w) * l1_value + w * (1.0 - ssim_value);
+        let mut d_image = vec![0.0f32; RENDER_CHANNELS * hw];
+        for (o, (&a, &b)) in d_image.iter_mut().zip(d_l1.iter().zip(&d_ssim)) {
+            *o = (1.0 - w) * a - w * b;
+        }
+        times.loss = t0.elapsed().as_secs_f64();
+
+        let t0 = Instant::now();
+        let rg = render_cov_backward(
+            camera,
+            &splats,
+            &settings,
+            &out,
+            &Cotangents {
+                image: &d_image,
+                alpha: None,
+                depth: None,
+            },
+        )?;
+        times.render_backward = t0.elapsed().as_secs_f64();
+
+        let t0 = Instant::now();
+        let n = self.set.len();
+        let mut d_colours = vec![0.0f32; n * 3];
+        let mut d_prob = vec![0.0f32; n];
+        for i in 0..n {
+            d_colours[i * 3..i * 3 + 3]
+                .copy_from_slice(&rg.channels[i * RENDER_CHANNELS..i * RENDER_CHANNELS + 3]);
+            d_prob[i] = rg.channels[i * RENDER_CHANNELS + 3];
+        }
+        let mut d_posed_means = rg.means.clone();
+        let mut d_posed_covs = rg.covariances.clone();
+        // AIAP on the human Gaussians: canonical vs posed positions and covariances.
+        let mut d_canon_means = vec![[0.0f32; 3]; self.aiap_index.len()];
+        let mut d_canon_covs = vec![[0.0f32; 6]; self.aiap_index.len()];
+        let mut aiap_value = 0.0f32;
+        if !self.aiap_neighbours.is_empty()
+            && (config.aiap_position_weight > 0.0 || config.aiap_covariance_weight > 0.0)
+        {
+            let k = crate::aiap::AIAP_NEIGHBOURS;
+            let idx = &self.aiap_index;
+            let canon_x: Vec<[f32; 3]> = idx.iter().map(|&i| self.set.means[i]).collect();
+            let posed_x: Vec<[f32; 3]> = idx.iter().map(|&i| posed.means[i]).collect();
+            let mut d_posed_x = vec![[0.0f32; 3]; idx.len()];
+            aiap_value += crate::aiap::aiap_loss(
+                &canon_x,
+                &posed_x,
+                &self.aiap_neighbours,
+                k,
+                config.aiap_position_weight,
+                Some(&mut d_canon_means),
+                Some(&mut d_posed_x),
+            );
+            let canon_c: Vec<[f32; 6]> = idx
+                .iter()
+                .map(|&i| {
+                    crate::aiap::upper_triangle(&covariance_3d(
+                        self.set.log_scales[i],
+                        self.set.quats[i],
+                    ))
+                })
+                .collect();
+            let posed_c: Vec<[f32; 6]> = idx
+                .iter()
+                .map(|&i| crate::aiap::upper_triangle(&posed.covariances[i]))
+                .collect();
+            let mut d_posed_c = vec![[0.0f32; 6]; idx.len()];
+            aiap_value += crate::aiap::aiap_loss(
+                &canon_c,
+                &posed_c,
+                &self.aiap_neighbours,
+                k,
+                config.aiap_covariance_weight,
+                Some(&mut d_canon_covs),
+                Some(&mut d_posed_c),
+            );
+            for (a, &i) in idx.iter().enumerate() {
+                for ax in 0..3 {
+                    d_posed_means[i][ax] += d_posed_x[a][ax];
+                }
+                let g = crate::aiap::upper_triangle_backward(&d_posed_c[a]);
+                for r in 0..3 {
+                    for c in 0..3 {
+                        d_posed_covs[i][r][c] += g[r][c];
+                    }
+                }
+            }
+        }
+        let mut grads = pose_frame_backward(
+            &self.nets,
+            config.semantic,
+            &self.params(),
+            &frame_inputs,
+            &cache,
+            &FrameCotangents {
+                means: &d_posed_means,
+                covariances: &d_posed_covs,
+                colours: &d_colours,
+                human_probability: &d_prob,
+            },
+        )?;
+        for (a, &i) in self.aiap_index.iter().enumerate() {
+            for ax in 0..3 {
+                grads.means[i][ax] += d_canon_means[a][ax];
+            }
+            let g = crate::aiap::upper_triangle_backward(&d_canon_covs[a]);
+            let (ds, dq) = covariance_3d_backward(self.set.log_scales[i], self.set.quats[i], &g);
+            for ax in 0..3 {
+                grads.log_scales[i][ax] += ds[ax];
+            }
+            for ax in 0..4 {
+                grads.quats[i][ax] += dq[ax];
+            }
+        }
+        // Skinning loss on canonical surface samples (a window of the pool that moves every step).
+        let mut skinning_value = 0.0f32;
+        if step < config.skinning_until
+            && config.skinning_weight > 0.0
+            && !ctx.skin_points.is_empty()
+        {
+            let m = config.skinning_samples.min(ctx.skin_points.len()).max(1);
+            let pool = ctx.skin_points.len();
+            let start = (step * m) % pool;
+            let nb = ctx.skin_weights.len() / pool;
+            let idx: Vec<usize> = (0..m).map(|j| (start + j) % pool).collect();
+            let pts: Vec<[f32; 3]> = idx.iter().map(|&j| ctx.skin_points[j]).collect();
+            let target: Vec<f32> = idx
+                .iter()
+                .flat_map(|&j| ctx.skin_weights[j * nb..(j + 1) * nb].iter().copied())
+                .collect();
+            let (pred, skin_cache) = self.nets.skinning.forward(&pts)?;
+            let (value, mut d_pred) = skinning_loss(&pred, &target);
+            for g in &mut d_pred {
+                *g *= config.skinning_weight;
+            }
+            skinning_value = value * config.skinning_weight;
+            self.nets
+                .skinning
+                .backward(&skin_cache, &d_pred, &mut grads.skinning)?;
+        }
+        times.model_backward = t0.elapsed().as_secs_f64();
+
+        let loss = photometric + aiap_value + skinning_value;
+        let finite = loss.is_finite()
+            && rg.opacity_logits.iter().all(|v| v.is_finite())
+            && grads.means.iter().flatten().all(|v| v.is_finite())
+            && grads.log_scales.iter().flatten().all(|v| v.is_finite())
+            && grads.quats.iter().flatten().all(|v| v.is_finite())
+            && grads.features.iter().all(|v| v.is_finite())
+            && grads.semantic_logits.iter().all(|v| v.is_finite())
+            && grads.nonrigid.iter().all(|v| v.is_finite())
+            && grads.skinning.iter().all(|v| v.is_finite())
+            && grads.human_colour.iter().all(|v| v.is_finite())
+            && grads.scene_colour.iter().all(|v| v.is_finite())
+            && grads.latent.iter().all(|v| v.is_finite());
+        if !finite {
+            return Err(TrainError::NonFinite { step });
+        }
+
+        let t0 = Instant::now();
+        let mut set_grads = self.set.zeros_like();
+        set_grads.means = grads.means;
+        set_grads.log_scales = grads.log_scales;
+        set_grads.quats = grads.quats;
+        set_grads.opacity_logits = rg.opacity_logits;
+        set_grads.features = grads.features;
+        set_grads.semantic_logits = grads.semantic_logits;
+        let rates = GaussianLearningRates {
+            means: exponential_rate(
+                config.lr_means * self.scene_extent,
+                config.lr_means_final_fraction,
+                step,
+                config.steps,
+            ),
+            log_scales: config.lr_log_scales,
+            quats: config.lr_quats,
+            opacity_logits: config.lr_opacity,
+            sh_dc: 0.0,
+            sh_rest: 0.0,
+            features: config.lr_features,
+            semantic_logits: config.lr_semantic,
+        };
+        self.adam
+            .step(&mut self.set, &set_grads, &rates)
+            .map_err(|e| TrainError::Config(e.to_string()))?;
+        if step >= config.nonrigid_from {
+            self.nonrigid_adam
+                .step(&mut self.nets.nonrigid.mlp.params, &grads.nonrigid)?;
+        }
+        self.skinning_adam
+            .step(&mut self.nets.skinning.mlp.params, &grads.skinning)?;
+        self.human_colour_adam
+            .step(&mut self.nets.human_colour.mlp.params, &grads.human_colour)?;
+        self.scene_colour_adam
+            .step(&mut self.nets.scene_colour.mlp.params, &grads.scene_colour)?;
+        let mut latent_grads = vec![0.0f32; self.latents.len()];
+        latent_grads[slot * d..(slot + 1) * d].copy_from_slice(&grads.latent);
+        self.latent_adam.step(&mut self.latents, &latent_grads)?;
+        times.adam = t0.elapsed().as_secs_f64();
+
+        let t0 = Instant::now();
+        let (hw_half, hh_half) = (camera.width as f32 * 0.5, camera.height as f32 * 0.5);
+        let grad_ndc: Vec<[f32; 2]> = rg
+            .means_2d
+            .iter()
+            .map(|m| [m[0] * hw_half, m[1] * hh_half])
+            .collect();
+        let radius: Vec<f32> = out.radii.iter().map(|&r| r as f32).collect();
+        self.stats.accumulate(&grad_ndc, &radius);
+        let done = step + 1;
+        if done >= config.densify_from
+            && done <= config.densify_until
+            && config.densify_every > 0
+            && done.is_multiple_of(config.densify_every)
+        {
+            let densify = DensifyConfig {
+                grad_threshold: config.densify_grad_threshold,
+                scene_extent: self.scene_extent,
+                min_opacity: config.prune_min_opacity,
+                max_gaussians: config.max_gaussians,
+                ..DensifyConfig::default()
+            };
+            densify_and_prune(
+                &mut self.set,
+                &mut self.adam,
+                &mut self.stats,
+                &densify,
+                config.seed ^ (done as u64).wrapping_mul(0x9e37_79b9),
+            );
+            self.refresh_neighbours();
+        }
+        if config.opacity_reset_every > 0
+            && done.is_multiple_of(config.opacity_reset_every)
+            && done < config.steps
+        {
+            reset_opacity(&mut self.set, &mut self.adam, 0.01);
+        }
+        times.density = t0.elapsed().as_secs_f64();
+        self.step = done;
+        let human = self.human_count();
+        Ok(StepReport {
+            step,
+            frame: frame.index,
+            loss,
+            l1: l1_value,
+            ssim: ssim_value,
+            skinning: skinning_value,
+            aiap: aiap_value,
+            psnr: psnr(rgb, &frame.image),
+            gaussians_human: human,
+            gaussians_scene: self.set.len() - human,
+            active: cache.active().len(),
+            times,
+        })
+    }
+
+    /// Writes the whole state to one safetensors file atomically (temporary sibling + rename).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), TrainError> {
+        let mut w = CheckpointWriter::default();
+        w.push_set("set", &self.set);
+        let adam_steps = w.push_gaussian_adam("adam", &self.adam);
+        w.push("nonrigid", self.nets.nonrigid.mlp.params.clone());
+        w.push("skinning", self.nets.skinning.mlp.params.clone());
+        w.push("human_colour", self.nets.human_colour.mlp.params.clone());
+        w.push("scene_colour", self.nets.scene_colour.mlp.params.clone());
+        w.push("latents", self.latents.clone());
+        let net_adam_steps = vec![
+            w.push_adam("nonrigid_adam", &self.nonrigid_adam),
+            w.push_adam("skinning_adam", &self.skinning_adam),
+            w.push_adam("human_colour_adam", &self.human_colour_adam),
+            w.push_adam("scene_colour_adam", &self.scene_colour_adam),
+            w.push_adam("latent_adam", &self.latent_adam),
+        ];
+        w.push_stats("stats", &self.stats);
+        // Indices as float32: exact below 2^24, which `TrainConfig::validate` bounds the count by.
+        w.push(
+            "aiap.index",
+            self.aiap_index.iter().map(|&i| i as f32).collect(),
+        );
+        w.push(
+            "aiap.neighbours",
+            self.aiap_neighbours.iter().map(|&i| i as f32).collect(),
+        );
+        let (rng_seed, rng_word_pos) = rng_to_strings(&self.rng);
+        let meta = CheckpointMeta {
+            format: CHECKPOINT_FORMAT.into(),
+            config: self.config.clone(),
+            step: self.step,
+            scene_extent: self.scene_extent,
+            sh_degree: self.set.sh_degree,
+            adam_steps,
+            net_adam_steps,
+            rng_seed,
+            rng_word_pos,
+            order: self.order.clone(),
+        };
+        let json = serde_json::to_string(&meta).map_err(|e| TrainError::Checkpoint {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        w.write(path, &json)
+    }
+
+    /// Restores a trainer saved by [`Trainer::save_checkpoint`] for the context `ctx` (which supplies the
+    /// canonical body the networks normalise by). The stored configuration is used.
+    pub fn load_checkpoint(path: &Path, ctx: &TrainContext) -> Result<Self, TrainError> {
+        let r = CheckpointReader::open(path)?;
+        let meta: CheckpointMeta =
+            serde_json::from_str(&r.metadata).map_err(|e| r.error(format!("metadata: {e}")))?;
+        if meta.format != CHECKPOINT_FORMAT {
+            return Err(r.error(format!("unknown checkpoint format `{}`", meta.format)));
+        }
+        let config = meta.config;
+        config.validate()?;
+        let k = config.semantic.logits_per_gaussian();
+        let set = r.set("set", meta.sh_degree, config.feature_dim, k)?;
+        let mut nets = build_nets(&config, &ctx.body.canonical.posed.vertices)?;
+        let load = |name: &str, params: &mut Vec<f32>| -> Result<(), TrainError> {
+            *params = r.get_len(name, params.len())?;
+            Ok(())
+        };
+        load("nonrigid", &mut nets.nonrigid.mlp.params)?;
+        load("skinning", &mut nets.skinning.mlp.params)?;
+        load("human_colour", &mut nets.human_colour.mlp.params)?;
+        load("scene_colour", &mut nets.scene_colour.mlp.params)?;
+        let latents = r.get_len("latents", ctx.frames.len() * config.latent_dim)?;
+        let mut t = Self::assemble(config, set, nets, latents, meta.scene_extent)?;
+        r.gaussian_adam("adam", &mut t.adam, &meta.adam_steps)?;
+        if meta.net_adam_steps.len() != 5 {
+            return Err(r.error("expected 5 network optimiser step counts"));
+        }
+        let c = &t.config;
+        let s = &meta.net_adam_steps;
+        t.nonrigid_adam = r.adam(
+            "nonrigid_adam",
+            adam_config(c.lr_nonrigid),
+            t.nets.nonrigid.mlp.num_params(),
+            s[0],
+        )?;
+        t.skinning_adam = r.adam(
+            "skinning_adam",
+            adam_config(c.lr_skinning),
+            t.nets.skinning.mlp.num_params(),
+            s[1],
+        )?;
+        t.human_colour_adam = r.adam(
+            "human_colour_adam",
+            adam_config(c.lr_colour),
+            t.nets.human_colour.mlp.num_params(),
+            s[2],
+        )?;
+        t.scene_colour_adam = r.adam(
+            "scene_colour_adam",
+            adam_config(c.lr_colour),
+            t.nets.scene_colour.mlp.num_params(),
+            s[3],
+        )?;
+        t.latent_adam = r.adam(
+            "latent_adam",
+            adam_config(c.lr_latent),
+            t.latents.len(),
+            s[4],
+        )?;
+        t.stats = r.stats("stats", t.set.len())?;
+        let n = t.set.len();
+        let index = r.get("aiap.index")?;
+        let neighbours = r.get("aiap.neighbours")?;
+        let bad = |v: &f32, bound: usize| !(*v >= 0.0 && (*v as usize) < bound && v.fract() == 0.0);
+        if index.iter().any(|v| bad(v, n))
+            || neighbours.iter().any(|v| bad(v, index.len()))
+            || neighbours.len() != index.len() * crate::aiap::AIAP_NEIGHBOURS
+                && !neighbours.is_empty()
+        {
+            return Err(r.error("AIAP neighbourhoods do not match the Gaussians"));
+        }
+        t.aiap_index = index.iter().map(|&v| v as usize).collect();
+        t.aiap_neighbours = neighbours.iter().map(|&v| v as u32).collect();
+        t.rng = rng_from_strings(&meta.rng_seed, &meta.rng_word_pos).map_err(|e| r.error(e))?;
+        t.order = meta.order;
+        t.step = meta.step;
+        Ok(t)
+    }
+}
+
+/// Per-Gaussian render channels (r, g, b, p), N × 4 row-major.
+fn interleave_channels(posed: &PosedFrame<f32>) -> Vec<f32> {
+    let n = posed.means.len();
+    let mut channels = Vec::with_capacity(n * RENDER_CHANNELS);
+    for i in 0..n {
+        channels.extend_from_slice(&posed.colours[i * 3..i * 3 + 3]);
+        channels.push(posed.human_probability[i]);
+    }
+    channels
+}
+
+/// Non-tensor state of a checkpoint (JSON in the safetensors metadata).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct CheckpointMeta {
+    format: String,
+    config: TrainConfig,
+    step: usize,
+    scene_extent: f32,
+    sh_degree: usize,
+    adam_steps: Vec<u64>,
+    net_adam_steps: Vec<u64>,
+    rng_seed: String,
+    rng_word_pos: String,
+    order: Vec<usize>,
+}
