@@ -58,6 +58,7 @@ pub fn run(args: Args) -> Result<()> {
         batch: args.batch,
         lr: args.lr,
         seed: args.seed,
+        distinct_pairs: None,
     };
     let mut trainer = match &args.init {
         Some(p) => Trainer::from_net(

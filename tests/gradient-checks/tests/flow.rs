@@ -220,3 +220,95 @@ proptest! {
         check_case(2, 2 * (h / 2), 2 * (w / 2), seed, Some(60));
     }
 }
+
+/// The trainer's loss ([`flow::train::level_epe_loss`]: partial forward to the trained level,
+/// smoothed EPE against the level's ground truth, last-level weight backward) against central
+/// differences of the same function, for weights and biases of all five convolutions of the trained
+/// level on a 2-level network (level 0 frozen, so its weight gradient must stay zero).
+///
+/// Tolerance `abs 1e-6, rel 1e-5`, step `h = 1e-6`: the loss is an O(1) mean of smoothed EPEs,
+/// smooth inside one region (probes straddling a ReLU or warp-cell kink are dropped as above; the
+/// smoothed norm `√(|d|² + 1e-6)` has curvature ≤ 1/√ε = 1e3, so its truncation error at `h = 1e-6`
+/// is ≤ 1e3·h² ≈ 1e-9 for unit-scale weight sensitivities); rounding `≈ 1e-16/1e-6 = 1e-10`.
+fn check_trainer_loss(seed: u64) {
+    use flow::synthetic::{generate_pair, PairConfig};
+    use flow::train::{flow_at_level, level_epe_loss};
+    let levels = 2;
+    let size = 8;
+    let net = network(levels, seed);
+    let pair = generate_pair(
+        seed,
+        0,
+        &PairConfig {
+            size,
+            ..PairConfig::default()
+        },
+    );
+    let f64v = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+    let (i1, i2) = (f64v(&pair.img1), f64v(&pair.img2));
+    let truth = f64v(&flow_at_level(&pair.flow, size, size, levels, 1));
+    let mut grads = net.zeros_like();
+    let loss =
+        level_epe_loss(&net, &i1, &i2, size, size, 1, &truth, Some(&mut grads), 1.0).expect("loss");
+    assert!(loss > 0.1, "degenerate loss {loss}");
+    let eval = |n: &SpyNet<f64>| {
+        let l = level_epe_loss(n, &i1, &i2, size, size, 1, &truth, None, 1.0).expect("loss");
+        let sig = n
+            .forward_to_level(&i1, &i2, size, size, 1)
+            .expect("forward")
+            .region_signature();
+        (l, sig)
+    };
+    let mut rng = Rng(seed ^ 0x7a1);
+    let mut checker = GradientChecker::new();
+    for i in 0..5 {
+        for bias in [false, true] {
+            let param = |n: &SpyNet<f64>| {
+                let c = &n.levels[1][i];
+                if bias {
+                    c.bias.clone()
+                } else {
+                    c.weight.clone()
+                }
+            };
+            let x = param(&net);
+            let probe: Vec<usize> = (0..12)
+                .map(|_| (rng.next() * x.len() as f64) as usize % x.len())
+                .collect();
+            let (kept, numeric, dropped) = probe_numeric(&x, &probe, |p| {
+                let mut n = net.clone();
+                let c = &mut n.levels[1][i];
+                if bias {
+                    c.bias.copy_from_slice(p);
+                } else {
+                    c.weight.copy_from_slice(p);
+                }
+                eval(&n)
+            });
+            assert!(dropped <= 3, "conv{i}: {dropped} of 12 probes on a kink");
+            let g = param(&grads);
+            let ana: Vec<f64> = kept.iter().map(|&k| g[k]).collect();
+            let name = format!("trainer loss seed {seed} level1.conv{i} bias={bias}");
+            checker.check(&name, &numeric, &ana, TOL);
+            let scaled: Vec<f64> = ana.iter().map(|a| 1.5 * a).collect();
+            if numeric.iter().any(|v| v.abs() > 1e-4) {
+                assert!(
+                    !compare(&name, &numeric, &scaled, TOL).passed(),
+                    "{name}: a 1.5x gradient passes"
+                );
+            }
+        }
+    }
+    checker.finish();
+    assert!(
+        grads.levels[0]
+            .iter()
+            .all(|c| c.weight.iter().chain(&c.bias).all(|&v| v == 0.0)),
+        "the frozen level 0 received a weight gradient"
+    );
+}
+
+#[test]
+fn trainer_loss_weight_gradient_matches_finite_differences() {
+    check_trainer_loss(3);
+}
