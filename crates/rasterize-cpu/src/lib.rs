@@ -56,21 +56,27 @@ impl Real for f64 {
 
 /// Branch-free exp for f32 (Cody–Waite reduction to |r| ≤ ln2/2, degree-6 Taylor polynomial,
 /// exponent by bit construction). Inputs are clamped to [−87, 0] (the kernels only need x ≤ 0;
-/// below −87 the result, < 2e-38, is far under the 1/255 alpha cut anyway).
+/// below −87 the result, < 2e-38, is far under the 1/255 alpha cut anyway). Written with selects
+/// and integer bit operations only (no float→int cast) so that loops calling it vectorise.
 #[inline(always)]
 pub fn fast_exp_f32(x: f32) -> f32 {
     const LOG2E: f32 = std::f32::consts::LOG2_E;
     const LN2_HI: f32 = 0.693_145_75;
     const LN2_LO: f32 = 1.428_606_8e-6;
     const ROUND: f32 = 12_582_912.0; // 1.5·2^23: adding and subtracting rounds to an integer.
-    let x = x.clamp(-87.0, 0.0);
-    let k = (x * LOG2E + ROUND) - ROUND;
+                                     // ROUND + k for an integer k in [−126, 0] has the bit pattern ROUND_BITS + k.
+    const ROUND_BITS: u32 = 0x4B40_0000;
+    let x = if x < -87.0 { -87.0 } else { x };
+    let x = if x > 0.0 { 0.0 } else { x };
+    let kr = x * LOG2E + ROUND;
+    let k = kr - ROUND;
     let r = x - k * LN2_HI - k * LN2_LO;
     let p = 1.0
         + r * (1.0
             + r * (0.5
                 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
-    let scale = f32::from_bits(((k as i32 + 127) as u32) << 23);
+    // Biased exponent k + 127 in bits 23..31.
+    let scale = f32::from_bits(kr.to_bits().wrapping_sub(ROUND_BITS - 127) << 23);
     p * scale
 }
 

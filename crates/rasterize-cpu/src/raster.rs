@@ -13,8 +13,12 @@
 //! derivative of the clamp). Per-(tile, Gaussian) contributions are written in sorted order and then
 //! summed per Gaussian in tile order, so gradients are bit-identical for any thread count.
 //!
-//! Hot loops are splat-major over the pixels of a tile, restricted to the (margin-padded) box where α
-//! can reach 1/255; they never allocate.
+//! Hot loops are splat-major: after sorting, each pair's 2D parameters and channels are gathered into
+//! contiguous per-pair arrays (so a tile streams its list), and each tile row of a splat's
+//! (margin-padded) box where α can reach 1/255 is processed as groups of 4 lanes (one per pixel
+//! column) in select-only loops that the compiler vectorises (SSE2 baseline). The backward replays
+//! the forward's exact α, T and stop decisions (same lane code), so it needs no per-pixel record of
+//! the last contributor. They never allocate.
 
 use rayon::prelude::*;
 
@@ -180,6 +184,17 @@ impl Default for RenderSettings {
     }
 }
 
+/// The part of a [`Projected`] Gaussian the tile kernels read, copied per (tile, Gaussian) pair in
+/// sorted order so that each tile streams its list from contiguous memory.
+#[derive(Clone, Copy, Debug)]
+struct PairSplat<T> {
+    mean2d: [T; 2],
+    conic: [T; 3],
+    opacity: T,
+    depth: T,
+    extent: [T; 2],
+}
+
 /// Everything the backward pass needs from the forward pass.
 #[derive(Clone, Debug)]
 struct ForwardState<T> {
@@ -191,10 +206,15 @@ struct ForwardState<T> {
     tile_offsets: Vec<usize>,
     /// Compact indices, sorted by tile then depth.
     tile_list: Vec<u32>,
+    /// What the tile kernels read of each pair's Gaussian, gathered in `tile_list` order.
+    pair_splats: Vec<PairSplat<T>>,
+    /// Each pair's channels, pairs × C, in `tile_list` order.
+    pair_channels: Vec<T>,
     /// Per tile, tile-major pixels: [T_final (256) | depth (256) | channel sums C × 256].
     tile_buf: Vec<T>,
-    /// Per tile pixel: number of list entries up to and including the last contributing one.
-    last: Vec<u32>,
+    /// Per tile: number of list entries the forward blended before every pixel had stopped (the
+    /// list length if some pixel never stopped). The backward replays exactly these.
+    used: Vec<u32>,
     /// Background in working precision (C values).
     background: Vec<T>,
     /// Number of input Gaussians.
@@ -465,32 +485,53 @@ fn render_inputs<T: Real>(
     //    (depth, input index), which equals INRIA's stable radix sort on (tile, depth).
     let (tile_offsets, tile_list) = bin_and_sort(&visible, gx, n_tiles);
     let num_pairs = tile_list.len();
+    let pair_splats: Vec<PairSplat<T>> = tile_list
+        .par_iter()
+        .map(|&ci| {
+            let p = &visible[ci as usize];
+            PairSplat {
+                mean2d: p.mean2d,
+                conic: p.conic,
+                opacity: p.opacity,
+                depth: p.depth,
+                extent: p.extent,
+            }
+        })
+        .collect();
+    let mut pair_channels = vec![T::zero(); num_pairs * c];
+    if c > 0 {
+        pair_channels
+            .par_chunks_mut(c)
+            .zip(tile_list.par_iter())
+            .for_each(|(dst, &ci)| {
+                let g = visible_ids[ci as usize] as usize;
+                dst.copy_from_slice(&splats.channels[g * c..(g + 1) * c]);
+            });
+    }
 
     // 3. Blend every tile.
     let stride = (2 + c) * TILE_PIXELS;
     let mut tile_buf = vec![T::zero(); n_tiles * stride];
-    let mut last = vec![0u32; n_tiles * TILE_PIXELS];
+    let mut used = vec![0u32; n_tiles];
     tile_buf
         .par_chunks_mut(stride)
-        .zip(last.par_chunks_mut(TILE_PIXELS))
+        .zip(used.par_iter_mut())
         .enumerate()
-        .for_each(|(tile, (buf, last))| {
-            let list = &tile_list[tile_offsets[tile]..tile_offsets[tile + 1]];
+        .for_each(|(tile, (buf, used))| {
+            let range = tile_offsets[tile]..tile_offsets[tile + 1];
             let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
             let size = [
                 TILE_SIZE.min(width - origin[0]),
                 TILE_SIZE.min(height - origin[1]),
             ];
             forward_tile(
-                list,
-                &visible,
-                &visible_ids,
-                splats.channels,
+                &pair_splats[range.clone()],
+                &pair_channels[range.start * c..range.end * c],
                 c,
                 origin,
                 size,
                 buf,
-                last,
+                used,
             );
         });
 
@@ -540,8 +581,10 @@ fn render_inputs<T: Real>(
             visible_ids,
             tile_offsets,
             tile_list,
+            pair_splats,
+            pair_channels,
             tile_buf,
-            last,
+            used,
             background: bg,
             n,
         },
@@ -592,85 +635,178 @@ fn bin_and_sort<T: Real>(
     (offsets, list)
 }
 
-/// Blends one tile front to back into `buf` ([T | depth | channels] × 256) and `last`.
+/// Per-splat constants of the tile kernels, relative to the tile origin.
+#[derive(Clone, Copy)]
+struct SplatLanes<T> {
+    mx: T,
+    my: T,
+    conic: [T; 3],
+    opacity: T,
+    /// Lane x is in the splat's pixel box iff lo < x + 0.5 < hi.
+    lo: T,
+    hi: T,
+    /// Quads (groups of [`QUAD`] lanes) overlapping the box: q0..q1.
+    q0: usize,
+    q1: usize,
+}
+
+/// Lanes per group in the tile kernels' row loops: `for q in q0..q1 { for l in 0..QUAD { … } }`
+/// visits only the groups overlapping a splat's box, and the compiler turns each group into one
+/// SIMD operation (SSE2 baseline: 4 × f32).
+const QUAD: usize = 4;
+/// Quads per tile row (loops bound their quad index by it so the compiler can drop bounds checks).
+const QUADS: usize = TILE_SIZE / QUAD;
+
+/// Lane values of one splat on one tile row: the power, exp(power), o·exp(power) and the α that
+/// blends (0 outside the box, for power > 0 and for α < 1/255). One function for forward and
+/// backward, so that both make bit-identical decisions.
+#[inline(always)]
+fn lane_alpha<T: Real>(s: &SplatLanes<T>, cx: T, dy: T) -> (T, T, T, T) {
+    let half: T = lit(0.5);
+    let max_alpha: T = lit(0.99);
+    let min_alpha: T = lit(1.0 / 255.0);
+    let [ca, cb, cc] = s.conic;
+    let dx = s.mx - cx;
+    let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
+    let gauss = power.splat_exp();
+    let raw = s.opacity * gauss;
+    let a = if raw < max_alpha { raw } else { max_alpha };
+    let ok = (cx > s.lo) & (cx < s.hi) & (power <= T::zero()) & (a >= min_alpha);
+    (power, gauss, raw, if ok { a } else { T::zero() })
+}
+
+/// Lane step of the blend state shared by forward and backward: with `a` the lane's α (0 = skip)
+/// and `alive` 1/0, returns (weight α·T, new T, new alive, stopped). A stopping splat is excluded.
+#[inline(always)]
+fn lane_blend<T: Real>(a: T, t: T, alive: T) -> (T, T, T, bool) {
+    let min_t: T = lit(1e-4);
+    let live = (alive > T::zero()) & (a > T::zero());
+    let test_t = t * (T::one() - a);
+    let stop = live & (test_t < min_t);
+    let contrib = live & !stop;
+    (
+        if contrib { a * t } else { T::zero() },
+        if contrib { test_t } else { t },
+        if stop { T::zero() } else { alive },
+        stop,
+    )
+}
+
+/// The splat's lane constants and pixel box (rows y0..y1) in a tile, or `None` if the box is empty.
+#[inline]
+fn splat_lanes<T: Real>(
+    p: &PairSplat<T>,
+    ox: T,
+    oy: T,
+    size: [usize; 2],
+) -> Option<(SplatLanes<T>, usize, usize)> {
+    let (x0, x1) = pixel_span(p.mean2d[0], p.extent[0], ox, size[0]);
+    let (y0, y1) = pixel_span(p.mean2d[1], p.extent[1], oy, size[1]);
+    if x0 >= x1 || y0 >= y1 {
+        return None;
+    }
+    Some((
+        SplatLanes {
+            mx: p.mean2d[0] - ox,
+            my: p.mean2d[1] - oy,
+            conic: p.conic,
+            opacity: p.opacity,
+            lo: lit(x0 as f64),
+            hi: lit(x1 as f64),
+            q0: x0 / QUAD,
+            q1: x1.div_ceil(QUAD),
+        },
+        y0,
+        y1,
+    ))
+}
+
+/// Pixel-centre offsets 0.5, 1.5, … within a tile.
+fn centres<T: Real>() -> [T; TILE_SIZE] {
+    std::array::from_fn(|i| lit(i as f64 + 0.5))
+}
+
+/// Blends one tile front to back into `buf` ([T | depth | channels] × 256); `used` receives the
+/// number of list entries blended before every pixel stopped.
+///
+/// Splat-major: each row of a splat's (margin-padded) pixel box is a few fixed 16-lane passes (one
+/// lane per pixel column; lanes outside the box, already stopped, with power > 0 or α < 1/255 get
+/// weight 0), written as simple select-only loops so that the compiler vectorises them. Adding a
+/// zero weight leaves every sum bit-identical to skipping the pixel (all values are finite).
 #[allow(clippy::too_many_arguments)]
 fn forward_tile<T: Real>(
-    list: &[u32],
-    visible: &[Projected<T>],
-    ids: &[u32],
+    list: &[PairSplat<T>],
     channels: &[T],
     c: usize,
     origin: [usize; 2],
     size: [usize; 2],
     buf: &mut [T],
-    last: &mut [u32],
+    used: &mut u32,
 ) {
     buf[BUF_T..BUF_T + TILE_PIXELS].fill(T::one());
+    *used = list.len() as u32;
     if list.is_empty() {
         return;
     }
     let (tbuf, rest) = buf.split_at_mut(BUF_D);
     let (dbuf, cbuf) = rest.split_at_mut(TILE_PIXELS);
-    let mut done = [false; TILE_PIXELS];
-    let mut n_done = 0usize;
-    let n_pixels = size[0] * size[1];
+    // 1 while a pixel still blends, 0 once it stopped (a T so that every lane is T-wide).
+    let mut alive = [T::one(); TILE_PIXELS];
+    let mut n_done = 0u32;
+    let n_pixels = (size[0] * size[1]) as u32;
     let ox: T = lit(origin[0] as f64);
     let oy: T = lit(origin[1] as f64);
-    let mut centre = [T::zero(); TILE_SIZE];
-    for (i, v) in centre.iter_mut().enumerate() {
-        *v = lit(i as f64 + 0.5);
-    }
-    let half: T = lit(0.5);
-    let max_alpha: T = lit(0.99);
-    let min_alpha: T = lit(1.0 / 255.0);
-    let min_t: T = lit(1e-4);
-    for (k, &ci) in list.iter().enumerate() {
-        let p = &visible[ci as usize];
-        let (x0, x1) = pixel_span(p.mean2d[0], p.extent[0], ox, size[0]);
-        let (y0, y1) = pixel_span(p.mean2d[1], p.extent[1], oy, size[1]);
-        if x0 >= x1 || y0 >= y1 {
+    let centre = centres::<T>();
+    let mut w = [T::zero(); TILE_SIZE];
+    let mut alpha = [T::zero(); TILE_SIZE];
+    for (k, p) in list.iter().enumerate() {
+        let Some((sl, y0, y1)) = splat_lanes(p, ox, oy, size) else {
             continue;
-        }
-        let g = ids[ci as usize] as usize;
-        let ch = &channels[g * c..(g + 1) * c];
-        let [ca, cb, cc] = p.conic;
-        let mx = p.mean2d[0] - ox;
-        let my = p.mean2d[1] - oy;
-        let o = p.opacity;
+        };
+        let ch = &channels[k * c..(k + 1) * c];
+        let z = p.depth;
         for y in y0..y1 {
-            let dy = my - centre[y];
+            let dy = sl.my - centre[y];
             let row = y * TILE_SIZE;
-            // Branch-free falloff for the row span (vectorisable); power > 0 maps to α = 0.
-            let mut alphas = [T::zero(); TILE_SIZE];
-            for x in x0..x1 {
-                let dx = mx - centre[x];
-                let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-                let a = (o * power.splat_exp()).min(max_alpha);
-                alphas[x] = if power > T::zero() { T::zero() } else { a };
-            }
-            // Branch-free blend: a skipped or stopping pixel gets weight 0, which leaves every sum
-            // bit-identical to skipping it (all values are finite).
-            for x in x0..x1 {
-                let idx = row + x;
-                let alpha = alphas[x];
-                let live = !done[idx] & (alpha >= min_alpha);
-                let t = tbuf[idx];
-                let test_t = t * (T::one() - alpha);
-                let stop = live & (test_t < min_t);
-                let contrib = live & !stop;
-                let w = if contrib { alpha * t } else { T::zero() };
-                for (j, &v) in ch.iter().enumerate() {
-                    let s = &mut cbuf[j * TILE_PIXELS + idx];
-                    *s = *s + w * v;
+            for q in sl.q0..sl.q1.min(QUADS) {
+                for l in 0..QUAD {
+                    let x = q * QUAD + l;
+                    alpha[x] = lane_alpha(&sl, centre[x], dy).3;
                 }
-                dbuf[idx] = dbuf[idx] + w * p.depth;
-                tbuf[idx] = if contrib { test_t } else { t };
-                last[idx] = if contrib { k as u32 + 1 } else { last[idx] };
-                done[idx] |= stop;
-                n_done += usize::from(stop);
+            }
+            let t_row = &mut tbuf[row..row + TILE_SIZE];
+            let alive_row = &mut alive[row..row + TILE_SIZE];
+            let mut stops = 0u32;
+            for q in sl.q0..sl.q1.min(QUADS) {
+                for l in 0..QUAD {
+                    let x = q * QUAD + l;
+                    let (wx, t, al, stop) = lane_blend(alpha[x], t_row[x], alive_row[x]);
+                    w[x] = wx;
+                    t_row[x] = t;
+                    alive_row[x] = al;
+                    stops += u32::from(stop);
+                }
+            }
+            n_done += stops;
+            for (j, &v) in ch.iter().enumerate() {
+                let dst = &mut cbuf[j * TILE_PIXELS + row..j * TILE_PIXELS + row + TILE_SIZE];
+                for q in sl.q0..sl.q1.min(QUADS) {
+                    for l in 0..QUAD {
+                        let x = q * QUAD + l;
+                        dst[x] = dst[x] + w[x] * v;
+                    }
+                }
+            }
+            let dst = &mut dbuf[row..row + TILE_SIZE];
+            for q in sl.q0..sl.q1.min(QUADS) {
+                for l in 0..QUAD {
+                    let x = q * QUAD + l;
+                    dst[x] = dst[x] + w[x] * z;
+                }
             }
         }
         if n_done == n_pixels {
+            *used = k as u32 + 1;
             break;
         }
     }
@@ -766,8 +902,8 @@ fn backward_inputs<T: Real>(
     slices.into_par_iter().enumerate().for_each_init(
         || BackwardScratch::new(c),
         |scratch, (tile, out)| {
-            let list = &st.tile_list[st.tile_offsets[tile]..st.tile_offsets[tile + 1]];
-            if list.is_empty() {
+            let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
+            if range.is_empty() {
                 return;
             }
             let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
@@ -776,16 +912,16 @@ fn backward_inputs<T: Real>(
                 TILE_SIZE.min(height - origin[1]),
             ];
             backward_tile(
-                list,
-                st,
-                splats.channels,
+                &st.pair_splats[range.clone()],
+                &st.pair_channels[range.start * c..range.end * c],
+                &st.background,
                 c,
                 origin,
                 size,
                 width,
                 hw,
                 &st.tile_buf[tile * stride..(tile + 1) * stride],
-                &st.last[tile * TILE_PIXELS..(tile + 1) * TILE_PIXELS],
+                st.used[tile] as usize,
                 cot,
                 scratch,
                 out,
@@ -920,10 +1056,12 @@ fn backward_inputs<T: Real>(
 /// Per-thread scratch of the backward tile kernel (allocated once per rayon job split, not per pixel).
 struct BackwardScratch<T> {
     t: Vec<T>,
+    alive: Vec<T>,
     pre: Vec<T>,
     g_img: Vec<T>,
     g_alpha: Vec<T>,
     g_depth: Vec<T>,
+    /// Per-lane gradient accumulators of the current pair, (7 + C) × 16.
     acc: Vec<T>,
 }
 
@@ -931,142 +1069,190 @@ impl<T: Real> BackwardScratch<T> {
     fn new(c: usize) -> Self {
         Self {
             t: vec![T::zero(); TILE_PIXELS],
+            alive: vec![T::zero(); TILE_PIXELS],
             pre: vec![T::zero(); (c + 1) * TILE_PIXELS],
             g_img: vec![T::zero(); c * TILE_PIXELS],
             g_alpha: vec![T::zero(); TILE_PIXELS],
             g_depth: vec![T::zero(); TILE_PIXELS],
-            acc: vec![T::zero(); 7 + c],
+            acc: vec![T::zero(); (7 + c) * TILE_SIZE],
         }
     }
 }
 
-/// Replays one tile front to back and writes each pair's gradient slot
+/// Replays one tile front to back (the forward's first `used` list entries, with bit-identical
+/// α, T and stop decisions) and writes each pair's gradient slot
 /// [mean2d x, y | conic a, b, c | opacity | depth | channels C].
+///
+/// Like the forward, every row is a few fixed 16-lane passes; each pair's per-lane partial sums are
+/// reduced in lane order at the end of the pair, so the result does not depend on threads.
 #[allow(clippy::too_many_arguments)]
 fn backward_tile<T: Real>(
-    list: &[u32],
-    st: &ForwardState<T>,
+    list: &[PairSplat<T>],
     channels: &[T],
+    bg: &[T],
     c: usize,
     origin: [usize; 2],
     size: [usize; 2],
     width: usize,
     hw: usize,
     buf: &[T],
-    last: &[u32],
+    used: usize,
     cot: &Cotangents<'_, T>,
     s: &mut BackwardScratch<T>,
     out: &mut [T],
 ) {
     let slot = 7 + c;
     s.t.fill(T::one());
+    s.alive.fill(T::one());
     s.pre.fill(T::zero());
     s.g_img.fill(T::zero());
     s.g_alpha.fill(T::zero());
     s.g_depth.fill(T::zero());
-    let mut max_last = 0u32;
     for y in 0..size[1] {
-        for x in 0..size[0] {
-            let idx = y * TILE_SIZE + x;
-            let pix = (origin[1] + y) * width + origin[0] + x;
-            for j in 0..c {
-                s.g_img[j * TILE_PIXELS + idx] = cot.image[j * hw + pix];
-            }
-            if let Some(a) = cot.alpha {
-                s.g_alpha[idx] = a[pix];
-            }
-            if let Some(d) = cot.depth {
-                s.g_depth[idx] = d[pix];
-            }
-            max_last = max_last.max(last[idx]);
+        let idx = y * TILE_SIZE;
+        let pix = (origin[1] + y) * width + origin[0];
+        for j in 0..c {
+            s.g_img[j * TILE_PIXELS + idx..j * TILE_PIXELS + idx + size[0]]
+                .copy_from_slice(&cot.image[j * hw + pix..j * hw + pix + size[0]]);
+        }
+        if let Some(a) = cot.alpha {
+            s.g_alpha[idx..idx + size[0]].copy_from_slice(&a[pix..pix + size[0]]);
+        }
+        if let Some(d) = cot.depth {
+            s.g_depth[idx..idx + size[0]].copy_from_slice(&d[pix..pix + size[0]]);
         }
     }
     let t_final = &buf[BUF_T..BUF_T + TILE_PIXELS];
     let d_final = &buf[BUF_D..BUF_D + TILE_PIXELS];
     let c_final = &buf[BUF_C..];
-    let bg = &st.background;
     let ox: T = lit(origin[0] as f64);
     let oy: T = lit(origin[1] as f64);
-    let mut centre = [T::zero(); TILE_SIZE];
-    for (i, v) in centre.iter_mut().enumerate() {
-        *v = lit(i as f64 + 0.5);
-    }
+    let centre = centres::<T>();
     let half: T = lit(0.5);
     let max_alpha: T = lit(0.99);
-    let min_alpha: T = lit(1.0 / 255.0);
-    for (k, &ci) in list.iter().enumerate().take(max_last as usize) {
-        let p = &st.visible[ci as usize];
-        let (x0, x1) = pixel_span(p.mean2d[0], p.extent[0], ox, size[0]);
-        let (y0, y1) = pixel_span(p.mean2d[1], p.extent[1], oy, size[1]);
-        if x0 >= x1 || y0 >= y1 {
+    let mut alpha = [T::zero(); TILE_SIZE];
+    let mut gauss = [T::zero(); TILE_SIZE];
+    // α where the clamp is inactive (else 0): dα/dpower = α there.
+    let mut slope = [T::zero(); TILE_SIZE];
+    let mut w = [T::zero(); TILE_SIZE];
+    let mut t_old = [T::zero(); TILE_SIZE];
+    let mut inv = [T::zero(); TILE_SIZE];
+    let mut d_alpha = [T::zero(); TILE_SIZE];
+    for (k, p) in list.iter().enumerate().take(used) {
+        let Some((sl, y0, y1)) = splat_lanes(p, ox, oy, size) else {
             continue;
-        }
-        let g = st.visible_ids[ci as usize] as usize;
-        let ch = &channels[g * c..(g + 1) * c];
+        };
+        let ch = &channels[k * c..(k + 1) * c];
         let [ca, cb, cc] = p.conic;
-        let mx = p.mean2d[0] - ox;
-        let my = p.mean2d[1] - oy;
         let z = p.depth;
         s.acc.fill(T::zero());
-        let kk = k as u32;
         for y in y0..y1 {
-            let dy = my - centre[y];
+            let dy = sl.my - centre[y];
             let row = y * TILE_SIZE;
-            let mut gauss_row = [T::zero(); TILE_SIZE];
-            let mut power_row = [T::zero(); TILE_SIZE];
-            for x in x0..x1 {
-                let dx = mx - centre[x];
-                let power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-                power_row[x] = power;
-                gauss_row[x] = power.splat_exp();
+            let r = row..row + TILE_SIZE;
+            for q in sl.q0..sl.q1.min(QUADS) {
+                for l in 0..QUAD {
+                    let x = q * QUAD + l;
+                    let (_, gs, raw, a) = lane_alpha(&sl, centre[x], dy);
+                    alpha[x] = a;
+                    gauss[x] = gs;
+                    slope[x] = if raw < max_alpha { a } else { T::zero() };
+                }
             }
-            for x in x0..x1 {
-                let idx = row + x;
-                if kk >= last[idx] || power_row[x] > T::zero() {
-                    continue;
+            {
+                let t_row = &mut s.t[r.clone()];
+                let alive_row = &mut s.alive[r.clone()];
+                for q in sl.q0..sl.q1.min(QUADS) {
+                    for l in 0..QUAD {
+                        let x = q * QUAD + l;
+                        let (wx, t, al, _) = lane_blend(alpha[x], t_row[x], alive_row[x]);
+                        // Non-contributing lanes: w = 0 and T unchanged.
+                        let contrib = wx != T::zero();
+                        w[x] = wx;
+                        t_old[x] = t_row[x];
+                        inv[x] = T::one() / (T::one() - if contrib { alpha[x] } else { T::zero() });
+                        t_row[x] = t;
+                        alive_row[x] = al;
+                    }
                 }
-                let dx = mx - centre[x];
-                let gauss = gauss_row[x];
-                let raw = p.opacity * gauss;
-                let alpha = raw.min(max_alpha);
-                if alpha < min_alpha {
-                    continue;
+            }
+            // dL/dα per lane, accumulated over channels, depth and alpha.
+            let tn = &t_final[r.clone()];
+            for q in sl.q0..sl.q1.min(QUADS) {
+                for l in 0..QUAD {
+                    let x = q * QUAD + l;
+                    d_alpha[x] = s.g_alpha[row + x] * tn[x] * inv[x];
                 }
-                let t = s.t[idx];
-                let w = alpha * t;
-                let one_minus = T::one() - alpha;
-                let inv = T::one() / one_minus;
-                let tn = t_final[idx];
-                let mut d_alpha = T::zero();
-                for j in 0..c {
-                    let pre = &mut s.pre[j * TILE_PIXELS + idx];
-                    *pre = *pre + w * ch[j];
-                    let behind = c_final[j * TILE_PIXELS + idx] - *pre + tn * bg[j];
-                    let gj = s.g_img[j * TILE_PIXELS + idx];
-                    d_alpha = d_alpha + gj * (t * ch[j] - behind * inv);
-                    s.acc[7 + j] = s.acc[7 + j] + w * gj;
+            }
+            for j in 0..c {
+                let v = ch[j];
+                let b = bg[j];
+                let base = j * TILE_PIXELS + row;
+                let pre = &mut s.pre[base..base + TILE_SIZE];
+                let cf = &c_final[base..base + TILE_SIZE];
+                let gi = &s.g_img[base..base + TILE_SIZE];
+                let acc = &mut s.acc[(7 + j) * TILE_SIZE..(8 + j) * TILE_SIZE];
+                for q in sl.q0..sl.q1.min(QUADS) {
+                    for l in 0..QUAD {
+                        let x = q * QUAD + l;
+                        pre[x] = pre[x] + w[x] * v;
+                        let behind = cf[x] - pre[x] + tn[x] * b;
+                        d_alpha[x] = d_alpha[x] + gi[x] * (t_old[x] * v - behind * inv[x]);
+                        acc[x] = acc[x] + w[x] * gi[x];
+                    }
                 }
-                {
-                    let pre = &mut s.pre[c * TILE_PIXELS + idx];
-                    *pre = *pre + w * z;
-                    let behind = d_final[idx] - *pre;
-                    let gd = s.g_depth[idx];
-                    d_alpha = d_alpha + gd * (t * z - behind * inv);
-                    s.acc[6] = s.acc[6] + w * gd;
+            }
+            {
+                let base = c * TILE_PIXELS + row;
+                let pre = &mut s.pre[base..base + TILE_SIZE];
+                let df = &d_final[r.clone()];
+                let gd = &s.g_depth[r.clone()];
+                let acc = &mut s.acc[6 * TILE_SIZE..7 * TILE_SIZE];
+                for q in sl.q0..sl.q1.min(QUADS) {
+                    for l in 0..QUAD {
+                        let x = q * QUAD + l;
+                        pre[x] = pre[x] + w[x] * z;
+                        let behind = df[x] - pre[x];
+                        d_alpha[x] = d_alpha[x] + gd[x] * (t_old[x] * z - behind * inv[x]);
+                        acc[x] = acc[x] + w[x] * gd[x];
+                    }
                 }
-                d_alpha = d_alpha + s.g_alpha[idx] * tn * inv;
-                s.t[idx] = t * one_minus;
-                if raw < max_alpha {
-                    let d_power = alpha * d_alpha;
-                    s.acc[0] = s.acc[0] - d_power * (ca * dx + cb * dy);
-                    s.acc[1] = s.acc[1] - d_power * (cc * dy + cb * dx);
-                    s.acc[2] = s.acc[2] - half * d_power * dx * dx;
-                    s.acc[3] = s.acc[3] - d_power * dx * dy;
-                    s.acc[4] = s.acc[4] - half * d_power * dy * dy;
-                    s.acc[5] = s.acc[5] + gauss * d_alpha;
+            }
+            let (acc_geo, _) = s.acc.split_at_mut(6 * TILE_SIZE);
+            let (a_mx, rest) = acc_geo.split_at_mut(TILE_SIZE);
+            let (a_my, rest) = rest.split_at_mut(TILE_SIZE);
+            let (a_ca, rest) = rest.split_at_mut(TILE_SIZE);
+            let (a_cb, rest) = rest.split_at_mut(TILE_SIZE);
+            let (a_cc, a_op) = rest.split_at_mut(TILE_SIZE);
+            for q in sl.q0..sl.q1.min(QUADS) {
+                for l in 0..QUAD {
+                    let x = q * QUAD + l;
+                    let dx = sl.mx - centre[x];
+                    // Only contributing lanes carry a gradient; where α is clamped at 0.99 its
+                    // derivative w.r.t. opacity and power is zero.
+                    let da = if w[x] != T::zero() {
+                        d_alpha[x]
+                    } else {
+                        T::zero()
+                    };
+                    let d_power = slope[x] * da;
+                    a_mx[x] = a_mx[x] - d_power * (ca * dx + cb * dy);
+                    a_my[x] = a_my[x] - d_power * (cc * dy + cb * dx);
+                    a_ca[x] = a_ca[x] - half * d_power * dx * dx;
+                    a_cb[x] = a_cb[x] - d_power * dx * dy;
+                    a_cc[x] = a_cc[x] - half * d_power * dy * dy;
+                    let unclamped = slope[x] != T::zero();
+                    a_op[x] = a_op[x] + if unclamped { gauss[x] * da } else { T::zero() };
                 }
             }
         }
-        out[k * slot..(k + 1) * slot].copy_from_slice(&s.acc);
+        let dst = &mut out[k * slot..(k + 1) * slot];
+        for (d, lanes) in dst.iter_mut().zip(s.acc.chunks_exact(TILE_SIZE)) {
+            let mut sum = T::zero();
+            for &v in lanes {
+                sum = sum + v;
+            }
+            *d = sum;
+        }
     }
 }
