@@ -13,15 +13,25 @@
 //!   initial deformation is the identity (as in 3DGS-Avatar).
 //! - Order (3DGS-Avatar's): `x_nr = x + Δx`, `s' = s + Δs`, `q' = q ⊗ (1, Δr)` (Hamilton product),
 //!   weights `w = field(x_nr)`, then LBS of `x_nr` and `q'` with the frame's bone transforms.
+//! - Execution: rows are processed in fixed-size chunks (`batch_mlp`), every product a GEMM on the
+//!   chunk, the whole pipeline fused per chunk and run in parallel over chunks; parameter and bone
+//!   gradients are summed over a fixed number of groups in order, so results are bit-identical for
+//!   any thread count. Hidden post-activations are cached for the backward pass.
 //!
 //! This module never reads files and knows nothing of rasterization or losses other than the
 //! skinning loss.
 
-use nn::mlp::{Activation, Mlp, MlpCache};
-use nn::Real;
+use std::ops::Range;
 
-use crate::lbs::{lbs_gaussians, lbs_gaussians_backward};
-use crate::math::{Affine, Mat3};
+use nn::mlp::{Activation, Mlp};
+use nn::{gemm, Real};
+use rayon::prelude::*;
+
+use crate::batch_mlp;
+use crate::math::{
+    affine_apply, affine_rot, mat3_mul, mat3_mul_t, mat3_tmul, quat_to_mat3, quat_to_mat3_backward,
+    Affine, Mat3,
+};
 use crate::skeleton::{NUM_JOINTS, NUM_POSE_FEATURES};
 
 /// Octaves of the frequency encoding.
@@ -34,6 +44,10 @@ pub const NR_FEATURE_DIM: usize = 16;
 pub const NR_OUT_DIM: usize = 9 + NR_FEATURE_DIM;
 /// LeakyReLU slope of both networks (PyTorch's default).
 pub const LEAKY_SLOPE: f64 = 0.01;
+/// Hidden width the project uses for both networks: 64, half of 3DGS-Avatar's 128, because at 128
+/// the two MLPs alone cost ≈ 28 GFLOP per forward + backward of 50k Gaussians, beyond the CPU
+/// budget (see docs/BENCHMARKS.md, "deformation"). The constructors take any width.
+pub const DEFAULT_HIDDEN: usize = 64;
 
 /// Maps canonical positions (metres) to the box-normalised frame: `(x − centre) / half_extent`.
 #[derive(Clone, Debug, PartialEq)]
@@ -68,27 +82,40 @@ impl<T: Real> Normalizer<T> {
     }
 }
 
-/// Frequency encoding of a normalised point into `out` (length [`ENC_DIM`]).
+/// Frequency encoding of a normalised point into `out` (length [`ENC_DIM`]):
+/// `[x, sin(2^k π x), cos(2^k π x)]_{k<L}`. Only octave 0 calls `sin_cos`; higher octaves use the
+/// double-angle recurrence `sin 2a = 2 sin a cos a`, `cos 2a = (cos a − sin a)(cos a + sin a)`
+/// (a few ulps from the direct evaluation after L − 1 = 3 doublings).
 pub fn encode<T: Real>(xn: [T; 3], out: &mut [T]) {
     out[..3].copy_from_slice(&xn);
-    let mut f = T::of(std::f64::consts::PI);
-    for k in 0..NUM_FREQS {
-        for c in 0..3 {
-            let (s, co) = (f * xn[c]).sin_cos();
+    let pi = T::of(std::f64::consts::PI);
+    for c in 0..3 {
+        let (mut s, mut co) = (pi * xn[c]).sin_cos();
+        for k in 0..NUM_FREQS {
             out[3 + 6 * k + c] = s;
             out[3 + 6 * k + 3 + c] = co;
+            let s2 = (s + s) * co;
+            co = (co - s) * (co + s);
+            s = s2;
         }
-        f = f + f;
     }
 }
 
 /// Backward of [`encode`]: `∂L/∂xn` from `∂L/∂encoding`.
 pub fn encode_backward<T: Real>(xn: [T; 3], d_enc: &[T]) -> [T; 3] {
+    let mut enc = [T::zero(); ENC_DIM];
+    encode(xn, &mut enc);
+    encode_backward_from(&enc, d_enc)
+}
+
+/// Backward of [`encode`] from its output `enc` (the sines and cosines it holds are the derivatives'
+/// ingredients, so no trigonometry is evaluated): `∂L/∂xn` from `∂L/∂encoding`.
+pub fn encode_backward_from<T: Real>(enc: &[T], d_enc: &[T]) -> [T; 3] {
     let mut g = [d_enc[0], d_enc[1], d_enc[2]];
     let mut f = T::of(std::f64::consts::PI);
     for k in 0..NUM_FREQS {
         for c in 0..3 {
-            let (s, co) = (f * xn[c]).sin_cos();
+            let (s, co) = (enc[3 + 6 * k + c], enc[3 + 6 * k + 3 + c]);
             g[c] = g[c] + f * (co * d_enc[3 + 6 * k + c] - s * d_enc[3 + 6 * k + 3 + c]);
         }
         f = f + f;
@@ -96,29 +123,33 @@ pub fn encode_backward<T: Real>(xn: [T; 3], d_enc: &[T]) -> [T; 3] {
     g
 }
 
-/// Encodes N points (box-normalised) into `(N, ENC_DIM)` rows of width `row` starting at column 0.
-fn encode_points<T: Real>(norm: &Normalizer<T>, points: &[[T; 3]], row: usize) -> Vec<T> {
-    let mut out = vec![T::zero(); points.len() * row];
-    for (i, p) in points.iter().enumerate() {
-        encode(norm.apply(*p), &mut out[i * row..i * row + ENC_DIM]);
+/// Encodes the (box-normalised) `points` into `out` (`(N, ENC_DIM)`).
+fn encode_rows<T: Real>(norm: &Normalizer<T>, points: &[[T; 3]], out: &mut [T]) {
+    for (p, row) in points.iter().zip(out.chunks_exact_mut(ENC_DIM)) {
+        encode(norm.apply(*p), row);
     }
-    out
 }
 
-fn encode_points_backward<T: Real>(
+/// `∂L/∂points` (metres) of [`encode_rows`], written to `d_points`.
+fn encode_rows_backward<T: Real>(
     norm: &Normalizer<T>,
-    points: &[[T; 3]],
-    d_input: &[T],
-    row: usize,
-) -> Vec<[T; 3]> {
-    points
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let g = encode_backward(norm.apply(*p), &d_input[i * row..i * row + ENC_DIM]);
-            [0, 1, 2].map(|k| g[k] * norm.inv_half[k])
-        })
-        .collect()
+    enc: &[T],
+    d_enc: &[T],
+    d_points: &mut [[T; 3]],
+) {
+    for ((d, e), de) in d_points
+        .iter_mut()
+        .zip(enc.chunks_exact(ENC_DIM))
+        .zip(d_enc.chunks_exact(ENC_DIM))
+    {
+        let g = encode_backward_from(e, de);
+        *d = [0, 1, 2].map(|k| g[k] * norm.inv_half[k]);
+    }
+}
+
+/// Rows per chunk of the chunked passes of both networks (a function of their widths only).
+fn rows_per_chunk<T: Real>(a: &Mlp<T>, b: &Mlp<T>) -> usize {
+    batch_mlp::chunk_rows(batch_mlp::widest(a).max(batch_mlp::widest(b)))
 }
 
 /// The learned skinning field: canonical position → weights over the 24 bones.
@@ -130,17 +161,76 @@ pub struct SkinningField<T: Real> {
     pub norm: Normalizer<T>,
 }
 
-/// What [`SkinningField::backward`] needs from the forward pass.
+/// One chunk of a skinning-field forward pass.
 #[derive(Clone, Debug)]
-pub struct SkinningCache<T> {
-    points: Vec<[T; 3]>,
-    mlp: MlpCache<T>,
+struct SkinChunk<T> {
+    rows: Range<usize>,
+    enc: Vec<T>,
+    pre: Vec<T>,
     weights: Vec<T>,
 }
 
+/// What [`SkinningField::backward`] needs from the forward pass.
+#[derive(Clone, Debug)]
+pub struct SkinningCache<T> {
+    n: usize,
+    chunks: Vec<SkinChunk<T>>,
+}
+
+impl<T: Real> SkinningCache<T> {
+    /// Number of points of the forward pass.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether the forward pass had no points.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// The softmax weights `(N, 24)` of the forward pass (a copy).
+    pub fn weights(&self) -> Vec<T> {
+        let mut w = Vec::with_capacity(self.n * NUM_JOINTS);
+        for c in &self.chunks {
+            w.extend_from_slice(&c.weights);
+        }
+        w
+    }
+}
+
+/// Row-wise softmax of `(rows, 24)` logits, in place.
+fn softmax_rows<T: Real>(v: &mut [T]) {
+    for row in v.chunks_exact_mut(NUM_JOINTS) {
+        let m = row.iter().fold(T::neg_infinity(), |a, &b| a.max(b));
+        let mut s = T::zero();
+        for x in row.iter_mut() {
+            *x = (*x - m).exp();
+            s = s + *x;
+        }
+        let inv = T::one() / s;
+        for x in row.iter_mut() {
+            *x = *x * inv;
+        }
+    }
+}
+
+/// Softmax backward: `∂L/∂logits = w ⊙ (g − ⟨w, g⟩)` per row, written to `d_logits`.
+fn softmax_rows_backward<T: Real>(w: &[T], g: &[T], d_logits: &mut [T]) {
+    for ((w, g), d) in w
+        .chunks_exact(NUM_JOINTS)
+        .zip(g.chunks_exact(NUM_JOINTS))
+        .zip(d_logits.chunks_exact_mut(NUM_JOINTS))
+    {
+        let dot: T = w.iter().zip(g).map(|(&a, &b)| a * b).sum();
+        for j in 0..NUM_JOINTS {
+            d[j] = w[j] * (g[j] - dot);
+        }
+    }
+}
+
 impl<T: Real> SkinningField<T> {
-    /// A field with `hidden`-wide layers (128 in 3DGS-Avatar), PyTorch init from `seed`, normalised
-    /// by the canonical vertices' box.
+    /// A field with `hidden`-wide layers (128 in 3DGS-Avatar; see [`DEFAULT_HIDDEN`]), PyTorch init
+    /// from `seed`, normalised by the canonical vertices' box.
     pub fn new(
         canonical_vertices: &[[f32; 3]],
         hidden: usize,
@@ -153,30 +243,68 @@ impl<T: Real> SkinningField<T> {
         })
     }
 
-    /// Weights `(N, 24)` (softmax rows) at the given canonical points.
-    pub fn forward(&self, points: &[[T; 3]]) -> Result<(Vec<T>, SkinningCache<T>), nn::NnError> {
-        let input = encode_points(&self.norm, points, ENC_DIM);
-        let (logits, mlp) = self.mlp.forward(&input, points.len())?;
-        let mut weights = logits;
-        for row in weights.chunks_exact_mut(NUM_JOINTS) {
-            let m = row.iter().fold(T::neg_infinity(), |a, &b| a.max(b));
-            let mut s = T::zero();
-            for v in row.iter_mut() {
-                *v = (*v - m).exp();
-                s = s + *v;
-            }
-            for v in row.iter_mut() {
-                *v = *v / s;
-            }
+    fn check(&self) -> Result<(), nn::NnError> {
+        check_mlp(&self.mlp, "skinning field", ENC_DIM, NUM_JOINTS)
+    }
+
+    /// Forward of one chunk of points.
+    fn chunk_forward(&self, points: &[[T; 3]], rows: Range<usize>) -> SkinChunk<T> {
+        let r = rows.len();
+        let mut enc = vec![T::zero(); r * ENC_DIM];
+        encode_rows(&self.norm, points, &mut enc);
+        let mut pre = vec![T::zero(); r * batch_mlp::hidden_total(&self.mlp)];
+        let mut weights = vec![T::zero(); r * NUM_JOINTS];
+        batch_mlp::forward_chunk(&self.mlp, &enc, r, &mut pre, &mut weights);
+        softmax_rows(&mut weights);
+        SkinChunk {
+            rows,
+            enc,
+            pre,
+            weights,
         }
-        Ok((
-            weights.clone(),
-            SkinningCache {
-                points: points.to_vec(),
-                mlp,
-                weights,
-            },
-        ))
+    }
+
+    /// Backward of one chunk: accumulates into `d_params`, writes `∂L/∂points` to `d_points`.
+    fn chunk_backward(
+        &self,
+        c: &SkinChunk<T>,
+        d_weights: &[T],
+        d_params: &mut [T],
+        d_points: &mut [[T; 3]],
+        buf: &mut ChunkBuffers<T>,
+    ) {
+        let r = c.rows.len();
+        let d_logits = grow(&mut buf.d_logits, r * NUM_JOINTS);
+        softmax_rows_backward(&c.weights, d_weights, d_logits);
+        let d_enc = grow(&mut buf.d_enc, r * ENC_DIM);
+        batch_mlp::backward_chunk(
+            &self.mlp,
+            &c.enc,
+            &c.pre,
+            r,
+            d_logits,
+            d_params,
+            Some(d_enc),
+            &mut buf.mlp,
+        );
+        encode_rows_backward(&self.norm, &c.enc, d_enc, d_points);
+    }
+
+    /// Weights `(N, 24)` (softmax rows) at the given canonical points. The weights depend on the
+    /// points and the field only: evaluate once per parameter update and reuse them (and the cache)
+    /// for every consumer, accumulating their `∂L/∂w` before one [`SkinningField::backward`].
+    pub fn forward(&self, points: &[[T; 3]]) -> Result<(Vec<T>, SkinningCache<T>), nn::NnError> {
+        self.check()?;
+        let rows = rows_per_chunk(&self.mlp, &self.mlp);
+        let chunks: Vec<SkinChunk<T>> = batch_mlp::chunks(points.len(), rows)
+            .into_par_iter()
+            .map(|range| self.chunk_forward(&points[range.clone()], range))
+            .collect();
+        let cache = SkinningCache {
+            n: points.len(),
+            chunks,
+        };
+        Ok((cache.weights(), cache))
     }
 
     /// Backward: accumulates `∂L/∂params` into `d_params` and returns `∂L/∂points`.
@@ -186,26 +314,99 @@ impl<T: Real> SkinningField<T> {
         d_weights: &[T],
         d_params: &mut [T],
     ) -> Result<Vec<[T; 3]>, nn::NnError> {
-        let n = cache.points.len();
-        let mut d_logits = vec![T::zero(); n * NUM_JOINTS];
-        for i in 0..n {
-            let w = &cache.weights[i * NUM_JOINTS..(i + 1) * NUM_JOINTS];
-            let g = &d_weights[i * NUM_JOINTS..(i + 1) * NUM_JOINTS];
-            let dot: T = w.iter().zip(g).map(|(&a, &b)| a * b).sum();
-            for j in 0..NUM_JOINTS {
-                d_logits[i * NUM_JOINTS + j] = w[j] * (g[j] - dot);
+        self.check()?;
+        check_len("skinning d_weights", cache.n * NUM_JOINTS, d_weights.len())?;
+        check_len("skinning d_params", self.mlp.params.len(), d_params.len())?;
+        let np = self.mlp.params.len();
+        let parts = batch_mlp::map_groups(cache.chunks.len(), |group| {
+            let mut buf = ChunkBuffers::default();
+            let mut dp = vec![T::zero(); np];
+            let first = cache.chunks[group.start].rows.start;
+            let last = cache.chunks[group.end - 1].rows.end;
+            let mut d_points = vec![[T::zero(); 3]; last - first];
+            for c in &cache.chunks[group] {
+                let range = c.rows.clone();
+                self.chunk_backward(
+                    c,
+                    &d_weights[range.start * NUM_JOINTS..range.end * NUM_JOINTS],
+                    &mut dp,
+                    &mut d_points[range.start - first..range.end - first],
+                    &mut buf,
+                );
             }
+            (dp, d_points)
+        });
+        let mut out = Vec::with_capacity(cache.n);
+        for (dp, d_points) in &parts {
+            out.extend_from_slice(d_points);
+            batch_mlp::sum_into(d_params, [dp]);
         }
-        let mut d_input = vec![T::zero(); n * ENC_DIM];
-        self.mlp
-            .backward(&cache.mlp, &d_logits, d_params, Some(&mut d_input))?;
-        Ok(encode_points_backward(
-            &self.norm,
-            &cache.points,
-            &d_input,
-            ENC_DIM,
-        ))
+        Ok(out)
     }
+}
+
+/// Per-group buffers of the backward passes (allocated once per group, reused across its chunks).
+#[derive(Default)]
+struct ChunkBuffers<T> {
+    mlp: batch_mlp::Scratch<T>,
+    d_logits: Vec<T>,
+    d_enc: Vec<T>,
+    d_enc2: Vec<T>,
+    d_nr_out: Vec<T>,
+    d_t: Vec<T>,
+    d_w: Vec<T>,
+    d_x_field: Vec<[T; 3]>,
+}
+
+fn grow<T: Clone + Default>(v: &mut Vec<T>, len: usize) -> &mut [T] {
+    if v.len() < len {
+        v.resize(len, T::default());
+    }
+    &mut v[..len]
+}
+
+fn check_len(name: &'static str, expected: usize, actual: usize) -> Result<(), nn::NnError> {
+    if expected == actual {
+        Ok(())
+    } else {
+        Err(nn::NnError::Length {
+            name,
+            expected,
+            actual,
+        })
+    }
+}
+
+/// Checks that `mlp` has the input and output widths its network needs and a complete parameter
+/// vector (the fields are public, so a caller may have replaced them).
+fn check_mlp<T: Real>(
+    mlp: &Mlp<T>,
+    what: &str,
+    inputs: usize,
+    outputs: usize,
+) -> Result<(), nn::NnError> {
+    if let Activation::LeakyRelu(s) = mlp.activation {
+        if !(s >= 0.0) {
+            return Err(nn::NnError::Shape(format!(
+                "{what}: LeakyReLU slope {s} must be ≥ 0"
+            )));
+        }
+    }
+    if mlp.sizes.len() < 2
+        || mlp.input_dim() != inputs
+        || mlp.output_dim() != outputs
+        || mlp.sizes.contains(&0)
+    {
+        return Err(nn::NnError::Shape(format!(
+            "{what}: layer sizes {:?} must run {inputs} → … → {outputs}",
+            mlp.sizes
+        )));
+    }
+    check_len(
+        "deformation network params",
+        mlp.num_params(),
+        mlp.params.len(),
+    )
 }
 
 /// Skinning loss: mean over samples of the squared error summed over bones,
@@ -235,19 +436,27 @@ pub struct NonRigidNet<T: Real> {
     pub norm: Normalizer<T>,
 }
 
+/// One chunk of a non-rigid forward pass.
+#[derive(Clone, Debug)]
+struct NrChunk<T> {
+    enc: Vec<T>,
+    pre: Vec<T>,
+}
+
 /// What [`NonRigidNet::backward`] needs from the forward pass.
 #[derive(Clone, Debug)]
 pub struct NonRigidCache<T: Real> {
-    points: Vec<[T; 3]>,
-    mlp: MlpCache<T>,
+    n: usize,
+    rows: Vec<Range<usize>>,
+    chunks: Vec<NrChunk<T>>,
     /// The network with the pose code folded into the first layer's bias.
     folded: Mlp<T>,
     pose_code: Vec<T>,
 }
 
 impl<T: Real> NonRigidNet<T> {
-    /// A network with `hidden`-wide layers (128 in 3DGS-Avatar), PyTorch init from `seed` except the
-    /// last layer, which is zero (identity deformation at the start).
+    /// A network with `hidden`-wide layers (128 in 3DGS-Avatar; see [`DEFAULT_HIDDEN`]), PyTorch
+    /// init from `seed` except the last layer, which is zero (identity deformation at the start).
     pub fn new(
         canonical_vertices: &[[f32; 3]],
         hidden: usize,
@@ -272,6 +481,52 @@ impl<T: Real> NonRigidNet<T> {
         })
     }
 
+    fn check(&self, pose_code: &[T]) -> Result<(), nn::NnError> {
+        check_mlp(
+            &self.mlp,
+            "non-rigid network",
+            ENC_DIM + NUM_POSE_FEATURES,
+            NR_OUT_DIM,
+        )?;
+        check_len("non-rigid pose code", NUM_POSE_FEATURES, pose_code.len())
+    }
+
+    /// Forward of one chunk with the folded network; writes the outputs to `out`.
+    fn chunk_forward(&self, folded: &Mlp<T>, points: &[[T; 3]], out: &mut [T]) -> NrChunk<T> {
+        let r = points.len();
+        let mut enc = vec![T::zero(); r * ENC_DIM];
+        encode_rows(&self.norm, points, &mut enc);
+        let mut pre = vec![T::zero(); r * batch_mlp::hidden_total(folded)];
+        batch_mlp::forward_chunk(folded, &enc, r, &mut pre, out);
+        NrChunk { enc, pre }
+    }
+
+    /// Backward of one chunk: accumulates the *folded* network's parameter gradient into
+    /// `d_folded` and writes `∂L/∂points` to `d_points`.
+    fn chunk_backward(
+        &self,
+        folded: &Mlp<T>,
+        c: &NrChunk<T>,
+        d_out: &[T],
+        d_folded: &mut [T],
+        d_points: &mut [[T; 3]],
+        buf: &mut ChunkBuffers<T>,
+    ) {
+        let r = d_points.len();
+        let d_enc = grow(&mut buf.d_enc2, r * ENC_DIM);
+        batch_mlp::backward_chunk(
+            folded,
+            &c.enc,
+            &c.pre,
+            r,
+            d_out,
+            d_folded,
+            Some(d_enc),
+            &mut buf.mlp,
+        );
+        encode_rows_backward(&self.norm, &c.enc, d_enc, d_points);
+    }
+
     /// Outputs `(N, 25)`: Δx (metres), Δlog-scale, Δrotation (quaternion vector part, w = 1), feature.
     /// `pose_code` is the 207-value pose feature of the frame.
     pub fn forward(
@@ -279,24 +534,25 @@ impl<T: Real> NonRigidNet<T> {
         points: &[[T; 3]],
         pose_code: &[T],
     ) -> Result<(Vec<T>, NonRigidCache<T>), nn::NnError> {
-        if pose_code.len() != NUM_POSE_FEATURES {
-            return Err(nn::NnError::Length {
-                name: "non-rigid pose code",
-                expected: NUM_POSE_FEATURES,
-                actual: pose_code.len(),
-            });
-        }
+        self.check(pose_code)?;
         // The pose code is the same for every point, so its share of the first layer is a bias:
         // fold it once per call (W_pose · code) and run a network whose input is the 27-value
         // position encoding only (8.7× fewer first-layer multiply-adds).
         let folded = self.fold(pose_code);
-        let input = encode_points(&self.norm, points, ENC_DIM);
-        let (out, mlp) = folded.forward(&input, points.len())?;
+        let rows = batch_mlp::chunks(points.len(), rows_per_chunk(&folded, &folded));
+        let mut out = vec![T::zero(); points.len() * NR_OUT_DIM];
+        let per = rows.first().map_or(1, |r| r.len().max(1));
+        let chunks: Vec<NrChunk<T>> = out
+            .par_chunks_mut(per * NR_OUT_DIM)
+            .zip(rows.par_iter())
+            .map(|(o, range)| self.chunk_forward(&folded, &points[range.clone()], o))
+            .collect();
         Ok((
             out,
             NonRigidCache {
-                points: points.to_vec(),
-                mlp,
+                n: points.len(),
+                rows,
+                chunks,
                 folded,
                 pose_code: pose_code.to_vec(),
             },
@@ -329,35 +585,18 @@ impl<T: Real> NonRigidNet<T> {
         }
     }
 
-    /// Backward: accumulates `∂L/∂params` and returns `∂L/∂points` (the pose code is a constant).
-    pub fn backward(
-        &self,
-        cache: &NonRigidCache<T>,
-        d_out: &[T],
-        d_params: &mut [T],
-    ) -> Result<Vec<[T; 3]>, nn::NnError> {
+    /// Maps the folded network's parameter gradient back onto the full network's (accumulating):
+    /// first-layer position columns and bias map directly, the pose columns get `∂L/∂bias ⊗ code`,
+    /// later layers are identical.
+    fn unfold_grad(&self, pose_code: &[T], d_folded: &[T], d_params: &mut [T]) {
         let full_in = ENC_DIM + NUM_POSE_FEATURES;
         let h = self.mlp.sizes[1];
-        if d_params.len() != self.mlp.params.len() {
-            return Err(nn::NnError::Length {
-                name: "non-rigid d_params",
-                expected: self.mlp.params.len(),
-                actual: d_params.len(),
-            });
-        }
-        let mut d_folded = vec![T::zero(); cache.folded.params.len()];
-        let mut d_input = vec![T::zero(); cache.points.len() * ENC_DIM];
-        cache
-            .folded
-            .backward(&cache.mlp, d_out, &mut d_folded, Some(&mut d_input))?;
-        // Unfold: first-layer position columns and bias map back directly; the pose columns get
-        // ∂L/∂bias ⊗ code; later layers are identical.
         for r in 0..h {
             let db = d_folded[h * ENC_DIM + r];
             for c in 0..ENC_DIM {
                 d_params[r * full_in + c] = d_params[r * full_in + c] + d_folded[r * ENC_DIM + c];
             }
-            for (c, &code) in cache.pose_code.iter().enumerate() {
+            for (c, &code) in pose_code.iter().enumerate() {
                 let k = r * full_in + ENC_DIM + c;
                 d_params[k] = d_params[k] + db * code;
             }
@@ -368,12 +607,46 @@ impl<T: Real> NonRigidNet<T> {
         for (dst, src) in d_params[full0..].iter_mut().zip(&d_folded[fold0..]) {
             *dst = *dst + *src;
         }
-        Ok(encode_points_backward(
-            &self.norm,
-            &cache.points,
-            &d_input,
-            ENC_DIM,
-        ))
+    }
+
+    /// Backward: accumulates `∂L/∂params` and returns `∂L/∂points` (the pose code is a constant).
+    pub fn backward(
+        &self,
+        cache: &NonRigidCache<T>,
+        d_out: &[T],
+        d_params: &mut [T],
+    ) -> Result<Vec<[T; 3]>, nn::NnError> {
+        self.check(&cache.pose_code)?;
+        check_len("non-rigid d_out", cache.n * NR_OUT_DIM, d_out.len())?;
+        check_len("non-rigid d_params", self.mlp.params.len(), d_params.len())?;
+        let nf = cache.folded.params.len();
+        let parts = batch_mlp::map_groups(cache.chunks.len(), |group| {
+            let mut buf = ChunkBuffers::default();
+            let mut dp = vec![T::zero(); nf];
+            let first = cache.rows[group.start].start;
+            let last = cache.rows[group.end - 1].end;
+            let mut d_points = vec![[T::zero(); 3]; last - first];
+            for ci in group {
+                let range = cache.rows[ci].clone();
+                self.chunk_backward(
+                    &cache.folded,
+                    &cache.chunks[ci],
+                    &d_out[range.start * NR_OUT_DIM..range.end * NR_OUT_DIM],
+                    &mut dp,
+                    &mut d_points[range.start - first..range.end - first],
+                    &mut buf,
+                );
+            }
+            (dp, d_points)
+        });
+        let mut d_folded = vec![T::zero(); nf];
+        let mut out = Vec::with_capacity(cache.n);
+        for (dp, d_points) in &parts {
+            out.extend_from_slice(d_points);
+            batch_mlp::sum_into(&mut d_folded, [dp]);
+        }
+        self.unfold_grad(&cache.pose_code, &d_folded, d_params);
+        Ok(out)
     }
 }
 
@@ -426,20 +699,51 @@ pub struct PosedGaussians<T> {
     pub features: Vec<T>,
 }
 
+/// One chunk of a deformation forward pass.
+#[derive(Clone, Debug)]
+struct DeformChunk<T> {
+    rows: Range<usize>,
+    nr: NrChunk<T>,
+    nr_out: Vec<T>,
+    skin: SkinChunk<T>,
+    x_nr: Vec<[T; 3]>,
+    q_nr: Vec<[T; 4]>,
+    /// Blended transforms `Σ_b w_b T_b`, `(rows, 12)`.
+    blended: Vec<T>,
+}
+
 /// Everything the backward pass needs.
 #[derive(Clone, Debug)]
 pub struct DeformCache<T: Real> {
-    nr: NonRigidCache<T>,
-    nr_out: Vec<T>,
-    skin: SkinningCache<T>,
-    x_nr: Vec<[T; 3]>,
-    q_nr: Vec<[T; 4]>,
+    n: usize,
+    folded: Mlp<T>,
+    pose_code: Vec<T>,
     quats: Vec<[T; 4]>,
-    weights: Vec<T>,
+    chunks: Vec<DeformChunk<T>>,
+}
+
+impl<T: Real> DeformCache<T> {
+    /// The skinning weights `(N, 24)` the forward pass used (the field at the non-rigidly moved
+    /// positions), a copy.
+    pub fn skinning_weights(&self) -> Vec<T> {
+        let mut w = Vec::with_capacity(self.n * NUM_JOINTS);
+        for c in &self.chunks {
+            w.extend_from_slice(&c.skin.weights);
+        }
+        w
+    }
+}
+
+/// The 24 bone transforms as a `(24, 12)` row-major matrix.
+fn bones_matrix<T: Real>(bones: &[Affine<T>]) -> Vec<T> {
+    bones.iter().flatten().copied().collect()
 }
 
 /// Deforms canonical Gaussians into a frame: non-rigid net, learned skinning weights at the
-/// non-rigidly moved positions, LBS with `frame_from_canonical` bone transforms.
+/// non-rigidly moved positions, LBS with `frame_from_canonical` bone transforms (24).
+///
+/// Runs in chunks of rows (every product a GEMM on the chunk, rayon over chunks); the result does
+/// not depend on the thread count.
 pub fn deform_gaussians<T: Real>(
     nonrigid: &NonRigidNet<T>,
     field: &SkinningField<T>,
@@ -448,35 +752,85 @@ pub fn deform_gaussians<T: Real>(
     bones: &[Affine<T>],
 ) -> Result<(PosedGaussians<T>, DeformCache<T>), nn::NnError> {
     let n = g.positions.len();
-    let (nr_out, nr) = nonrigid.forward(g.positions, pose_code)?;
-    let mut x_nr = Vec::with_capacity(n);
-    let mut s = Vec::with_capacity(n);
-    let mut q_nr = Vec::with_capacity(n);
-    let mut features = Vec::with_capacity(n * NR_FEATURE_DIM);
-    for i in 0..n {
-        let o = &nr_out[i * NR_OUT_DIM..(i + 1) * NR_OUT_DIM];
-        x_nr.push([0, 1, 2].map(|k| g.positions[i][k] + o[k]));
-        s.push([0, 1, 2].map(|k| g.log_scales[i][k] + o[3 + k]));
-        q_nr.push(quat_mul(g.quats[i], [T::one(), o[6], o[7], o[8]]));
-        features.extend_from_slice(&o[9..]);
-    }
-    let (weights, skin) = field.forward(&x_nr)?;
-    let (positions, mats) = lbs_gaussians(&weights, bones, &x_nr, &q_nr);
+    nonrigid.check(pose_code)?;
+    field.check()?;
+    check_len("deform log_scales", n, g.log_scales.len())?;
+    check_len("deform quats", n, g.quats.len())?;
+    check_len("deform bones", NUM_JOINTS, bones.len())?;
+    let folded = nonrigid.fold(pose_code);
+    let bm = bones_matrix(bones);
+    let rows = rows_per_chunk(&folded, &field.mlp);
+    let mut positions = vec![[T::zero(); 3]; n];
+    let mut log_scales = vec![[T::zero(); 3]; n];
+    let mut mats = vec![[T::zero(); 9]; n];
+    let mut features = vec![T::zero(); n * NR_FEATURE_DIM];
+    let ranges = batch_mlp::chunks(n, rows);
+    let chunks: Vec<DeformChunk<T>> = positions
+        .par_chunks_mut(rows)
+        .zip(log_scales.par_chunks_mut(rows))
+        .zip(mats.par_chunks_mut(rows))
+        .zip(features.par_chunks_mut(rows * NR_FEATURE_DIM))
+        .zip(ranges.par_iter())
+        .map(|((((pos, ls), ms), feat), range)| {
+            let r = range.len();
+            let x = &g.positions[range.clone()];
+            let mut nr_out = vec![T::zero(); r * NR_OUT_DIM];
+            let nr = nonrigid.chunk_forward(&folded, x, &mut nr_out);
+            let mut x_nr = Vec::with_capacity(r);
+            let mut q_nr = Vec::with_capacity(r);
+            for (k, o) in nr_out.chunks_exact(NR_OUT_DIM).enumerate() {
+                let i = range.start + k;
+                x_nr.push([0, 1, 2].map(|a| x[k][a] + o[a]));
+                ls[k] = [0, 1, 2].map(|a| g.log_scales[i][a] + o[3 + a]);
+                q_nr.push(quat_mul(g.quats[i], [T::one(), o[6], o[7], o[8]]));
+                feat[k * NR_FEATURE_DIM..(k + 1) * NR_FEATURE_DIM].copy_from_slice(&o[9..]);
+            }
+            let skin = field.chunk_forward(&x_nr, range.clone());
+            // Blended transforms (rows × 12) = weights (rows × 24) · bones (24 × 12).
+            let mut blended = vec![T::zero(); r * 12];
+            gemm(
+                r,
+                NUM_JOINTS,
+                12,
+                T::one(),
+                &skin.weights,
+                false,
+                &bm,
+                false,
+                T::zero(),
+                &mut blended,
+            );
+            for k in 0..r {
+                let t: &Affine<T> = blended[12 * k..12 * k + 12]
+                    .try_into()
+                    .expect("12 values per blended transform");
+                pos[k] = affine_apply(t, x_nr[k]);
+                ms[k] = mat3_mul(&affine_rot(t), &quat_to_mat3(q_nr[k]));
+            }
+            DeformChunk {
+                rows: range.clone(),
+                nr,
+                nr_out,
+                skin,
+                x_nr,
+                q_nr,
+                blended,
+            }
+        })
+        .collect();
     Ok((
         PosedGaussians {
             positions,
-            log_scales: s,
+            log_scales,
             mats,
             features,
         },
         DeformCache {
-            nr,
-            nr_out,
-            skin,
-            x_nr,
-            q_nr,
+            n,
+            folded,
+            pose_code: pose_code.to_vec(),
             quats: g.quats.to_vec(),
-            weights,
+            chunks,
         },
     ))
 }
@@ -494,8 +848,20 @@ pub struct DeformGrad<T> {
     pub bones: Vec<Affine<T>>,
 }
 
+/// Per-group partial results of the deformation backward pass.
+struct GroupGrad<T> {
+    d_folded: Vec<T>,
+    d_field: Vec<T>,
+    d_bones: Vec<T>,
+    d_x: Vec<[T; 3]>,
+    d_q: Vec<[T; 4]>,
+}
+
 /// Backward of [`deform_gaussians`] from the gradients of its outputs (`d_features` `(N, 16)`).
 /// Accumulates network parameter gradients into `d_nonrigid` and `d_field`.
+///
+/// Chunks are grouped into a fixed number of groups; each group sums its chunks' parameter and
+/// bone gradients in order, and the groups are summed in order (bit-identical for any thread count).
 #[allow(clippy::too_many_arguments)]
 pub fn deform_gaussians_backward<T: Real>(
     nonrigid: &NonRigidNet<T>,
@@ -509,44 +875,458 @@ pub fn deform_gaussians_backward<T: Real>(
     d_nonrigid: &mut [T],
     d_field: &mut [T],
 ) -> Result<DeformGrad<T>, nn::NnError> {
-    let n = cache.x_nr.len();
-    let lbs = lbs_gaussians_backward(
-        &cache.weights,
-        bones,
-        &cache.x_nr,
-        &cache.q_nr,
-        d_positions,
-        d_mats,
-    );
-    let d_x_from_field = field.backward(&cache.skin, &lbs.weights, d_field)?;
-    let mut d_nr_out = vec![T::zero(); n * NR_OUT_DIM];
-    let mut d_x = Vec::with_capacity(n);
-    let mut d_q = Vec::with_capacity(n);
-    for i in 0..n {
-        let o = &cache.nr_out[i * NR_OUT_DIM..(i + 1) * NR_OUT_DIM];
-        let dxn = [0, 1, 2].map(|k| lbs.positions[i][k] + d_x_from_field[i][k]);
-        let d = &mut d_nr_out[i * NR_OUT_DIM..(i + 1) * NR_OUT_DIM];
-        d[..3].copy_from_slice(&dxn);
-        d[3..6].copy_from_slice(&d_log_scales[i]);
-        // q_nr = q ⊗ r with r = (1, o6, o7, o8): ∂L/∂q = dq ⊗ r*, ∂L/∂r = q* ⊗ dq.
-        let r = [T::one(), o[6], o[7], o[8]];
-        let dqn = lbs.quats[i];
-        d_q.push(quat_mul(dqn, conj(r)));
-        let dr = quat_mul(conj(cache.quats[i]), dqn);
-        d[6..9].copy_from_slice(&dr[1..]);
-        d[9..].copy_from_slice(&d_features[i * NR_FEATURE_DIM..(i + 1) * NR_FEATURE_DIM]);
-        d_x.push(dxn);
+    let n = cache.n;
+    nonrigid.check(&cache.pose_code)?;
+    field.check()?;
+    check_len("deform bones", NUM_JOINTS, bones.len())?;
+    check_len("deform d_positions", n, d_positions.len())?;
+    check_len("deform d_log_scales", n, d_log_scales.len())?;
+    check_len("deform d_mats", n, d_mats.len())?;
+    check_len("deform d_features", n * NR_FEATURE_DIM, d_features.len())?;
+    check_len(
+        "deform d_nonrigid",
+        nonrigid.mlp.params.len(),
+        d_nonrigid.len(),
+    )?;
+    check_len("deform d_field", field.mlp.params.len(), d_field.len())?;
+    let bm = bones_matrix(bones);
+    let (nf, ns) = (cache.folded.params.len(), field.mlp.params.len());
+    let parts = batch_mlp::map_groups(cache.chunks.len(), |group| {
+        let mut buf = ChunkBuffers::default();
+        let first = cache.chunks[group.start].rows.start;
+        let last = cache.chunks[group.end - 1].rows.end;
+        let mut out = GroupGrad {
+            d_folded: vec![T::zero(); nf],
+            d_field: vec![T::zero(); ns],
+            d_bones: vec![T::zero(); NUM_JOINTS * 12],
+            d_x: vec![[T::zero(); 3]; last - first],
+            d_q: vec![[T::zero(); 4]; last - first],
+        };
+        for c in &cache.chunks[group] {
+            let r = c.rows.len();
+            let off = c.rows.start - first;
+            let d_x = &mut out.d_x[off..off + r];
+            let d_q = &mut out.d_q[off..off + r];
+            // LBS backward: ∂L/∂T per row (rows × 12), ∂L/∂x_nr, ∂L/∂q_nr.
+            let d_t = grow(&mut buf.d_t, r * 12);
+            for k in 0..r {
+                let i = c.rows.start + k;
+                let t: &Affine<T> = c.blended[12 * k..12 * k + 12]
+                    .try_into()
+                    .expect("12 values per blended transform");
+                let (x, dp) = (c.x_nr[k], d_positions[i]);
+                let rq = quat_to_mat3(c.q_nr[k]);
+                let a = affine_rot(t);
+                // M = A R(q): ∂L/∂A = dM R(q)ᵀ, ∂L/∂R(q) = Aᵀ dM.
+                let d_a = mat3_mul_t(&d_mats[i], &rq);
+                let dt = &mut d_t[12 * k..12 * k + 12];
+                for row in 0..3 {
+                    for col in 0..3 {
+                        dt[4 * row + col] = dp[row] * x[col] + d_a[3 * row + col];
+                    }
+                    dt[4 * row + 3] = dp[row];
+                }
+                d_x[k] = [
+                    a[0] * dp[0] + a[3] * dp[1] + a[6] * dp[2],
+                    a[1] * dp[0] + a[4] * dp[1] + a[7] * dp[2],
+                    a[2] * dp[0] + a[5] * dp[1] + a[8] * dp[2],
+                ];
+                d_q[k] = quat_to_mat3_backward(c.q_nr[k], &mat3_tmul(&a, &d_mats[i]));
+            }
+            // ∂L/∂w (rows × 24) = ∂L/∂T · bonesᵀ; ∂L/∂bones (24 × 12) += wᵀ · ∂L/∂T.
+            let d_w = grow(&mut buf.d_w, r * NUM_JOINTS);
+            gemm(
+                r,
+                12,
+                NUM_JOINTS,
+                T::one(),
+                d_t,
+                false,
+                &bm,
+                true,
+                T::zero(),
+                d_w,
+            );
+            gemm(
+                NUM_JOINTS,
+                r,
+                12,
+                T::one(),
+                &c.skin.weights,
+                true,
+                d_t,
+                false,
+                T::one(),
+                &mut out.d_bones,
+            );
+            // Skinning field at x_nr.
+            let mut d_x_field = std::mem::take(&mut buf.d_x_field);
+            let d_w_owned = std::mem::take(&mut buf.d_w);
+            let mut d_nr_out = std::mem::take(&mut buf.d_nr_out);
+            grow(&mut d_x_field, r);
+            field.chunk_backward(
+                &c.skin,
+                &d_w_owned[..r * NUM_JOINTS],
+                &mut out.d_field,
+                &mut d_x_field[..r],
+                &mut buf,
+            );
+            // Non-rigid outputs: Δx gets ∂L/∂x_nr, Δs gets ∂L/∂s, Δr from q_nr = q ⊗ r
+            // (∂L/∂q = dq ⊗ r*, ∂L/∂r = q* ⊗ dq), feature gets its cotangent.
+            grow(&mut d_nr_out, r * NR_OUT_DIM);
+            for k in 0..r {
+                let i = c.rows.start + k;
+                let o = &c.nr_out[k * NR_OUT_DIM..(k + 1) * NR_OUT_DIM];
+                let dxn = [0, 1, 2].map(|a| d_x[k][a] + d_x_field[k][a]);
+                let d = &mut d_nr_out[k * NR_OUT_DIM..(k + 1) * NR_OUT_DIM];
+                d[..3].copy_from_slice(&dxn);
+                d[3..6].copy_from_slice(&d_log_scales[i]);
+                let rr = [T::one(), o[6], o[7], o[8]];
+                let dqn = d_q[k];
+                d_q[k] = quat_mul(dqn, conj(rr));
+                let dr = quat_mul(conj(cache.quats[i]), dqn);
+                d[6..9].copy_from_slice(&dr[1..]);
+                d[9..].copy_from_slice(&d_features[i * NR_FEATURE_DIM..(i + 1) * NR_FEATURE_DIM]);
+                d_x[k] = dxn;
+            }
+            // The field's point gradient is consumed: reuse its buffer for the non-rigid one.
+            nonrigid.chunk_backward(
+                &cache.folded,
+                &c.nr,
+                &d_nr_out[..r * NR_OUT_DIM],
+                &mut out.d_folded,
+                &mut d_x_field[..r],
+                &mut buf,
+            );
+            for k in 0..r {
+                for a in 0..3 {
+                    d_x[k][a] = d_x[k][a] + d_x_field[k][a];
+                }
+            }
+            buf.d_w = d_w_owned;
+            buf.d_nr_out = d_nr_out;
+            buf.d_x_field = d_x_field;
+        }
+        out
+    });
+    let mut d_folded = vec![T::zero(); nf];
+    let mut d_bones_flat = vec![T::zero(); NUM_JOINTS * 12];
+    let mut positions = Vec::with_capacity(n);
+    let mut quats = Vec::with_capacity(n);
+    for p in &parts {
+        batch_mlp::sum_into(&mut d_folded, [&p.d_folded]);
+        batch_mlp::sum_into(d_field, [&p.d_field]);
+        batch_mlp::sum_into(&mut d_bones_flat, [&p.d_bones]);
+        positions.extend_from_slice(&p.d_x);
+        quats.extend_from_slice(&p.d_q);
     }
-    let d_x_from_nr = nonrigid.backward(&cache.nr, &d_nr_out, d_nonrigid)?;
-    for i in 0..n {
-        for k in 0..3 {
-            d_x[i][k] = d_x[i][k] + d_x_from_nr[i][k];
+    nonrigid.unfold_grad(&cache.pose_code, &d_folded, d_nonrigid);
+    let bones_grad = d_bones_flat
+        .chunks_exact(12)
+        .map(|c| c.try_into().expect("12 values per bone"))
+        .collect();
+    Ok(DeformGrad {
+        positions,
+        log_scales: d_log_scales.to_vec(),
+        quats,
+        bones: bones_grad,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    //! The chunked, fused passes against a slow oracle built from the unfused pieces (`nn::Mlp` on
+    //! the full, unfolded input; per-point LBS kernels of `crate::lbs`), on a batch that spans
+    //! several chunks and gradient groups; and bit-identity across thread counts.
+
+    use super::*;
+    use crate::lbs::{lbs_gaussians, lbs_gaussians_backward};
+
+    const N: usize = 1500;
+
+    fn lcg(seed: u64, n: usize) -> Vec<f64> {
+        let mut s = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    struct Case {
+        nonrigid: NonRigidNet<f64>,
+        field: SkinningField<f64>,
+        x: Vec<[f64; 3]>,
+        s: Vec<[f64; 3]>,
+        q: Vec<[f64; 4]>,
+        code: Vec<f64>,
+        bones: Vec<Affine<f64>>,
+        cot: Vec<f64>,
+    }
+
+    fn case() -> Case {
+        let verts = [[-0.8f32, -1.0, -0.2], [0.8, 0.8, 0.3]];
+        let mut nonrigid = NonRigidNet::<f64>::new(&verts, 16, 3).expect("net");
+        let noise = lcg(9, nonrigid.mlp.params.len());
+        for (p, r) in nonrigid.mlp.params.iter_mut().zip(&noise) {
+            if *p == 0.0 {
+                *p = 0.1 * r;
+            }
+        }
+        let field = SkinningField::<f64>::new(&verts, 16, 4).expect("field");
+        let v = lcg(5, N * 10);
+        let bones = (0..NUM_JOINTS)
+            .map(|b| {
+                let r = lcg(100 + b as u64, 12);
+                let mut a = [0.0; 12];
+                for k in 0..12 {
+                    a[k] = if k % 5 == 0 { 1.0 } else { 0.0 } + 0.2 * r[k];
+                }
+                a
+            })
+            .collect();
+        Case {
+            nonrigid,
+            field,
+            x: (0..N)
+                .map(|i| [0.7 * v[10 * i], 0.9 * v[10 * i + 1], 0.2 * v[10 * i + 2]])
+                .collect(),
+            s: (0..N).map(|i| [v[10 * i + 3] - 4.0; 3]).collect(),
+            q: (0..N)
+                .map(|i| [1.0, v[10 * i + 7], v[10 * i + 8], v[10 * i + 9]])
+                .collect(),
+            code: lcg(7, NUM_POSE_FEATURES).iter().map(|x| 0.3 * x).collect(),
+            bones,
+            cot: lcg(11, N * (15 + NR_FEATURE_DIM)),
         }
     }
-    Ok(DeformGrad {
-        positions: d_x,
-        log_scales: d_log_scales.to_vec(),
-        quats: d_q,
-        bones: lbs.bones,
-    })
+
+    fn rows<const K: usize>(v: &[f64], off: usize) -> Vec<[f64; K]> {
+        let stride = 15 + NR_FEATURE_DIM;
+        (0..N)
+            .map(|i| std::array::from_fn(|k| v[i * stride + off + k]))
+            .collect()
+    }
+
+    fn close(what: &str, a: &[f64], b: &[f64]) {
+        assert_eq!(a.len(), b.len(), "{what}: lengths");
+        let scale = b.iter().fold(1e-12f64, |m, v| m.max(v.abs()));
+        let worst = a
+            .iter()
+            .zip(b)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        assert!(
+            worst <= 1e-10 * scale,
+            "{what}: max abs diff {worst:e} (scale {scale:e})"
+        );
+    }
+
+    #[test]
+    fn chunked_passes_match_the_unfused_oracle() {
+        let c = case();
+        assert!(N > 4 * rows_per_chunk(&c.nonrigid.mlp, &c.field.mlp));
+        let g = CanonicalGaussians {
+            positions: &c.x,
+            log_scales: &c.s,
+            quats: &c.q,
+        };
+        let (out, cache) =
+            deform_gaussians(&c.nonrigid, &c.field, &g, &c.code, &c.bones).expect("fwd");
+        let (d_pos, d_s, d_m) = (
+            rows::<3>(&c.cot, 0),
+            rows::<3>(&c.cot, 3),
+            rows::<9>(&c.cot, 6),
+        );
+        let d_f: Vec<f64> = (0..N)
+            .flat_map(|i| {
+                let o = i * (15 + NR_FEATURE_DIM) + 15;
+                c.cot[o..o + NR_FEATURE_DIM].to_vec()
+            })
+            .collect();
+        let mut d_nr = vec![0.0; c.nonrigid.mlp.params.len()];
+        let mut d_sf = vec![0.0; c.field.mlp.params.len()];
+        let grad = deform_gaussians_backward(
+            &c.nonrigid,
+            &c.field,
+            &c.bones,
+            &cache,
+            &d_pos,
+            &d_s,
+            &d_m,
+            &d_f,
+            &mut d_nr,
+            &mut d_sf,
+        )
+        .expect("bwd");
+
+        // Oracle forward.
+        let full_in = ENC_DIM + NUM_POSE_FEATURES;
+        let mut input = vec![0.0; N * full_in];
+        for i in 0..N {
+            encode(
+                c.nonrigid.norm.apply(c.x[i]),
+                &mut input[i * full_in..i * full_in + ENC_DIM],
+            );
+            input[i * full_in + ENC_DIM..(i + 1) * full_in].copy_from_slice(&c.code);
+        }
+        let (nr_out, nr_cache) = c.nonrigid.mlp.forward(&input, N).expect("nr");
+        let x_nr: Vec<[f64; 3]> = (0..N)
+            .map(|i| [0, 1, 2].map(|k| c.x[i][k] + nr_out[i * NR_OUT_DIM + k]))
+            .collect();
+        let q_nr: Vec<[f64; 4]> = (0..N)
+            .map(|i| {
+                let o = &nr_out[i * NR_OUT_DIM..];
+                quat_mul(c.q[i], [1.0, o[6], o[7], o[8]])
+            })
+            .collect();
+        let mut enc = vec![0.0; N * ENC_DIM];
+        for i in 0..N {
+            encode(
+                c.field.norm.apply(x_nr[i]),
+                &mut enc[i * ENC_DIM..(i + 1) * ENC_DIM],
+            );
+        }
+        let (mut w, sf_cache) = c.field.mlp.forward(&enc, N).expect("sf");
+        softmax_rows(&mut w);
+        let (pos, mats) = lbs_gaussians(&w, &c.bones, &x_nr, &q_nr);
+        close("positions", &out.positions.concat(), &pos.concat());
+        close("mats", &out.mats.concat(), &mats.concat());
+        let feats: Vec<f64> = (0..N)
+            .flat_map(|i| nr_out[i * NR_OUT_DIM + 9..(i + 1) * NR_OUT_DIM].to_vec())
+            .collect();
+        close("features", &out.features, &feats);
+
+        // Oracle backward.
+        let lbs = lbs_gaussians_backward(&w, &c.bones, &x_nr, &q_nr, &d_pos, &d_m);
+        let mut d_logits = vec![0.0; N * NUM_JOINTS];
+        softmax_rows_backward(&w, &lbs.weights, &mut d_logits);
+        let mut d_sf_ref = vec![0.0; d_sf.len()];
+        let mut d_enc = vec![0.0; N * ENC_DIM];
+        c.field
+            .mlp
+            .backward(&sf_cache, &d_logits, &mut d_sf_ref, Some(&mut d_enc))
+            .expect("sf bwd");
+        let mut d_nr_out = vec![0.0; N * NR_OUT_DIM];
+        let mut d_x_ref = vec![[0.0; 3]; N];
+        let mut d_q_ref = vec![[0.0; 4]; N];
+        for i in 0..N {
+            let gx = encode_backward(c.field.norm.apply(x_nr[i]), &d_enc[i * ENC_DIM..]);
+            let dxn = [0, 1, 2].map(|k| lbs.positions[i][k] + gx[k] * c.field.norm.inv_half[k]);
+            let o = &nr_out[i * NR_OUT_DIM..];
+            let r = [1.0, o[6], o[7], o[8]];
+            d_q_ref[i] = quat_mul(lbs.quats[i], conj(r));
+            let dr = quat_mul(conj(c.q[i]), lbs.quats[i]);
+            let d = &mut d_nr_out[i * NR_OUT_DIM..(i + 1) * NR_OUT_DIM];
+            d[..3].copy_from_slice(&dxn);
+            d[3..6].copy_from_slice(&d_s[i]);
+            d[6..9].copy_from_slice(&dr[1..]);
+            d[9..].copy_from_slice(&d_f[i * NR_FEATURE_DIM..(i + 1) * NR_FEATURE_DIM]);
+            d_x_ref[i] = dxn;
+        }
+        let mut d_nr_ref = vec![0.0; d_nr.len()];
+        let mut d_in = vec![0.0; N * full_in];
+        c.nonrigid
+            .mlp
+            .backward(&nr_cache, &d_nr_out, &mut d_nr_ref, Some(&mut d_in))
+            .expect("nr bwd");
+        for i in 0..N {
+            let gx = encode_backward(c.nonrigid.norm.apply(c.x[i]), &d_in[i * full_in..]);
+            for k in 0..3 {
+                d_x_ref[i][k] += gx[k] * c.nonrigid.norm.inv_half[k];
+            }
+        }
+        close("d positions", &grad.positions.concat(), &d_x_ref.concat());
+        close("d quats", &grad.quats.concat(), &d_q_ref.concat());
+        close("d bones", &grad.bones.concat(), &lbs.bones.concat());
+        close("d nonrigid params", &d_nr, &d_nr_ref);
+        close("d field params", &d_sf, &d_sf_ref);
+
+        // The standalone field passes agree with the fused ones.
+        let (w2, sc) = c.field.forward(&x_nr).expect("field fwd");
+        close("field weights", &w2, &w);
+        close("cached weights", &cache.skinning_weights(), &w);
+        let mut d_sf2 = vec![0.0; d_sf.len()];
+        let d_x2 = c
+            .field
+            .backward(&sc, &lbs.weights, &mut d_sf2)
+            .expect("field bwd");
+        close("field d params", &d_sf2, &d_sf_ref);
+        let gx: Vec<f64> = (0..N)
+            .flat_map(|i| {
+                let g = encode_backward(c.field.norm.apply(x_nr[i]), &d_enc[i * ENC_DIM..]);
+                [0, 1, 2].map(|k| g[k] * c.field.norm.inv_half[k])
+            })
+            .collect();
+        close("field d points", &d_x2.concat(), &gx);
+    }
+
+    fn run_f32(threads: usize) -> (Vec<u32>, Vec<u32>, Vec<u32>) {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            let verts = [[-0.8f32, -1.0, -0.2], [0.8, 0.8, 0.3]];
+            let mut nonrigid = NonRigidNet::<f32>::new(&verts, 32, 1).expect("net");
+            for (k, p) in nonrigid.mlp.params.iter_mut().enumerate() {
+                if *p == 0.0 {
+                    *p = 0.01 * ((k % 7) as f32 - 3.0);
+                }
+            }
+            let field = SkinningField::<f32>::new(&verts, 32, 2).expect("field");
+            let v = lcg(3, 5000 * 3);
+            let x: Vec<[f32; 3]> = v
+                .chunks(3)
+                .map(|c| [c[0] as f32, c[1] as f32, 0.2 * c[2] as f32])
+                .collect();
+            let s = vec![[-4.0f32; 3]; x.len()];
+            let q = vec![[1.0f32, 0.1, 0.0, 0.0]; x.len()];
+            let code = vec![0.05f32; NUM_POSE_FEATURES];
+            let bones =
+                vec![[1.0f32, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]; NUM_JOINTS];
+            let g = CanonicalGaussians {
+                positions: &x,
+                log_scales: &s,
+                quats: &q,
+            };
+            let (out, cache) = deform_gaussians(&nonrigid, &field, &g, &code, &bones).expect("fwd");
+            let n = x.len();
+            let mut d_nr = vec![0.0f32; nonrigid.mlp.params.len()];
+            let mut d_sf = vec![0.0f32; field.mlp.params.len()];
+            let grad = deform_gaussians_backward(
+                &nonrigid,
+                &field,
+                &bones,
+                &cache,
+                &out.positions,
+                &vec![[0.5f32; 3]; n],
+                &out.mats,
+                &vec![0.25f32; n * NR_FEATURE_DIM],
+                &mut d_nr,
+                &mut d_sf,
+            )
+            .expect("bwd");
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+            let mut params = bits(&d_nr);
+            params.extend(bits(&d_sf));
+            params.extend(bits(&grad.bones.concat()));
+            (
+                bits(&out.positions.concat()),
+                bits(&grad.positions.concat()),
+                params,
+            )
+        })
+    }
+
+    #[test]
+    fn results_are_bit_identical_for_any_thread_count() {
+        let one = run_f32(1);
+        assert_eq!(one, run_f32(2));
+        assert_eq!(one, run_f32(3));
+    }
 }

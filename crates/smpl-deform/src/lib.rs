@@ -5,6 +5,7 @@
 //! Math kernels are generic over f32/f64 ([`num_traits::Float`]) so the f64 versions are checked by
 //! finite differences in the `gradient-checks` package.
 
+mod batch_mlp;
 pub mod body;
 pub mod canonical;
 pub mod deform_net;
