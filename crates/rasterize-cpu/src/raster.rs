@@ -1138,6 +1138,8 @@ fn backward_tile<T: Real>(
     let mut t_old = [T::zero(); TILE_SIZE];
     let mut inv = [T::zero(); TILE_SIZE];
     let mut d_alpha = [T::zero(); TILE_SIZE];
+    let has_alpha = cot.alpha.is_some();
+    let has_depth = cot.depth.is_some();
     for (k, p) in list.iter().enumerate().take(used) {
         let Some((sl, y0, y1)) = splat_lanes(p, ox, oy, size) else {
             continue;
@@ -1178,11 +1180,15 @@ fn backward_tile<T: Real>(
             }
             // dL/dα per lane, accumulated over channels, depth and alpha.
             let tn = &t_final[r.clone()];
-            for q in sl.q0..sl.q1.min(QUADS) {
-                for l in 0..QUAD {
-                    let x = q * QUAD + l;
-                    d_alpha[x] = s.g_alpha[row + x] * tn[x] * inv[x];
+            if has_alpha {
+                for q in sl.q0..sl.q1.min(QUADS) {
+                    for l in 0..QUAD {
+                        let x = q * QUAD + l;
+                        d_alpha[x] = s.g_alpha[row + x] * tn[x] * inv[x];
+                    }
                 }
+            } else {
+                d_alpha.fill(T::zero());
             }
             for j in 0..c {
                 let v = ch[j];
@@ -1202,7 +1208,8 @@ fn backward_tile<T: Real>(
                     }
                 }
             }
-            {
+            // Without a depth cotangent the depth terms are exact zeros: skip them.
+            if has_depth {
                 let base = c * TILE_PIXELS + row;
                 let pre = &mut s.pre[base..base + TILE_SIZE];
                 let df = &d_final[r.clone()];
