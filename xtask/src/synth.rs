@@ -8,7 +8,7 @@ use std::time::Instant;
 /// Preset names of the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum PresetArg {
-    /// 20 frames at 64×64, S = 8 (the checked-in fixture).
+    /// 15 frames at 64×64, S = 8 (the checked-in fixture).
     Tiny,
     /// 100 frames at 256×256, S = 16 (the benchmark).
     Default,
@@ -19,11 +19,11 @@ pub enum PresetArg {
 /// Motion speed names of the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum SpeedArg {
-    /// Angular frequencies ×0.5.
+    /// Angular frequencies ×1.5 of the base motion (arm sweep 1.35 Hz).
     Slow,
-    /// Angular frequencies ×1.
+    /// Angular frequencies ×3.
     Medium,
-    /// Angular frequencies ×2.
+    /// Angular frequencies ×6 (arm sweep 5.4 Hz; the presets' speed).
     Fast,
 }
 

@@ -20,7 +20,7 @@ use crate::texture;
 pub enum Region {
     /// Plaid shirt (torso, collars, upper arms).
     Shirt = 0,
-    /// Denim trousers (pelvis, thighs, shins).
+    /// Plaid trousers (pelvis, thighs, shins).
     Trousers = 1,
     /// Skin (neck, face, forearms, hands).
     Skin = 2,
@@ -176,7 +176,13 @@ impl DressedBody {
         let shirt_b = Vec3::new(0.85, 0.82, 0.7);
         let mats = [
             texture::plaid(seed ^ 1, size, shirt_a, shirt_b, 6),
-            texture::denim(seed ^ 2, size, Vec3::new(0.08, 0.14, 0.35 + 0.1 * h(3))),
+            texture::plaid(
+                seed ^ 2,
+                size,
+                Vec3::new(0.08, 0.14, 0.35 + 0.1 * h(3)),
+                Vec3::new(0.8, 0.74, 0.55),
+                8,
+            ),
             texture::mottled(seed ^ 3, size, Vec3::new(0.62, 0.42, 0.32), 0.12, false),
             texture::mottled(seed ^ 4, size, Vec3::new(0.12, 0.07, 0.04), 0.4, true),
             texture::checker(seed ^ 5, size, Vec3::splat(0.06), Vec3::splat(0.5), 8),

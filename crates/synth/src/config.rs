@@ -15,7 +15,7 @@ pub const MAX_SUBFRAMES: u32 = 256;
 /// Named settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Preset {
-    /// 20 frames at 64×64, S = 8, no event-only flow: the checked-in test fixture (< 2 MB).
+    /// 15 frames at 64×64, S = 8, no event-only flow: the checked-in test fixture (< 2 MB).
     Tiny,
     /// The benchmark: 100 frames at 256×256, S = 16.
     Default,
@@ -74,7 +74,7 @@ impl SynthConfig {
             supersample: 3,
             speed: Speed::Fast,
             texture_seed: 0,
-            camera_distance: 3.6,
+            camera_distance: 2.6,
             camera_height: 1.3,
             fps: 30.0,
             exposure_fraction: 1.0,
@@ -86,7 +86,7 @@ impl SynthConfig {
         };
         match p {
             Preset::Tiny => Self {
-                frames: 20,
+                frames: 15,
                 width: 64,
                 height: 64,
                 subframes: 8,

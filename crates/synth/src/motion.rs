@@ -4,8 +4,8 @@
 //! in front of the person, so it blurs.
 //!
 //! Pose parameters are axis-angle in each joint's parent frame, in the SMPL rest frame (y up, x to
-//! the body's left, z forward). [`Speed`] scales every angular frequency (slow ×1, medium ×2,
-//! fast ×4), hence the blur; amplitudes do not change. The motion is a smooth, closed-form function
+//! the body's left, z forward). [`Speed`] scales every angular frequency (slow ×1.5, medium ×3,
+//! fast ×6: each level doubles the blur length), hence the blur; amplitudes do not change. The motion is a smooth, closed-form function
 //! of time, so any sub-frame time can be evaluated exactly.
 
 use glam::{Quat, Vec3};
@@ -16,11 +16,11 @@ use std::f32::consts::TAU;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Speed {
-    /// Frequencies ×1 (arm sweep 0.9 Hz, steps 0.6 Hz, sway 0.4 Hz, turn 0.15 Hz).
+    /// Frequencies ×1.5 (arm sweep 1.35 Hz, steps 0.9 Hz, sway 0.6 Hz, turn 0.225 Hz).
     Slow,
-    /// Frequencies ×2.
+    /// Frequencies ×3.
     Medium,
-    /// Frequencies ×4 (arm sweep 3.6 Hz).
+    /// Frequencies ×6 (arm sweep 5.4 Hz, sway 2.4 Hz).
     Fast,
 }
 
@@ -28,9 +28,9 @@ impl Speed {
     /// Frequency multiplier.
     pub fn factor(self) -> f32 {
         match self {
-            Self::Slow => 1.0,
-            Self::Medium => 2.0,
-            Self::Fast => 4.0,
+            Self::Slow => 1.5,
+            Self::Medium => 3.0,
+            Self::Fast => 6.0,
         }
     }
 
@@ -82,9 +82,10 @@ impl Motion {
             ((f64::from(hz * f) * t).fract() as f32) * TAU + self.phases[k]
         };
         let mut pose = vec![[0.0f32; 3]; NUM_JOINTS];
-        // Turn in place (0.15 Hz at medium), ±0.7 rad, and sway sideways ±0.12 m (0.4 Hz).
+        // Turn in place (0.15 Hz before the speed factor), ±0.7 rad, and sway sideways ±0.25 m (0.4 Hz):
+        // the whole-body sway is what blurs the torso and legs, not only the thin limbs.
         pose[0] = aa(Quat::from_rotation_y(0.7 * ph(0.15, 0).sin()));
-        let sway = 0.12 * ph(0.4, 3).sin();
+        let sway = 0.25 * ph(0.4, 3).sin();
         // Arms: jumping-jack sweep in the body's frontal plane (elevation 10° above to 80° below
         // horizontal) with a front/back swing a quarter period later, so hands trace ellipses.
         let arm = ph(0.9, 1);
@@ -107,7 +108,7 @@ impl Motion {
         pose[4] = aa(Quat::from_rotation_x(1.6 * lift_l));
         pose[5] = aa(Quat::from_rotation_x(1.6 * lift_r));
         // Torso twist with the arms, sideways lean with the steps, head nods and turns.
-        let twist = 0.12 * (arm + 0.5).sin();
+        let twist = 0.25 * (arm + 0.5).sin();
         for j in [3, 6, 9] {
             pose[j] = aa(Quat::from_rotation_y(twist) * Quat::from_rotation_z(0.04 * step.sin()));
         }

@@ -57,6 +57,6 @@ fn tiny_preset_regenerates_the_fixture_byte_for_byte() {
     let total: usize = want.values().map(Vec::len).sum();
     assert!(total < 2_000_000, "fixture is {total} bytes");
     let s = scene::load(&fixture).unwrap();
-    assert_eq!(s.frames.len(), 20);
-    assert_eq!(s.split_indices(scene::Split::Test).len(), 6);
+    assert_eq!(s.frames.len(), 15);
+    assert_eq!(s.split_indices(scene::Split::Test).len(), 3);
 }
