@@ -553,6 +553,55 @@ impl BodyModel {
             local_rotations,
         })
     }
+
+    /// Gradient of [`BodyModel::pose`]'s vertices w.r.t. the pose (72 values, through the skinning
+    /// transforms *and* the pose blend shapes) and the translation, given `∂L/∂vertices`; evaluated
+    /// in f64 by [`crate::pose_blend::pose_vertices_backward`] (betas are constants). Returns
+    /// `(∂L/∂pose, ∂L/∂transl)`.
+    pub fn pose_backward(
+        &self,
+        params: &SmplParams,
+        d_vertices: &[[f32; 3]],
+    ) -> Result<(Vec<f32>, [f32; 3])> {
+        if params.pose.len() != 3 * NUM_JOINTS {
+            return Err(SmplDeformError::InvalidParams {
+                field: "pose".into(),
+                reason: format!("{} values, expected 72", params.pose.len()),
+            });
+        }
+        if d_vertices.len() != self.num_vertices() {
+            return Err(SmplDeformError::InvalidParams {
+                field: "d_vertices".into(),
+                reason: format!(
+                    "{} rows, expected one per vertex ({})",
+                    d_vertices.len(),
+                    self.num_vertices()
+                ),
+            });
+        }
+        check_finite("pose", &params.pose)?;
+        check_finite("transl", &params.transl)?;
+        let shaped = self.shaped_vertices(&params.betas)?;
+        let joints = self.rest_joints(&shaped);
+        let to64 =
+            |v: &[[f32; 3]]| -> Vec<[f64; 3]> { v.iter().map(|x| x.map(f64::from)).collect() };
+        let (shaped64, joints64, d64) = (to64(&shaped), to64(&joints), to64(d_vertices));
+        let pose64: Vec<f64> = params.pose.iter().map(|&x| f64::from(x)).collect();
+        let body = crate::pose_blend::PosingBody {
+            shaped: &shaped64,
+            joints_rest: &joints64,
+            parents: &self.parents,
+            weights: &self.weights,
+            posedirs: self.posedirs.as_deref(),
+        };
+        let (_, cache) =
+            crate::pose_blend::pose_vertices(&body, &pose64, params.transl.map(f64::from));
+        let g = crate::pose_blend::pose_vertices_backward(&body, &pose64, &cache, &d64);
+        Ok((
+            g.pose.iter().map(|&x| x as f32).collect(),
+            g.transl.map(|x| x as f32),
+        ))
+    }
 }
 
 /// The 207-value pose-blend-shape feature: `R_j − I` for joints 1..23, each row-major.

@@ -17,6 +17,7 @@ pub mod lbs;
 pub mod makehuman;
 pub mod math;
 pub mod npz;
+pub mod pose_blend;
 pub mod sample;
 pub mod skeleton;
 

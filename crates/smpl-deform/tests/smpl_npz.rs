@@ -141,7 +141,17 @@ fn write_npz(
         }
     }
     if skip != Some("f") {
-        w.add_u32("f", &[NF as u64, 3], &s.faces).expect("write");
+        let mut f: Vec<f64> = s.faces.iter().map(|&x| f64::from(x)).collect();
+        let mut shape = vec![NF as u64, 3];
+        edit("f", &mut f, &mut shape);
+        f.resize(shape.iter().product::<u64>() as usize, 0.0);
+        if f.iter().all(|&x| x >= 0.0) {
+            let d: Vec<u32> = f.iter().map(|&x| x as u32).collect();
+            w.add_u32("f", &shape, &d).expect("write");
+        } else {
+            let d: Vec<i64> = f.iter().map(|&x| x as i64).collect();
+            w.add_i64("f", &shape, &d).expect("write");
+        }
     }
     if skip != Some("kintree_table") {
         let mut kt = vec![0.0f64; 2 * NUM_JOINTS];
@@ -306,6 +316,7 @@ fn wrong_shape_is_named() {
         "J_regressor",
         "weights",
         "kintree_table",
+        "f",
     ] {
         let bytes = write_npz(&s, PLAIN, None, |k, _, shape| {
             if k == key {
@@ -322,7 +333,13 @@ fn wrong_shape_is_named() {
 #[test]
 fn nan_is_named() {
     let s = synthetic();
-    for key in ["v_template", "shapedirs", "posedirs", "J_regressor"] {
+    for key in [
+        "v_template",
+        "shapedirs",
+        "posedirs",
+        "J_regressor",
+        "weights",
+    ] {
         let bytes = write_npz(&s, PLAIN, None, |k, data, _| {
             if k == key {
                 data[5] = f64::NAN;
@@ -335,6 +352,40 @@ fn nan_is_named() {
             }
             other => panic!("{key}: expected NonFinite, got {}", brief(&other)),
         }
+    }
+}
+
+#[test]
+fn bad_faces_and_weights_are_named() {
+    let s = synthetic();
+    for bad in [NV as f64, -1.0] {
+        let bytes = write_npz(&s, PLAIN, None, |k, data, _| {
+            if k == "f" {
+                data[4] = bad;
+            }
+        });
+        match load(bytes) {
+            Err(SmplDeformError::IndexOutOfRange { key, index, bound }) => {
+                assert_eq!((key.as_str(), index, bound), ("f", bad as i64, NV));
+            }
+            other => panic!(
+                "face index {bad}: expected IndexOutOfRange, got {}",
+                brief(&other)
+            ),
+        }
+    }
+    // A weight row that is not a convex combination (sums to 1.5).
+    let bytes = write_npz(&s, PLAIN, None, |k, data, _| {
+        if k == "weights" {
+            data[3 * NUM_JOINTS] += 0.5;
+        }
+    });
+    match load(bytes) {
+        Err(SmplDeformError::BadArray { key, message }) => {
+            assert_eq!(key, "weights");
+            assert!(message.contains("row 3"), "{message}");
+        }
+        other => panic!("expected BadArray, got {}", brief(&other)),
     }
 }
 
@@ -386,4 +437,85 @@ fn bad_params_are_errors() {
     assert!(
         matches!(m.pose(&p), Err(SmplDeformError::InvalidParams { field, .. }) if field == "transl")
     );
+}
+
+#[test]
+fn generic_posing_and_its_backward_agree_with_pose() {
+    // The f64 posing of `pose_blend` (used by pose_backward and the FD checks) is the same function
+    // as BodyModel::pose, pose blend shapes included; and pose_backward's gradient matches a
+    // finite difference of BodyModel::pose itself (f32, so a loose tolerance).
+    let s = synthetic();
+    let m = load(write_npz(&s, PLAIN, None, no_edit)).expect("loads");
+    let mut p = SmplParams::zero();
+    for (k, x) in p.pose.iter_mut().enumerate() {
+        *x = 0.3 * (((k * 37) % 11) as f32 / 11.0 - 0.5);
+    }
+    p.transl = [0.1, 0.2, -0.3];
+    p.betas = vec![0.5; NB];
+    let posed = m.pose(&p).expect("pose");
+    let shaped: Vec<[f64; 3]> = m
+        .shaped_vertices(&p.betas)
+        .expect("shaped")
+        .iter()
+        .map(|v| v.map(f64::from))
+        .collect();
+    let joints: Vec<[f64; 3]> = m
+        .rest_joints(&m.shaped_vertices(&p.betas).expect("shaped"))
+        .iter()
+        .map(|v| v.map(f64::from))
+        .collect();
+    let body = smpl_deform::pose_blend::PosingBody {
+        shaped: &shaped,
+        joints_rest: &joints,
+        parents: &m.parents,
+        weights: &m.weights,
+        posedirs: m.posedirs.as_deref(),
+    };
+    let pose64: Vec<f64> = p.pose.iter().map(|&x| f64::from(x)).collect();
+    let (v64, _) = smpl_deform::pose_blend::pose_vertices(&body, &pose64, p.transl.map(f64::from));
+    let worst = posed
+        .vertices
+        .iter()
+        .zip(&v64)
+        .flat_map(|(a, b)| (0..3).map(move |c| (f64::from(a[c]) - b[c]).abs()))
+        .fold(0.0f64, f64::max);
+    assert!(worst < 1e-5, "f32 pose vs f64 posing: {worst} m");
+
+    // Gradient of L = Σ posed.x (all vertices) w.r.t. an elbow angle, vs a central difference
+    // of the f32 model with h = 1e-2 rad (f32 rounding ~1e-7 m per vertex).
+    let d_v = vec![[1.0f32, 0.0, 0.0]; m.num_vertices()];
+    let (d_pose, d_transl) = m.pose_backward(&p, &d_v).expect("backward");
+    // Translation moves every vertex rigidly: ∂L/∂transl = (V, 0, 0) up to the weights' rounding.
+    assert!(
+        (d_transl[0] - m.num_vertices() as f32).abs() < 1e-2,
+        "{d_transl:?}"
+    );
+    assert!(
+        d_transl[1].abs() < 1e-3 && d_transl[2].abs() < 1e-3,
+        "{d_transl:?}"
+    );
+    let sum_x = |q: &SmplParams| -> f64 {
+        m.pose(q)
+            .expect("pose")
+            .vertices
+            .iter()
+            .map(|v| f64::from(v[0]))
+            .sum()
+    };
+    for k in [3 * 18 + 1, 3 * 18 + 2, 3 * 4] {
+        let h = 1e-2f32;
+        let (mut a, mut b) = (p.clone(), p.clone());
+        a.pose[k] += h;
+        b.pose[k] -= h;
+        let num = (sum_x(&a) - sum_x(&b)) / (2.0 * f64::from(h));
+        let ana = f64::from(d_pose[k]);
+        assert!(
+            (num - ana).abs() <= 1e-2 * num.abs().max(ana.abs()) + 1e-3,
+            "pose[{k}]: numeric {num}, analytic {ana}"
+        );
+    }
+    assert!(matches!(
+        m.pose_backward(&p, &d_v[1..]),
+        Err(SmplDeformError::InvalidParams { field, .. }) if field == "d_vertices"
+    ));
 }

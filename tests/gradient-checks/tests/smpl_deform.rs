@@ -423,3 +423,98 @@ mod deformation_networks {
         }
     }
 }
+
+mod pose_blend_shapes {
+    //! FD check of posing a body's vertices (skinning transforms + SMPL pose blend shapes) w.r.t.
+    //! the 72 pose values and the translation, on a small random body with the SMPL tree. Same
+    //! tolerance and step as above: the function is a polynomial in sines and cosines of the pose.
+    //! The pose-blend path is checked on its own too (loss through the offsets only), so a
+    //! wrongly-zero blend gradient cannot hide behind the larger skinning-transform gradient.
+
+    use super::*;
+    use smpl_deform::pose_blend::{
+        pose_blend_offsets, pose_blend_offsets_backward, pose_feature_backward, pose_feature_of,
+        pose_vertices, pose_vertices_backward, PosingBody,
+    };
+    use smpl_deform::{NUM_JOINTS, NUM_POSE_FEATURES};
+
+    const NV: usize = 7;
+
+    struct Body {
+        shaped: Vec<[f64; 3]>,
+        joints: Vec<[f64; 3]>,
+        weights: Vec<f32>,
+        posedirs: Vec<f32>,
+    }
+
+    fn body(seed: u64) -> Body {
+        let v = lcg_vec(seed, NV * 3 + NUM_JOINTS * 3);
+        let mut weights = Vec::with_capacity(NV * NUM_JOINTS);
+        for k in 0..NV {
+            weights.extend(
+                convex_weights(seed ^ (k as u64 + 7), NUM_JOINTS)
+                    .iter()
+                    .map(|&w| w as f32),
+            );
+        }
+        Body {
+            shaped: v[..NV * 3].chunks(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            joints: v[NV * 3..]
+                .chunks(3)
+                .map(|c| [0.5 * c[0], c[1], 0.3 * c[2]])
+                .collect(),
+            weights,
+            posedirs: lcg_vec(seed ^ 99, NV * 3 * NUM_POSE_FEATURES)
+                .iter()
+                .map(|&x| (0.05 * x) as f32)
+                .collect(),
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(16))]
+
+        #[test]
+        fn posing_with_pose_blend_shapes_matches_finite_differences(
+            seed in any::<u64>(),
+            scale in 0.1f64..1.5,
+        ) {
+            let b = body(seed);
+            let posing = PosingBody {
+                shaped: &b.shaped,
+                joints_rest: &b.joints,
+                parents: &SMPL_PARENTS,
+                weights: &b.weights,
+                posedirs: Some(&b.posedirs),
+            };
+            let pose: Vec<f64> = lcg_vec(seed ^ 5, 3 * NUM_JOINTS).iter().map(|x| scale * x).collect();
+            let transl = [0.1, -0.2, 0.3];
+            let cot: Vec<[f64; 3]> = lcg_vec(seed ^ 6, NV * 3).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let loss = |p: &[f64], t: [f64; 3]| {
+                let (v, _) = pose_vertices(&posing, p, t);
+                v.iter().zip(&cot).map(|(a, c)| dot(a, c)).sum::<f64>()
+            };
+            let (_, cache) = pose_vertices(&posing, &pose, transl);
+            let g = pose_vertices_backward(&posing, &pose, &cache, &cot);
+            let mut checker = GradientChecker::new();
+            let num = central_differences(|p| loss(p, transl), &pose, H);
+            checker.check("posing d/dpose", &num, &g.pose, TOL);
+            let num = central_differences(|t| loss(&pose, [t[0], t[1], t[2]]), &transl, H);
+            checker.check("posing d/dtransl", &num, &g.transl, TOL);
+
+            // The pose-blend path alone: L = ⟨offsets(feature(pose)), cot⟩.
+            let blend_loss = |p: &[f64]| {
+                let rots: Vec<[f64; 9]> = p.chunks(3).map(|r| rodrigues([r[0], r[1], r[2]])).collect();
+                let off = pose_blend_offsets(&b.posedirs, &pose_feature_of(&rots));
+                off.iter().zip(&cot).map(|(a, c)| dot(a, c)).sum::<f64>()
+            };
+            let ana = pose_feature_backward(&pose, &pose_blend_offsets_backward(&b.posedirs, &cot));
+            let num = central_differences(blend_loss, &pose, H);
+            checker.check("pose blend shapes d/dpose", &num, &ana, TOL);
+            checker.finish();
+            // Joint 0 (global orientation) does not enter the blend feature; every other joint does.
+            prop_assert!(ana[..3].iter().all(|&x| x == 0.0));
+            prop_assert!(ana[3..].iter().all(|&x| x != 0.0));
+        }
+    }
+}
