@@ -4,8 +4,9 @@
 //! im2col + GEMM was chosen over a direct kernel so that the inner products run in the GEMM crate's
 //! packed micro-kernels; a direct kernel has not been written or measured against it yet (open work,
 //! together with the flow network's speed targets in docs/BENCHMARKS.md, section "flow"). Chunks of
-//! output rows (a fixed number of rows, independent of the thread count) keep
-//! the im2col buffer in cache and give parallelism even for a batch of one.
+//! output rows (a fixed number of rows, independent of the thread count) keep the im2col buffer in
+//! cache and give parallelism even for a batch of one; each chunk writes its own part of one scratch
+//! buffer, so there is one allocation per call, not per chunk.
 //!
 //! The input gradient is itself a convolution of the output gradient with the flipped, transposed
 //! kernel (padding `k − 1 − pad`), so it reuses the same fast path. Weight gradients are reduced over
@@ -14,8 +15,14 @@
 use crate::{check_len, NnError, Real};
 use rayon::prelude::*;
 
-/// Target number of output pixels per im2col chunk.
-const CHUNK_PIXELS: usize = 512;
+/// Target number of output pixels per im2col chunk of the forward and input-gradient passes. 128
+/// keeps the largest im2col block of the flow network (64 channels × 7 × 7 × 128 px × 4 B = 1.6 MB)
+/// near L2 size; measured against 32–2048 (docs/BENCHMARKS.md, section "flow"): 30 % less CPU time
+/// than 512 for the SPyNet forward + input gradient.
+const CHUNK_PIXELS: usize = 128;
+/// Target output pixels per chunk of the weight-gradient pass, where the chunk is the GEMM's inner
+/// dimension (larger chunks mean fewer read-modify-write passes over the weight-gradient buffer).
+const WEIGHT_CHUNK_PIXELS: usize = 512;
 /// Number of partial weight-gradient buffers (fixed, so the reduction order never depends on threads).
 const WEIGHT_GRAD_GROUPS: usize = 4;
 
@@ -73,13 +80,15 @@ impl Conv2dShape {
         Ok(())
     }
 
-    fn rows_per_chunk(&self) -> usize {
-        (CHUNK_PIXELS / self.out_width().max(1)).max(1)
+    /// Output rows per chunk for a target of `pixels` output pixels per chunk.
+    fn rows_per_chunk(&self, pixels: usize) -> usize {
+        (pixels / self.out_width().max(1)).max(1)
     }
 
-    /// (batch index, first output row, end output row) of every chunk, in a fixed order.
-    fn chunks(&self) -> Vec<(usize, usize, usize)> {
-        let rows = self.rows_per_chunk();
+    /// (batch index, first output row, end output row) of every chunk of about `pixels` output
+    /// pixels, in a fixed order (independent of the thread count).
+    fn chunks(&self, pixels: usize) -> Vec<(usize, usize, usize)> {
+        let rows = self.rows_per_chunk(pixels);
         let ho = self.out_height();
         let mut v = Vec::new();
         for b in 0..self.batch {
@@ -141,47 +150,54 @@ fn conv_core<T: Real>(
     let ckk = s.c_in * s.kernel * s.kernel;
     let in_img = s.c_in * s.height * s.width;
     let out_img = s.c_out * ho * wo;
-    let chunks = s.chunks();
-    let max_n = s.rows_per_chunk().min(ho) * wo;
-    let results: Vec<Vec<T>> = chunks
-        .par_iter()
-        .map_init(
-            || vec![T::zero(); ckk * max_n],
-            |col, &(b, r0, r1)| {
-                let n = (r1 - r0) * wo;
-                let col = &mut col[..ckk * n];
-                im2col(s, &input[b * in_img..(b + 1) * in_img], r0, r1, col);
-                let mut out = vec![T::zero(); s.c_out * n];
-                let beta = if let Some(bias) = bias {
-                    for (co, row) in out.chunks_exact_mut(n).enumerate() {
-                        row.fill(bias[co]);
-                    }
-                    T::one()
-                } else {
-                    T::zero()
-                };
-                crate::gemm(
-                    s.c_out,
-                    ckk,
-                    n,
-                    T::one(),
-                    weight,
-                    false,
-                    col,
-                    false,
-                    beta,
-                    &mut out,
-                );
-                out
-            },
-        )
-        .collect();
-    for (&(b, r0, r1), out) in chunks.iter().zip(&results) {
+    let chunks = s.chunks(CHUNK_PIXELS);
+    let max_n = s.rows_per_chunk(CHUNK_PIXELS).min(ho) * wo;
+    // One chunk-major scratch buffer per call (no allocation per chunk): chunk j owns
+    // `c_out × n_j` values, split off in order so that the chunks can be filled in parallel.
+    let mut scratch = vec![T::zero(); s.batch * out_img];
+    let mut parts: Vec<&mut [T]> = Vec::with_capacity(chunks.len());
+    let mut rest = &mut scratch[..];
+    for &(_, r0, r1) in &chunks {
+        let (part, tail) = rest.split_at_mut(s.c_out * (r1 - r0) * wo);
+        parts.push(part);
+        rest = tail;
+    }
+    parts.into_par_iter().zip(chunks.par_iter()).for_each_init(
+        || vec![T::zero(); ckk * max_n],
+        |col, (out, &(b, r0, r1))| {
+            let n = (r1 - r0) * wo;
+            let col = &mut col[..ckk * n];
+            im2col(s, &input[b * in_img..(b + 1) * in_img], r0, r1, col);
+            let beta = if let Some(bias) = bias {
+                for (co, row) in out.chunks_exact_mut(n).enumerate() {
+                    row.fill(bias[co]);
+                }
+                T::one()
+            } else {
+                T::zero()
+            };
+            crate::gemm(
+                s.c_out,
+                ckk,
+                n,
+                T::one(),
+                weight,
+                false,
+                col,
+                false,
+                beta,
+                out,
+            );
+        },
+    );
+    let mut offset = 0;
+    for &(b, r0, r1) in &chunks {
         let n = (r1 - r0) * wo;
         for co in 0..s.c_out {
             let dst = b * out_img + co * ho * wo + r0 * wo;
-            output[dst..dst + n].copy_from_slice(&out[co * n..(co + 1) * n]);
+            output[dst..dst + n].copy_from_slice(&scratch[offset + co * n..offset + (co + 1) * n]);
         }
+        offset += s.c_out * n;
     }
 }
 
@@ -270,10 +286,10 @@ pub fn conv2d_backward_weight<T: Real>(
     let ckk = s.c_in * s.kernel * s.kernel;
     let in_img = s.c_in * s.height * s.width;
     let out_img = s.c_out * hwo;
-    let chunks = s.chunks();
+    let chunks = s.chunks(WEIGHT_CHUNK_PIXELS);
     let groups = WEIGHT_GRAD_GROUPS.min(chunks.len()).max(1);
     let per_group = chunks.len().div_ceil(groups);
-    let max_n = s.rows_per_chunk().min(ho) * wo;
+    let max_n = s.rows_per_chunk(WEIGHT_CHUNK_PIXELS).min(ho) * wo;
     let partials: Vec<Vec<T>> = chunks
         .par_chunks(per_group.max(1))
         .map(|group| {
