@@ -141,6 +141,29 @@ fn worst_jump_ratio(b: &BodyModel, lengths: &[f32], p: &SmplParams) -> (f32, usi
     worst
 }
 
+/// Vertices whose distance to their dominant bone's rigid motion exceeds that bone's length
+/// (`lengths`), as (vertex, ratio, dominant weight − runner-up weight).
+fn strict_violations(b: &BodyModel, lengths: &[f32], p: &SmplParams) -> Vec<(usize, f32, f32)> {
+    let posed = b.pose(p).expect("poses");
+    let mut out = Vec::new();
+    for (v, w) in b.weights.chunks_exact(NUM_JOINTS).enumerate() {
+        let d = dominant(w);
+        let rigid = affine_apply::<f32>(&posed.posed_from_rest[d], b.v_template[v]);
+        let x = posed.vertices[v];
+        let jump =
+            ((x[0] - rigid[0]).powi(2) + (x[1] - rigid[1]).powi(2) + (x[2] - rigid[2]).powi(2))
+                .sqrt();
+        if jump > lengths[d] {
+            let second = (0..NUM_JOINTS)
+                .filter(|&k| k != d)
+                .map(|k| w[k])
+                .fold(0.0f32, f32::max);
+            out.push((v, jump / lengths[d], w[d] - second));
+        }
+    }
+    out
+}
+
 #[test]
 fn posing_has_no_jump_larger_than_the_bone_length() {
     let b = body();
@@ -153,6 +176,7 @@ fn posing_has_no_jump_larger_than_the_bone_length() {
         .map(|j| b.parents[j].map_or(strict[j], |p| strict[j].max(strict[p])))
         .collect();
     let mut worst_strict = 0.0f32;
+    let mut violations = Vec::new();
     // (1) Every joint alone bent about each axis: 90° for hips, knees, shoulders, elbows; 45° for
     // the short bones (spine, neck, head, collars, ankles, feet, wrists, hands), whose anatomical
     // range is smaller. (At 90°, spine1's 7 cm bone gives a ratio of 1.9 on buttock vertices blended
@@ -169,6 +193,9 @@ fn posing_has_no_jump_larger_than_the_bone_length() {
             p.pose[3 * j + axis] = angle;
             let (r, bone) = worst_jump_ratio(&b, &lengths, &p);
             worst_strict = worst_strict.max(worst_jump_ratio(&b, &strict, &p).0);
+            for (v, ratio, margin) in strict_violations(&b, &strict, &p) {
+                violations.push((j, axis, v, ratio, margin));
+            }
             if r > worst_single.0 {
                 worst_single = (r, j, bone);
             }
@@ -190,6 +217,9 @@ fn posing_has_no_jump_larger_than_the_bone_length() {
         }
         let r = worst_jump_ratio(&b, &lengths, &p);
         worst_strict = worst_strict.max(worst_jump_ratio(&b, &strict, &p).0);
+        for (v, ratio, margin) in strict_violations(&b, &strict, &p) {
+            violations.push((0, 3, v, ratio, margin));
+        }
         if r.0 > worst_random.0 {
             worst_random = r;
         }
@@ -202,6 +232,20 @@ fn posing_has_no_jump_larger_than_the_bone_length() {
     // A vertex may deviate from its dominant bone's rigid motion (that is what blending does), but
     // never by more than that bone's length (a wrongly mapped weight moves it by far more).
     assert!(worst_single.0 <= 1.0 && worst_random.0 <= 1.0);
+    // The literal criterion (dominant bone only) fails by 1.5% at one mirrored pair of vertices
+    // (4469 and 11094, front of the hips) under a 45° spine1 twist: MakeHuman weights them spine1
+    // 0.458, pelvis 0.415, thigh 0.12, so spine1 (a 7.2 cm bone) dominates by 4 points while the
+    // vertices sit ~16 cm from its axis; half-blended, they trail spine1's rigid motion by 7.3 cm.
+    // That is LBS blending at a near-tie of a short bone and its parent, not a mis-mapped weight
+    // (the same 7.3 cm is 0.66 of the parent pelvis's 11 cm bone). Pin it: every strict
+    // violation is such a near-tie (dominance margin < 0.05) and none exceeds 1.05.
+    // (Random poses are recorded with joint 0, axis 3.)
+    eprintln!("strict violations (joint, axis, vertex, ratio, margin): {violations:?}");
+    assert!(worst_strict <= 1.05, "strict ratio {worst_strict}");
+    assert!(
+        violations.iter().all(|&(_, _, _, _, margin)| margin < 0.05),
+        "a strict violation with a clear dominant bone: {violations:?}"
+    );
 }
 
 #[test]
