@@ -10,11 +10,15 @@ mod bench_flow;
 mod bench_raster;
 mod body;
 mod body_convert;
+mod curve;
+mod eval_cmd;
 mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
 mod ply_info;
+mod reconstruct;
 mod render;
+mod render_pose;
 mod synth;
 mod train_flow;
 
@@ -28,6 +32,13 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Train E-Sem3DGS (person + scene) on a scene directory — by default the synthetic benchmark —
+    /// then evaluate the test split and write the model, metrics.json, strips and a curve.
+    Reconstruct(reconstruct::Args),
+    /// Evaluate a saved model on a scene's test split (metrics.json + comparison strips).
+    Eval(eval_cmd::Args),
+    /// Render a saved model in new body poses (PNG, optionally posed 3DGS PLY).
+    RenderPose(render_pose::Args),
     /// Print a summary of a 3DGS PLY file (counts, SH degree, extra properties, bounds).
     PlyInfo(ply_info::Args),
     /// Pose a body model (SMPL .npz or builtin:makehuman) with SMPL parameters; write .npy or .obj.
@@ -67,6 +78,9 @@ enum BenchCommand {
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Reconstruct(args) => reconstruct::run(args),
+        Command::Eval(args) => eval_cmd::run(args),
+        Command::RenderPose(args) => render_pose::run(args),
         Command::PlyInfo(args) => ply_info::run(args),
         Command::Body(args) => body::run(args),
         Command::BodyConvert(args) => body_convert::run(args),
@@ -81,4 +95,16 @@ fn main() -> Result<()> {
         Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
         Command::Render(args) => render::run(args),
     }
+}
+
+/// A progress bar with elapsed time, ETA and a message slot, in the project's one style.
+pub fn progress_bar(len: u64, label: &str) -> Result<indicatif::ProgressBar> {
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{{spinner}} {label} [{{bar:30}}] {{pos}}/{{len}} {{elapsed}} elapsed, ETA {{eta}}  {{msg}}"
+        ))?
+        .progress_chars("=> "),
+    );
+    Ok(bar)
 }

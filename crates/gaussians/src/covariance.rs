@@ -153,6 +153,108 @@ pub fn covariance_3d_backward<T: Float>(
     (d_log_scale, rotation_from_quat_backward(quat, &d_rot))
 }
 
+/// Inverse of [`covariance_3d`] for a symmetric positive semi-definite Σ: log-scales and a unit
+/// (w, x, y, z) quaternion with R diag(e^{2s}) Rᵀ = Σ (cyclic Jacobi eigen-decomposition in f64; the
+/// rotation is made proper, det R = +1). Eigenvalues are floored at `min_variance` (m²) so the
+/// log-scales stay finite. Used to export posed Gaussians whose covariance is not built from a stored
+/// scale and rotation (skinning blends rotations into a general linear map).
+pub fn decompose_covariance(sigma: &Mat3<f64>, min_variance: f64) -> ([f32; 3], [f32; 4]) {
+    let mut a = *sigma;
+    // Symmetrise (callers may pass a matrix with rounding asymmetry).
+    for r in 0..3 {
+        for c in r + 1..3 {
+            let m = 0.5 * (a[r][c] + a[c][r]);
+            a[r][c] = m;
+            a[c][r] = m;
+        }
+    }
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..50 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+        if off <= 1e-15 * scale.max(f64::MIN_POSITIVE) {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            // A ← Jᵀ A J with J the rotation in the (p, q) plane; V ← V J.
+            for k in 0..3 {
+                let (akp, akq) = (a[k][p], a[k][q]);
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let (apk, aqk) = (a[p][k], a[q][k]);
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for row in &mut v {
+                let (vp, vq) = (row[p], row[q]);
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    let det = v[0][0] * (v[1][1] * v[2][2] - v[1][2] * v[2][1])
+        - v[0][1] * (v[1][0] * v[2][2] - v[1][2] * v[2][0])
+        + v[0][2] * (v[1][0] * v[2][1] - v[1][1] * v[2][0]);
+    if det < 0.0 {
+        for row in &mut v {
+            row[2] = -row[2];
+        }
+    }
+    let log_scales = [0, 1, 2].map(|k| (0.5 * a[k][k].max(min_variance).ln()) as f32);
+    (log_scales, quat_from_rotation(&v).map(|x| x as f32))
+}
+
+/// Unit (w, x, y, z) quaternion of a proper rotation matrix (Shepperd's method; w ≥ 0).
+pub fn quat_from_rotation(r: &Mat3<f64>) -> [f64; 4] {
+    let tr = r[0][0] + r[1][1] + r[2][2];
+    let q = if tr > 0.0 {
+        let s = (tr + 1.0).sqrt() * 2.0;
+        [
+            0.25 * s,
+            (r[2][1] - r[1][2]) / s,
+            (r[0][2] - r[2][0]) / s,
+            (r[1][0] - r[0][1]) / s,
+        ]
+    } else if r[0][0] > r[1][1] && r[0][0] > r[2][2] {
+        let s = (1.0 + r[0][0] - r[1][1] - r[2][2]).sqrt() * 2.0;
+        [
+            (r[2][1] - r[1][2]) / s,
+            0.25 * s,
+            (r[0][1] + r[1][0]) / s,
+            (r[0][2] + r[2][0]) / s,
+        ]
+    } else if r[1][1] > r[2][2] {
+        let s = (1.0 + r[1][1] - r[0][0] - r[2][2]).sqrt() * 2.0;
+        [
+            (r[0][2] - r[2][0]) / s,
+            (r[0][1] + r[1][0]) / s,
+            0.25 * s,
+            (r[1][2] + r[2][1]) / s,
+        ]
+    } else {
+        let s = (1.0 + r[2][2] - r[0][0] - r[1][1]).sqrt() * 2.0;
+        [
+            (r[1][0] - r[0][1]) / s,
+            (r[0][2] + r[2][0]) / s,
+            (r[1][2] + r[2][1]) / s,
+            0.25 * s,
+        ]
+    };
+    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    let sign = if q[0] < 0.0 { -1.0 } else { 1.0 };
+    q.map(|x| sign * x / n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -188,5 +290,27 @@ mod tests {
     fn zero_quaternion_maps_to_identity() {
         let r = rotation_from_quat([0.0f32; 4]);
         assert_eq!(r, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+    }
+
+    #[test]
+    fn decompose_inverts_covariance_3d() {
+        let mut seed = 7u64;
+        let mut r = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for _ in 0..200 {
+            let s = [r() * 2.0 - 3.0, r() * 2.0 - 3.0, r() * 2.0 - 3.0];
+            let q = [r(), r(), r(), r()];
+            let sigma = covariance_3d(s, q);
+            let (s2, q2) = decompose_covariance(&sigma, 1e-30);
+            let back = covariance_3d(s2.map(f64::from), q2.map(f64::from));
+            let norm: f64 = sigma.iter().flatten().map(|v| v * v).sum::<f64>().sqrt();
+            for (a, b) in sigma.iter().flatten().zip(back.iter().flatten()) {
+                assert!((a - b).abs() <= 1e-5 * norm, "{sigma:?} vs {back:?}");
+            }
+        }
     }
 }

@@ -60,6 +60,8 @@ pub struct TrainConfig {
     pub logit_magnitude: f32,
     /// Initial opacity of every Gaussian (3DGS-Avatar: 0.1).
     pub initial_opacity: f32,
+    /// Upper bound on the initial (kNN) scale of a Gaussian, metres.
+    pub max_initial_scale: f32,
     /// Per-Gaussian colour-feature length (paper: 32).
     pub feature_dim: usize,
     /// Per-frame latent length of the human colour network (paper: 16).
@@ -142,6 +144,7 @@ impl TrainConfig {
             max_gaussians: 60_000,
             logit_magnitude: 3.0,
             initial_opacity: 0.1,
+            max_initial_scale: 0.03,
             feature_dim: 32,
             latent_dim: 16,
             deform_hidden: 64,
@@ -247,6 +250,9 @@ impl TrainConfig {
         }
         if !(0.0..=1.0).contains(&self.ssim_weight) {
             return bad("ssim_weight", "must be in [0, 1]");
+        }
+        if !(self.max_initial_scale > 0.0) {
+            return bad("max_initial_scale", "must be positive");
         }
         if !(self.initial_opacity > 0.0 && self.initial_opacity < 1.0) {
             return bad("initial_opacity", "must be in (0, 1)");

@@ -146,6 +146,50 @@ pub fn comparison_strip(f: &EvalFrame<'_>) -> (usize, usize, Vec<f32>) {
     (out_w, h, out)
 }
 
+/// One evaluated frame of a dataset.
+#[derive(Clone, Debug)]
+pub struct EvaluatedFrame {
+    /// Frame number.
+    pub index: u32,
+    /// Its figures.
+    pub metrics: FrameMetrics,
+    /// The comparison strip (width, height, planar RGB).
+    pub strip: (usize, usize, Vec<f32>),
+}
+
+/// Renders every frame of `split` with the model and scores it against the sharp reference (or, for
+/// data without one, against the observed frame — the figures then measure fidelity to the input).
+/// Unseen frames use the latent of the nearest training frame.
+pub fn evaluate_split(
+    trainer: &crate::trainer::Trainer,
+    body: &crate::trainer::Body,
+    data: &crate::data::Dataset,
+    split: scene::Split,
+) -> Result<Vec<EvaluatedFrame>, crate::TrainError> {
+    let (w, h) = (data.camera.width as usize, data.camera.height as usize);
+    let mut out = Vec::new();
+    for f in data.frames.iter().filter(|f| f.split == split) {
+        let pose = body.prepare(&f.smpl)?;
+        let r = trainer.render(&data.camera, &pose, trainer.latent_for(f.index))?;
+        let no_mask = vec![false; w * h];
+        let frame = EvalFrame {
+            width: w,
+            height: h,
+            render: &r.rgb,
+            reference: f.sharp.as_deref().unwrap_or(&f.image),
+            blurred: &f.image,
+            mask: f.mask.as_deref().unwrap_or(&no_mask),
+            human_probability: &r.human,
+        };
+        out.push(EvaluatedFrame {
+            index: f.index,
+            metrics: evaluate_frame(&frame),
+            strip: comparison_strip(&frame),
+        });
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -63,6 +63,10 @@ pub struct InitConfig {
     pub surface_inside_depth: f32,
     /// The scene cube extends from the cameras to this multiple of the farthest camera–body distance.
     pub scene_depth_factor: f32,
+    /// Upper bound on the initial scale (m): kNN scales of sparse scene samples can reach tens of
+    /// centimetres, and each such Gaussian then overlaps thousands of pixels, which makes the first
+    /// steps cost more than the rest of training. `f32::INFINITY` keeps the plain kNN scales.
+    pub max_initial_scale: f32,
     /// Per-Gaussian colour-feature length.
     pub feature_dim: usize,
     /// Initial opacity (3DGS-Avatar: 0.1).
@@ -82,6 +86,7 @@ impl Default for InitConfig {
             logit_magnitude: 3.0,
             surface_inside_depth: 0.01,
             scene_depth_factor: 2.0,
+            max_initial_scale: f32::INFINITY,
             feature_dim: 32,
             opacity: 0.1,
             seed: 0,
@@ -219,7 +224,11 @@ pub fn initialise(
     let n = points.len();
     let k = config.semantic.logits_per_gaussian();
     let mut set = GaussianSet::zeros(n, 0, config.feature_dim, k);
-    set.log_scales = knn_log_scales(&points);
+    let cap = config.max_initial_scale.ln();
+    set.log_scales = knn_log_scales(&points)
+        .into_iter()
+        .map(|s| s.map(|v| v.min(cap)))
+        .collect();
     set.means = points;
     set.quats = vec![[1.0, 0.0, 0.0, 0.0]; n];
     set.opacity_logits = vec![gaussians::inverse_sigmoid(config.opacity); n];

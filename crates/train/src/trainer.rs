@@ -227,6 +227,8 @@ pub struct Trainer {
     pub nets: ModelNets<f32>,
     /// Per-training-frame latents, (frames, latent_dim).
     pub latents: Vec<f32>,
+    /// Frame number of each latent slot (the training frames in time order).
+    pub frame_indices: Vec<u32>,
     /// Steps taken.
     pub step: usize,
     /// Scene extent (m): scales the position rate and the density thresholds.
@@ -307,22 +309,55 @@ impl Trainer {
                 logit_magnitude: config.logit_magnitude,
                 feature_dim: config.feature_dim,
                 opacity: config.initial_opacity,
+                max_initial_scale: config.max_initial_scale,
                 seed: config.seed,
                 ..InitConfig::default()
             },
         );
         let nets = build_nets(&config, vertices)?;
         let latents = vec![0.0; ctx.frames.len() * config.latent_dim];
-        Self::assemble(config, init.set, nets, latents, extent_of(&init.cube))
+        let frame_indices = ctx.frames.iter().map(|f| f.index).collect();
+        Self::from_parts(
+            config,
+            init.set,
+            nets,
+            latents,
+            frame_indices,
+            extent_of(&init.cube),
+        )
     }
 
-    fn assemble(
+    /// A trainer (fresh optimiser state) around existing parameters, e.g. a saved model.
+    pub fn from_parts(
         config: TrainConfig,
         set: GaussianSet,
         nets: ModelNets<f32>,
         latents: Vec<f32>,
+        frame_indices: Vec<u32>,
         scene_extent: f32,
     ) -> Result<Self, TrainError> {
+        config.validate()?;
+        let k = config.semantic.logits_per_gaussian();
+        if set.semantic_logits.len() != set.len() * k || set.feature_dim != config.feature_dim {
+            return Err(TrainError::Config(format!(
+                "the Gaussians carry {} semantic logits and {} features each; the configuration needs {k} and {}",
+                set.semantic_logits.len().checked_div(set.len()).unwrap_or(0),
+                set.feature_dim,
+                config.feature_dim
+            )));
+        }
+        if frame_indices.is_empty() {
+            return Err(TrainError::Config(
+                "a model needs at least one training frame".into(),
+            ));
+        }
+        if latents.len() != frame_indices.len() * config.latent_dim {
+            return Err(TrainError::Shape {
+                what: "frame latents".into(),
+                expected: frame_indices.len() * config.latent_dim,
+                found: latents.len(),
+            });
+        }
         let adam = GaussianAdam::new(&set, AdamConfig::default());
         let mut t = Self {
             nonrigid_adam: net_adam(config.lr_nonrigid, nets.nonrigid.mlp.num_params()),
@@ -340,6 +375,7 @@ impl Trainer {
             set,
             nets,
             latents,
+            frame_indices,
             step: 0,
             scene_extent,
         };
@@ -416,13 +452,13 @@ impl Trainer {
     }
 
     /// The latent of the training frame nearest in frame number to `index` (for unseen frames).
-    pub fn latent_for(&self, ctx: &TrainContext, index: u32) -> &[f32] {
+    pub fn latent_for(&self, index: u32) -> &[f32] {
         let d = self.config.latent_dim;
-        let slot = ctx
-            .frames
+        let slot = self
+            .frame_indices
             .iter()
             .enumerate()
-            .min_by_key(|(_, f)| (i64::from(f.index) - i64::from(index)).abs())
+            .min_by_key(|(_, &f)| (i64::from(f) - i64::from(index)).abs())
             .map_or(0, |(s, _)| s);
         &self.latents[slot * d..(slot + 1) * d]
     }
@@ -866,7 +902,8 @@ impl Trainer {
         load("human_colour", &mut nets.human_colour.mlp.params)?;
         load("scene_colour", &mut nets.scene_colour.mlp.params)?;
         let latents = r.get_len("latents", ctx.frames.len() * config.latent_dim)?;
-        let mut t = Self::assemble(config, set, nets, latents, meta.scene_extent)?;
+        let frame_indices = ctx.frames.iter().map(|f| f.index).collect();
+        let mut t = Self::from_parts(config, set, nets, latents, frame_indices, meta.scene_extent)?;
         r.gaussian_adam("adam", &mut t.adam, &meta.adam_steps)?;
         if meta.net_adam_steps.len() != 5 {
             return Err(r.error("expected 5 network optimiser step counts"));

@@ -1,0 +1,349 @@
+//! `cargo xtask reconstruct`: train E-Sem3DGS on a scene-format-v1 directory (by default the synthetic
+//! benchmark, generated on first use under `target/benchmark/default`), then evaluate the test split and
+//! write the model, metrics, comparison strips and a loss/PSNR curve.
+//!
+//! Output directory layout: `config.json` (the resolved hyper-parameters), `log.jsonl` (one JSON object
+//! per step), `checkpoint.safetensors` (atomic, every `checkpoint_every` steps and at the end),
+//! `model/` (see `train::export`), `model/posed_frame_NNNNNN.ply` (a standard 3DGS PLY of the first
+//! training frame, colours baked to SH degree 0), `eval/strip_NNNNNN.png`, `metrics.json`, `curve.png`.
+
+use crate::eval_cmd::{write_evaluation, EvalSummary};
+use anyhow::{bail, Context, Result};
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use train::blend::SemanticMode;
+use train::config::{Preset, TrainConfig};
+use train::init::{InitMode, SemanticInit};
+use train::trainer::{Body, StepReport, TrainContext, Trainer};
+use train::TrainError;
+
+/// Arguments of `reconstruct`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Scene directory (scene format v1). Default: the synthetic benchmark's `default` preset, generated
+    /// under target/benchmark/default if it is not there yet.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Output directory (default: target/reconstruct/<data name>-<preset>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Hyper-parameter preset: quick (minutes on 2 cores) or full.
+    #[arg(long, default_value = "quick")]
+    pub preset: Preset,
+    /// TOML or JSON file overriding preset values (any field of train::config::TrainConfig).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Number of optimisation steps.
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Seed of initialisation, networks, frame order and splits.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Semantic parameterisation: one-hot (paper), scalar, none (everything deformed).
+    #[arg(long, value_parser = parse_semantic)]
+    pub semantic: Option<SemanticMode>,
+    /// Initial points: smpl+cube (paper), random, smpl-only.
+    #[arg(long, value_parser = parse_init)]
+    pub init: Option<InitMode>,
+    /// Initial semantic logits: one-hot (paper) or half (p = 0.5 everywhere).
+    #[arg(long, value_parser = parse_semantic_init)]
+    pub semantic_init: Option<SemanticInit>,
+    /// Continue from OUT/checkpoint.safetensors (same bits as an uninterrupted run).
+    #[arg(long)]
+    pub resume: bool,
+    /// Stop after this many steps of this invocation (the run can be resumed later).
+    #[arg(long, hide = true)]
+    pub stop_after: Option<usize>,
+}
+
+fn parse_semantic(s: &str) -> Result<SemanticMode, String> {
+    serde_json::from_value(serde_json::Value::String(s.into()))
+        .map_err(|_| format!("`{s}`: expected one-hot, scalar or none"))
+}
+
+fn parse_init(s: &str) -> Result<InitMode, String> {
+    serde_json::from_value(serde_json::Value::String(s.into()))
+        .map_err(|_| format!("`{s}`: expected smpl+cube, random or smpl-only"))
+}
+
+fn parse_semantic_init(s: &str) -> Result<SemanticInit, String> {
+    serde_json::from_value(serde_json::Value::String(s.into()))
+        .map_err(|_| format!("`{s}`: expected one-hot or half"))
+}
+
+/// The workspace's `target/` directory.
+pub fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target"))
+}
+
+/// Generates the default synthetic benchmark under `target/benchmark/default` unless a complete copy
+/// made with the same generator settings is already there.
+pub fn default_benchmark() -> Result<PathBuf> {
+    let dir = target_dir().join("benchmark/default");
+    let cfg = ::synth::SynthConfig::preset(::synth::Preset::Default);
+    let stamp = serde_json::to_string(&cfg).context("serialising the generator settings")?;
+    let marker = dir.join(".complete");
+    if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {
+        return Ok(dir);
+    }
+    eprintln!(
+        "generating the default synthetic benchmark into {} (once)",
+        dir.display()
+    );
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let bar = crate::progress_bar(u64::from(cfg.frames), "synth")?;
+    ::synth::generate(&cfg, &dir, &mut |done, _| bar.set_position(u64::from(done)))
+        .with_context(|| format!("generating the benchmark into {}", dir.display()))?;
+    bar.finish_and_clear();
+    std::fs::write(&marker, stamp).with_context(|| format!("writing {}", marker.display()))?;
+    Ok(dir)
+}
+
+/// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).
+pub fn scene_body(data: &train::data::Dataset) -> Result<Body> {
+    let spec = &data.scene.body;
+    let reference = smpl_deform::BodyRef::parse(&spec.model)
+        .with_context(|| format!("scene.json: body.model `{}`", spec.model))?;
+    let reference = match reference {
+        smpl_deform::BodyRef::SmplFile(p) if p.is_relative() => {
+            smpl_deform::BodyRef::SmplFile(data.dir.join(p))
+        }
+        r => r,
+    };
+    let model = reference
+        .load()
+        .with_context(|| format!("loading the body model `{}`", spec.model))?;
+    Ok(Body::new(model, spec.betas.clone())?)
+}
+
+/// The resolved configuration: preset, then the file, then the flags.
+fn resolve_config(args: &Args) -> Result<TrainConfig> {
+    let mut c = TrainConfig::preset(args.preset);
+    if let Some(path) = &args.config {
+        c = TrainConfig::load_over(path, &c)?;
+    }
+    if let Some(v) = args.steps {
+        c.steps = v;
+    }
+    if let Some(v) = args.seed {
+        c.seed = v;
+    }
+    if let Some(v) = args.semantic {
+        c.semantic = v;
+    }
+    if let Some(v) = args.init {
+        c.init = v;
+    }
+    if let Some(v) = args.semantic_init {
+        c.semantic_init = v;
+    }
+    c.validate()?;
+    Ok(c)
+}
+
+/// Keeps the log lines of steps before `step` and returns their summed wall time.
+fn truncate_log(path: &Path, step: usize) -> Result<f64> {
+    let Ok(file) = std::fs::File::open(path) else {
+        return Ok(0.0);
+    };
+    let mut kept = String::new();
+    let mut seconds = 0.0;
+    for line in std::io::BufReader::new(file).lines() {
+        let line = line.with_context(|| format!("reading {}", path.display()))?;
+        let v: serde_json::Value =
+            serde_json::from_str(&line).with_context(|| format!("{}: bad line", path.display()))?;
+        if v["step"].as_u64().is_some_and(|s| (s as usize) < step) {
+            seconds += v["seconds"].as_f64().unwrap_or(0.0);
+            kept.push_str(&line);
+            kept.push('\n');
+        }
+    }
+    std::fs::write(path, kept).with_context(|| format!("rewriting {}", path.display()))?;
+    Ok(seconds)
+}
+
+/// Runs `reconstruct`.
+pub fn run(args: Args) -> Result<()> {
+    let data_dir = match &args.data {
+        Some(d) => d.clone(),
+        None => default_benchmark()?,
+    };
+    let config = resolve_config(&args)?;
+    let preset_name = match args.preset {
+        Preset::Quick => "quick",
+        Preset::Full => "full",
+    };
+    let out = args.out.clone().unwrap_or_else(|| {
+        let name = data_dir
+            .file_name()
+            .map_or_else(|| "data".into(), |n| n.to_string_lossy().into_owned());
+        target_dir()
+            .join("reconstruct")
+            .join(format!("{name}-{preset_name}"))
+    });
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let data = train::data::load_dataset(&data_dir)
+        .with_context(|| format!("loading the scene {}", data_dir.display()))?;
+    let body = scene_body(&data)?;
+    let ctx = TrainContext::new(&data, body.clone(), config.seed)?;
+    let checkpoint = out.join("checkpoint.safetensors");
+    let log_path = out.join("log.jsonl");
+    let (mut trainer, mut train_seconds) = if args.resume {
+        let t = Trainer::load_checkpoint(&checkpoint, &ctx)
+            .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+        if t.config != config && (args.config.is_some() || args.steps.is_some()) {
+            eprintln!("note: --resume continues with the configuration stored in the checkpoint");
+        }
+        let secs = truncate_log(&log_path, t.step)?;
+        (t, secs)
+    } else {
+        let _ = std::fs::remove_file(&log_path);
+        (Trainer::new(&ctx, config)?, 0.0)
+    };
+    let config = trainer.config.clone();
+    let config_path = out.join("config.json");
+    std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)
+        .with_context(|| format!("writing {}", config_path.display()))?;
+    println!(
+        "training on {} ({} training frames, {}x{}), {} steps from step {}, {} Gaussians ({} human), {} threads",
+        data_dir.display(),
+        ctx.frames.len(),
+        ctx.camera.width,
+        ctx.camera.height,
+        config.steps,
+        trainer.step,
+        trainer.set.len(),
+        trainer.human_count(),
+        rayon::current_num_threads()
+    );
+    let mut log = std::io::BufWriter::new(
+        std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&log_path)
+            .with_context(|| format!("opening {}", log_path.display()))?,
+    );
+    let bar = crate::progress_bar(config.steps as u64, "train")?;
+    bar.set_position(trainer.step as u64);
+    let until = match args.stop_after {
+        Some(n) => (trainer.step + n).min(config.steps),
+        None => config.steps,
+    };
+    let mut running_psnr: Option<f64> = None;
+    let mut last_step_start = Instant::now();
+    let mut recent: Vec<StepReport> = Vec::new();
+    let result = trainer.run(&ctx, until, |t, r| {
+        let secs = last_step_start.elapsed().as_secs_f64();
+        last_step_start = Instant::now();
+        train_seconds += secs;
+        let ema = running_psnr.map_or(r.psnr, |p| 0.9 * p + 0.1 * r.psnr);
+        running_psnr = Some(ema);
+        bar.set_position(t.step as u64);
+        bar.set_message(format!(
+            "loss {:.4}  PSNR {:.2} dB  {} human + {} scene Gaussians",
+            r.loss, ema, r.gaussians_human, r.gaussians_scene
+        ));
+        let mut line = serde_json::to_value(r).map_err(|e| TrainError::Config(e.to_string()))?;
+        line["seconds"] = serde_json::json!(secs);
+        writeln!(log, "{line}").map_err(|e| TrainError::Config(format!("log: {e}")))?;
+        recent.push(r.clone());
+        if recent.len() > 50 {
+            recent.remove(0);
+        }
+        if config.checkpoint_every > 0
+            && t.step.is_multiple_of(config.checkpoint_every)
+            && t.step < config.steps
+        {
+            log.flush()
+                .map_err(|e| TrainError::Config(format!("log: {e}")))?;
+            t.save_checkpoint(&checkpoint)?;
+        }
+        Ok(())
+    });
+    log.flush().context("flushing the log")?;
+    if let Err(e) = result {
+        bar.abandon();
+        if matches!(e, TrainError::NonFinite { .. }) {
+            bail!(
+                "{e}. The last good checkpoint is {} (written every {} steps); nothing newer was saved",
+                checkpoint.display(),
+                config.checkpoint_every
+            );
+        }
+        return Err(e.into());
+    }
+    trainer
+        .save_checkpoint(&checkpoint)
+        .context("writing the checkpoint")?;
+    bar.finish_and_clear();
+    if trainer.step < config.steps {
+        println!(
+            "stopped at step {} of {}; continue with --resume (checkpoint {})",
+            trainer.step,
+            config.steps,
+            checkpoint.display()
+        );
+        return Ok(());
+    }
+    let model_dir = out.join("model");
+    train::export::save_model(
+        &model_dir,
+        &trainer,
+        &data.scene.body.model,
+        &data.scene.body.betas,
+        &data.scene.camera,
+    )
+    .with_context(|| format!("writing the model to {}", model_dir.display()))?;
+    if let Some(first) = ctx.frames.first() {
+        let r = trainer.render(&ctx.camera, &first.pose, trainer.latent_for(first.index))?;
+        let posed = train::export::posed_set(&trainer, &r.posed);
+        let path = model_dir.join(format!("posed_frame_{:06}.ply", first.index));
+        gaussians::ply::write_ply(&path, &posed)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let breakdown = mean_times(&recent);
+    let summary = EvalSummary {
+        train_seconds,
+        steps: trainer.step,
+        gaussians_human: trainer.human_count(),
+        gaussians_scene: trainer.set.len() - trainer.human_count(),
+        extra: serde_json::json!({
+            "data": data_dir.display().to_string(),
+            "preset": preset_name,
+            "semantic": config.semantic,
+            "init": config.init,
+            "semantic_init": config.semantic_init,
+            "seed": config.seed,
+            "threads": rayon::current_num_threads(),
+            "step_seconds_breakdown": breakdown,
+        }),
+    };
+    write_evaluation(&trainer, &ctx.body, &data, &out, &summary)?;
+    crate::curve::write_curve(&log_path, &out.join("curve.png"))?;
+    println!("model: {}", model_dir.display());
+    println!(
+        "step time (mean of the last {} steps): {}",
+        recent.len(),
+        serde_json::to_string(&breakdown)?
+    );
+    Ok(())
+}
+
+fn mean_times(recent: &[StepReport]) -> serde_json::Value {
+    let n = recent.len().max(1) as f64;
+    let sum = |f: fn(&StepReport) -> f64| recent.iter().map(f).sum::<f64>() / n;
+    serde_json::json!({
+        "pose": sum(|r| r.times.pose),
+        "render": sum(|r| r.times.render),
+        "loss": sum(|r| r.times.loss),
+        "render_backward": sum(|r| r.times.render_backward),
+        "model_backward": sum(|r| r.times.model_backward),
+        "adam": sum(|r| r.times.adam),
+        "density": sum(|r| r.times.density),
+        "total": sum(|r| r.times.pose + r.times.render + r.times.loss + r.times.render_backward
+            + r.times.model_backward + r.times.adam + r.times.density),
+    })
+}
