@@ -723,6 +723,19 @@ pub struct DeformCache<T: Real> {
 }
 
 impl<T: Real> DeformCache<T> {
+    /// Whether every non-rigid position offset Δx was exactly zero (e.g. before the non-rigid
+    /// network is switched on, its last layer being zero): then the skinning weights of the forward
+    /// pass ([`DeformCache::skinning_weights`]) are the field at the canonical positions themselves,
+    /// and a consumer of those can reuse them, passing its `∂L/∂w` to
+    /// [`deform_gaussians_backward_with_weights`] instead of running the field again.
+    pub fn nonrigid_offsets_are_zero(&self) -> bool {
+        self.chunks.iter().all(|c| {
+            c.nr_out
+                .chunks_exact(NR_OUT_DIM)
+                .all(|o| o[..3].iter().all(|&d| d == T::zero()))
+        })
+    }
+
     /// The skinning weights `(N, 24)` the forward pass used (the field at the non-rigidly moved
     /// positions), a copy.
     pub fn skinning_weights(&self) -> Vec<T> {
@@ -875,6 +888,73 @@ pub fn deform_gaussians_backward<T: Real>(
     d_nonrigid: &mut [T],
     d_field: &mut [T],
 ) -> Result<DeformGrad<T>, nn::NnError> {
+    deform_backward_impl(
+        nonrigid,
+        field,
+        bones,
+        cache,
+        d_positions,
+        d_log_scales,
+        d_mats,
+        d_features,
+        None,
+        d_nonrigid,
+        d_field,
+    )
+}
+
+/// [`deform_gaussians_backward`] with an extra cotangent `d_weights` `(N, 24)` on the skinning
+/// weights of the forward pass ([`DeformCache::skinning_weights`]), for a consumer that reuses those
+/// weights instead of evaluating the field again (see [`DeformCache::nonrigid_offsets_are_zero`]).
+/// Equal to [`deform_gaussians_backward`] plus a [`SkinningField::backward`] of `d_weights` at the
+/// non-rigidly moved positions `x + Δx`, at the cost of one field backward instead of two. When
+/// Δx ≡ 0 because the non-rigid net's last layer is zero, the position, field and bone gradients
+/// equal those of a consumer evaluating the field at the canonical positions; the non-rigid
+/// gradient additionally holds the effect of Δx on the reused weights (last layer, Δx rows only).
+#[allow(clippy::too_many_arguments)]
+pub fn deform_gaussians_backward_with_weights<T: Real>(
+    nonrigid: &NonRigidNet<T>,
+    field: &SkinningField<T>,
+    bones: &[Affine<T>],
+    cache: &DeformCache<T>,
+    d_positions: &[[T; 3]],
+    d_log_scales: &[[T; 3]],
+    d_mats: &[Mat3<T>],
+    d_features: &[T],
+    d_weights: &[T],
+    d_nonrigid: &mut [T],
+    d_field: &mut [T],
+) -> Result<DeformGrad<T>, nn::NnError> {
+    check_len("deform d_weights", cache.n * NUM_JOINTS, d_weights.len())?;
+    deform_backward_impl(
+        nonrigid,
+        field,
+        bones,
+        cache,
+        d_positions,
+        d_log_scales,
+        d_mats,
+        d_features,
+        Some(d_weights),
+        d_nonrigid,
+        d_field,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn deform_backward_impl<T: Real>(
+    nonrigid: &NonRigidNet<T>,
+    field: &SkinningField<T>,
+    bones: &[Affine<T>],
+    cache: &DeformCache<T>,
+    d_positions: &[[T; 3]],
+    d_log_scales: &[[T; 3]],
+    d_mats: &[Mat3<T>],
+    d_features: &[T],
+    d_weights_extra: Option<&[T]>,
+    d_nonrigid: &mut [T],
+    d_field: &mut [T],
+) -> Result<DeformGrad<T>, nn::NnError> {
     let n = cache.n;
     nonrigid.check(&cache.pose_code)?;
     field.check()?;
@@ -947,6 +1027,12 @@ pub fn deform_gaussians_backward<T: Real>(
                 T::zero(),
                 d_w,
             );
+            if let Some(extra) = d_weights_extra {
+                let e = &extra[c.rows.start * NUM_JOINTS..c.rows.end * NUM_JOINTS];
+                for (d, &x) in d_w.iter_mut().zip(e) {
+                    *d = *d + x;
+                }
+            }
             gemm(
                 NUM_JOINTS,
                 r,
@@ -1328,5 +1414,102 @@ mod tests {
         let one = run_f32(1);
         assert_eq!(one, run_f32(2));
         assert_eq!(one, run_f32(3));
+    }
+
+    #[test]
+    fn reused_weights_backward_equals_two_separate_backwards() {
+        // Identity non-rigid net (zero last layer): the deformation's weights are the field at the
+        // canonical positions, and one backward with the extra weight cotangent equals the plain
+        // backward plus a separate field backward.
+        let mut c = case();
+        let last = NR_OUT_DIM * (c.nonrigid.mlp.sizes[3] + 1);
+        let np = c.nonrigid.mlp.params.len();
+        for p in &mut c.nonrigid.mlp.params[np - last..] {
+            *p = 0.0;
+        }
+        let g = CanonicalGaussians {
+            positions: &c.x,
+            log_scales: &c.s,
+            quats: &c.q,
+        };
+        let (_, cache) =
+            deform_gaussians(&c.nonrigid, &c.field, &g, &c.code, &c.bones).expect("fwd");
+        assert!(cache.nonrigid_offsets_are_zero());
+        let (w, sc) = c.field.forward(&c.x).expect("field");
+        close("weights at canonical", &cache.skinning_weights(), &w);
+        let (d_pos, d_s, d_m) = (
+            rows::<3>(&c.cot, 0),
+            rows::<3>(&c.cot, 3),
+            rows::<9>(&c.cot, 6),
+        );
+        let d_f = vec![0.3; N * NR_FEATURE_DIM];
+        let d_w: Vec<f64> = lcg(77, N * NUM_JOINTS);
+        let (mut a_nr, mut a_sf) = (
+            vec![0.0; c.nonrigid.mlp.params.len()],
+            vec![0.0; c.field.mlp.params.len()],
+        );
+        let a = deform_gaussians_backward_with_weights(
+            &c.nonrigid,
+            &c.field,
+            &c.bones,
+            &cache,
+            &d_pos,
+            &d_s,
+            &d_m,
+            &d_f,
+            &d_w,
+            &mut a_nr,
+            &mut a_sf,
+        )
+        .expect("bwd with weights");
+        let (mut b_nr, mut b_sf) = (
+            a_nr.iter().map(|_| 0.0).collect::<Vec<f64>>(),
+            a_sf.iter().map(|_| 0.0).collect::<Vec<f64>>(),
+        );
+        let b = deform_gaussians_backward(
+            &c.nonrigid,
+            &c.field,
+            &c.bones,
+            &cache,
+            &d_pos,
+            &d_s,
+            &d_m,
+            &d_f,
+            &mut b_nr,
+            &mut b_sf,
+        )
+        .expect("bwd");
+        let extra = c.field.backward(&sc, &d_w, &mut b_sf).expect("field bwd");
+        let b_pos: Vec<f64> = b
+            .positions
+            .iter()
+            .zip(&extra)
+            .flat_map(|(p, e)| [0, 1, 2].map(|k| p[k] + e[k]))
+            .collect();
+        close("d positions", &a.positions.concat(), &b_pos);
+        close("d field", &a_sf, &b_sf);
+        close("d bones", &a.bones.concat(), &b.bones.concat());
+        // The non-rigid gradient differs only where Δx enters the reused weights: the last layer's
+        // Δx rows (outputs 0..3, weights and biases); every earlier layer sees a zero last layer.
+        let h = c.nonrigid.mlp.sizes[3];
+        let off = np - last;
+        let dx_rows = |k: usize| {
+            let k = k - off;
+            (k < NR_OUT_DIM * h && k / h < 3) || (k >= NR_OUT_DIM * h && k - NR_OUT_DIM * h < 3)
+        };
+        let same: Vec<usize> = (0..np).filter(|&k| k < off || !dx_rows(k)).collect();
+        close(
+            "d nonrigid outside the Δx rows",
+            &same.iter().map(|&k| a_nr[k]).collect::<Vec<_>>(),
+            &same.iter().map(|&k| b_nr[k]).collect::<Vec<_>>(),
+        );
+        assert!((off..np)
+            .filter(|&k| dx_rows(k))
+            .any(|k| a_nr[k] != b_nr[k]));
+        // A non-identity net moves the points: the weights are no longer the canonical ones.
+        let c2 = case();
+        let (_, cache2) =
+            deform_gaussians(&c2.nonrigid, &c2.field, &g, &c2.code, &c2.bones).expect("fwd");
+        assert!(!cache2.nonrigid_offsets_are_zero());
     }
 }
