@@ -90,3 +90,30 @@ fn coarse_to_fine_second_level_learns_on_top_of_a_frozen_first() {
         "80 steps at level 1 left the EPE at {end} px (first {first}, zero-flow {zero})"
     );
 }
+
+#[test]
+fn training_steps_are_bit_identical_for_one_and_two_threads() {
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            // 32x32 pairs: the finest level's convolutions span several im2col chunks.
+            let mut trainer = Trainer::new(config(2, 32));
+            let losses: Vec<f64> = (0..2)
+                .flat_map(|_| {
+                    [
+                        trainer.step(0).expect("step"),
+                        trainer.step(1).expect("step"),
+                    ]
+                })
+                .collect();
+            (losses, trainer.net)
+        })
+    };
+    let (l1, n1) = run(1);
+    let (l2, n2) = run(2);
+    assert_eq!(l1, l2, "losses differ between 1 and 2 threads");
+    assert!(n1 == n2, "weights differ between 1 and 2 threads");
+}
