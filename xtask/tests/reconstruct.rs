@@ -89,8 +89,22 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
             .count(),
         12
     );
+    let scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture().join("scene.json")).unwrap())
+            .unwrap();
+    let test_frames = scene["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["split"] == "test")
+        .count();
+    assert!(test_frames > 0);
     let strips = std::fs::read_dir(out.join("eval")).unwrap().count();
-    assert_eq!(strips, 6, "one strip per test frame of the fixture");
+    assert_eq!(
+        strips, test_frames,
+        "one strip per test frame of the fixture"
+    );
+    assert_eq!(metrics["test_frames"], test_frames);
     let posed: Vec<_> = std::fs::read_dir(out.join("model"))
         .unwrap()
         .filter_map(|e| e.ok())
