@@ -342,11 +342,13 @@ pub fn generate_with_body(
     let event_path = |k: usize| format!("events/{k:06}.npz");
     let cm_config = events::CmaxConfig::default();
     // Writes bucket k; returns its two-channel count frame and, when enabled and k has a next
-    // frame, the event-only flow of [t_k, t_{k+1}).
+    // frame, the event-only flow of [t_k, t_{k+1}) computed on a helper thread (contrast
+    // maximisation is sequential; it overlaps the rendering of the next frames). Its result does
+    // not depend on when it runs, and results are consumed in frame order (`cm_jobs`).
     let flush = |k: usize,
                  s: &mut events::EventStream,
                  st: &mut EventStats|
-     -> Result<(Vec<f32>, Option<Vec<f32>>)> {
+     -> Result<(Vec<f32>, Option<CmJob>)> {
         let p = out.join(event_path(k));
         events::write_events(&p, s)?;
         st.count += s.len();
@@ -354,19 +356,20 @@ pub fn generate_with_body(
         let frame = events::count_frame(&s.as_slice(), sensor, events::CountMode::TwoChannel);
         let mut cm = None;
         if cfg.event_flow && k + 1 < frames {
-            let f = events::flow_from_events(
-                &s.as_slice(),
-                sensor,
-                us(t_of(k)),
-                us(t_of(k + 1)),
-                &cm_config,
-            )?;
-            events::write_flo(out.join(format!("flow/{k:06}_cm.flo")), &f)?;
-            cm = Some(f.data);
+            let (evs, (t_a, t_b)) = (s.clone(), (us(t_of(k)), us(t_of(k + 1))));
+            let path = out.join(format!("flow/{k:06}_cm.flo"));
+            let handle = std::thread::spawn(move || -> Result<Vec<f32>> {
+                let f = events::flow_from_events(&evs.as_slice(), sensor, t_a, t_b, &cm_config)?;
+                events::write_flo(path, &f)?;
+                Ok(f.data)
+            });
+            cm = Some(CmJob { k, handle });
         }
         s.clear();
         Ok((frame, cm))
     };
+    // Event-only flow jobs in flight, oldest first.
+    let mut cm_jobs: std::collections::VecDeque<CmJob> = std::collections::VecDeque::new();
     // Ground-truth and event-only flows meet here (either may be ready first).
     let mut gt_wait: BTreeMap<usize, (Vec<f32>, Vec<bool>)> = BTreeMap::new();
     let mut cm_wait: BTreeMap<usize, Vec<f32>> = BTreeMap::new();
@@ -431,9 +434,9 @@ pub fn generate_with_body(
                     continue;
                 }
                 while bucket_k + 1 < frames && e.t >= us(t_of(bucket_k + 1)) {
-                    let (f, cm) = flush(bucket_k, &mut bucket, &mut stats.events)?;
+                    let (f, job) = flush(bucket_k, &mut bucket, &mut stats.events)?;
                     flushed_counts.push(f);
-                    pair(bucket_k, None, cm, &mut gt_wait, &mut cm_wait);
+                    cm_jobs.extend(job);
                     bucket_k += 1;
                 }
                 bucket.push(e);
@@ -597,14 +600,28 @@ pub fn generate_with_body(
             },
         });
         prev = Some(sharp);
+        // Collect finished event-only flows in order; at most two in flight.
+        while cm_jobs
+            .front()
+            .is_some_and(|j| j.handle.is_finished() || cm_jobs.len() > 2)
+        {
+            if let Some(job) = cm_jobs.pop_front() {
+                let (k, cm) = job.join()?;
+                pair(k, None, Some(cm), &mut gt_wait, &mut cm_wait);
+            }
+        }
         progress(k as u32 + 1, cfg.frames);
     }
     // Remaining event buckets (the last one, and empty ones if nothing happened).
     while bucket_k < frames {
-        let (f, cm) = flush(bucket_k, &mut bucket, &mut stats.events)?;
+        let (f, job) = flush(bucket_k, &mut bucket, &mut stats.events)?;
         flushed_counts.push(f);
-        pair(bucket_k, None, cm, &mut gt_wait, &mut cm_wait);
+        cm_jobs.extend(job);
         bucket_k += 1;
+    }
+    while let Some(job) = cm_jobs.pop_front() {
+        let (k, cm) = job.join()?;
+        pair(k, None, Some(cm), &mut gt_wait, &mut cm_wait);
     }
     for (row, &k) in preview_rows.iter_mut().zip(&preview_set) {
         row.events = flushed_counts[k].clone();
@@ -679,6 +696,22 @@ pub fn generate_with_body(
     std::fs::write(&stats_path, text).map_err(io_err(&stats_path))?;
     preview::write(&out.join("preview.png"), &preview_rows, w, h)?;
     Ok(stats)
+}
+
+/// An event-only flow being computed on a helper thread for frame pair (k, k+1).
+struct CmJob {
+    k: usize,
+    handle: std::thread::JoinHandle<Result<Vec<f32>>>,
+}
+
+impl CmJob {
+    /// Waits for the flow (planar u then v, pixels).
+    fn join(self) -> Result<(usize, Vec<f32>)> {
+        match self.handle.join() {
+            Ok(r) => Ok((self.k, r?)),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    }
 }
 
 fn room_and_body_tris(room: &Mesh, body: &DressedBody) -> Vec<[u32; 3]> {
