@@ -235,7 +235,8 @@ fn posing_has_no_jump_larger_than_the_bone_length() {
     // The literal criterion (dominant bone only) fails by 1.5% at one mirrored pair of vertices
     // (4469 and 11094, front of the hips) under a 45° spine1 twist: MakeHuman weights them spine1
     // 0.458, pelvis 0.415, thigh 0.12, so spine1 (a 7.2 cm bone) dominates by 4 points while the
-    // vertices sit ~16 cm from its axis; half-blended, they trail spine1's rigid motion by 7.3 cm.
+    // vertices sit ≈ 18 cm from its twist axis: the 54% not on spine1 stays put, so they trail
+    // spine1's rigid motion by 0.54 of the 2r·sin 22.5° chord = 7.3 cm.
     // That is LBS blending at a near-tie of a short bone and its parent, not a mis-mapped weight
     // (the same 7.3 cm is 0.66 of the parent pelvis's 11 cm bone). Pin it: every strict
     // violation is such a near-tie (dominance margin < 0.05) and none exceeds 1.05.
