@@ -106,3 +106,75 @@ proptest::proptest! {
         let _ = decode_flo(&bytes, std::path::Path::new("fuzz.flo"));
     }
 }
+
+/// Writes `bytes` to `name` in a fresh temporary directory and runs every path-based flow reader
+/// on it: each must return (Ok or Err), never panic.
+fn read_with_every_flow_reader(bytes: &[u8], name: &str) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join(name);
+    std::fs::write(&p, bytes).expect("write");
+    let _ = read_flo(&p);
+    let _ = read_flow_npy(&p);
+    let _ = read_flow_png(&p, FlowPngKind::Dsec);
+    let _ = read_flow_png(&p, FlowPngKind::Kitti);
+    let _ = read_flow_exr(&p);
+    let _ = read_flow(&p);
+}
+
+#[test]
+fn absurd_npy_header_is_an_error_not_an_allocation() {
+    // A valid npy header claiming (2, 100000, 100000) f32 (80 GB) followed by 16 bytes of data.
+    let header = "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 100000, 100000), }";
+    let mut h = header.to_string();
+    while !(10 + h.len() + 1).is_multiple_of(64) {
+        h.push(' ');
+    }
+    h.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(h.as_bytes());
+    bytes.extend_from_slice(&[0u8; 16]);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("huge.npy");
+    std::fs::write(&p, &bytes).expect("write");
+    assert!(
+        read_flow_npy(&p).is_err(),
+        "an 80 GB claim in a tiny file was accepted"
+    );
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+    #[test]
+    fn path_flow_readers_never_panic_on_random_bytes(
+        bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..300),
+        ext in proptest::sample::select(vec!["flo", "npy", "png", "exr"]),
+    ) {
+        read_with_every_flow_reader(&bytes, &format!("fuzz.{ext}"));
+    }
+
+    #[test]
+    fn path_flow_readers_never_panic_on_damaged_valid_files(
+        cut in 0usize..400,
+        flip in 0usize..400,
+        ext in proptest::sample::select(vec!["flo", "npy", "png", "exr"]),
+    ) {
+        // Start from a valid file of the format, truncate it and flip one byte.
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join(format!("ok.{ext}"));
+        let f = sample_flow(5, 4);
+        match ext {
+            "flo" => write_flo(&p, &f).expect("write"),
+            "npy" => write_flow_npy(&p, &f).expect("write"),
+            "png" => write_flow_png(&p, &f, None, FlowPngKind::Kitti).expect("write"),
+            _ => write_flow_exr(&p, &f).expect("write"),
+        }
+        let mut bytes = std::fs::read(&p).expect("read");
+        if !bytes.is_empty() {
+            let i = flip % bytes.len();
+            bytes[i] ^= 0xA5;
+            bytes.truncate(cut.min(bytes.len()));
+        }
+        read_with_every_flow_reader(&bytes, &format!("fuzz.{ext}"));
+    }
+}
