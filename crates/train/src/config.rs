@@ -80,6 +80,10 @@ pub struct TrainConfig {
     pub skinning_until: usize,
     /// Surface samples per step for the skinning loss.
     pub skinning_samples: usize,
+    /// Adam steps fitting the skinning field to the body's weights before training starts (a freshly
+    /// initialised field blends all 24 bones almost uniformly, which would pose every human Gaussian
+    /// with the mean bone transform until the skinning loss catches up).
+    pub skinning_warmup_steps: usize,
     /// Weight of the AIAP loss on human Gaussians' positions.
     pub aiap_position_weight: f32,
     /// Weight of the AIAP loss on human Gaussians' covariances.
@@ -134,14 +138,14 @@ impl TrainConfig {
     /// The defaults of a preset.
     pub fn preset(preset: Preset) -> Self {
         let quick = Self {
-            steps: 1500,
+            steps: 1200,
             seed: 0,
             semantic: SemanticMode::OneHot,
             init: InitMode::SmplCube,
             semantic_init: SemanticInit::OneHot,
             human_gaussians: 6_000,
             scene_gaussians: 20_000,
-            max_gaussians: 60_000,
+            max_gaussians: 45_000,
             logit_magnitude: 3.0,
             initial_opacity: 0.1,
             max_initial_scale: 0.03,
@@ -154,6 +158,7 @@ impl TrainConfig {
             skinning_weight: 10.0,
             skinning_until: 500,
             skinning_samples: 512,
+            skinning_warmup_steps: 400,
             aiap_position_weight: 1.0,
             aiap_covariance_weight: 100.0,
             lr_means: 1.6e-4,
@@ -169,7 +174,7 @@ impl TrainConfig {
             lr_latent: 1e-3,
             nonrigid_from: 300,
             densify_from: 200,
-            densify_until: 1000,
+            densify_until: 900,
             densify_every: 100,
             densify_grad_threshold: 2e-4,
             prune_min_opacity: 0.005,

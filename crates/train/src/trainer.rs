@@ -281,6 +281,38 @@ pub fn build_nets(
     })
 }
 
+/// Fits the skinning field to the body's skinning weights on the context's canonical surface samples
+/// (`config.skinning_warmup_steps` Adam steps of the skinning loss, 2048 samples each, its own
+/// optimiser state, deterministic).
+pub fn warm_up_skinning(
+    field: &mut SkinningField<f32>,
+    ctx: &TrainContext,
+    config: &TrainConfig,
+) -> Result<(), TrainError> {
+    let pool = ctx.skin_points.len();
+    if config.skinning_warmup_steps == 0 || pool == 0 {
+        return Ok(());
+    }
+    let nb = ctx.skin_weights.len() / pool;
+    let m = 2048.min(pool);
+    let mut adam = net_adam(config.lr_skinning.max(1e-3) * 5.0, field.mlp.num_params());
+    for step in 0..config.skinning_warmup_steps {
+        let start = (step * m) % pool;
+        let idx: Vec<usize> = (0..m).map(|j| (start + j) % pool).collect();
+        let pts: Vec<[f32; 3]> = idx.iter().map(|&j| ctx.skin_points[j]).collect();
+        let target: Vec<f32> = idx
+            .iter()
+            .flat_map(|&j| ctx.skin_weights[j * nb..(j + 1) * nb].iter().copied())
+            .collect();
+        let (pred, cache) = field.forward(&pts)?;
+        let (_, d_pred) = skinning_loss(&pred, &target);
+        let mut grads = vec![0.0f32; field.mlp.num_params()];
+        field.backward(&cache, &d_pred, &mut grads)?;
+        adam.step(&mut field.mlp.params, &grads)?;
+    }
+    Ok(())
+}
+
 /// Scene extent of an initial cube: half its diagonal.
 fn extent_of(cube: &([f32; 3], [f32; 3])) -> f32 {
     let (lo, hi) = cube;
@@ -314,7 +346,8 @@ impl Trainer {
                 ..InitConfig::default()
             },
         );
-        let nets = build_nets(&config, vertices)?;
+        let mut nets = build_nets(&config, vertices)?;
+        warm_up_skinning(&mut nets.skinning, ctx, &config)?;
         let latents = vec![0.0; ctx.frames.len() * config.latent_dim];
         let frame_indices = ctx.frames.iter().map(|f| f.index).collect();
         Self::from_parts(
