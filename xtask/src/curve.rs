@@ -1,4 +1,5 @@
-//! The loss / PSNR training curve as a PNG (two panels: total loss on a log scale, training PSNR in
+//! The loss / PSNR training curve as a PNG (two panels: total loss — photometric plus the weighted
+//! skinning and AIAP terms, so it drops where the skinning loss ends — on a log scale, training PSNR in
 //! dB, both against the step), drawn directly with the `image` crate and a 3×5 pixel font for the
 //! axis labels, so no plotting dependency is needed.
 
@@ -31,6 +32,7 @@ fn glyph(c: char) -> Option<[u8; 5]> {
         '.' => [0, 0, 0, 0, 2],
         '-' => [0, 0, 7, 0, 0],
         'e' => [0, 7, 7, 4, 7],
+        'g' => [0, 7, 5, 7, 1],
         'l' => [6, 2, 2, 2, 7],
         'o' => [0, 7, 5, 5, 7],
         's' => [0, 7, 6, 1, 7],
