@@ -97,6 +97,26 @@ pub fn exponential_rate(lr0: f32, final_fraction: f32, step: usize, steps: usize
     (lr0.ln() * (1.0 - t) + (lr0 * final_fraction).ln() * t).exp()
 }
 
+/// Adds one view's screen-space statistics to `stats` in INRIA's NDC convention: pixel-space mean
+/// gradients × (W/2, H/2), and the screen radii (pixels, 0 = culled).
+pub fn accumulate_screen_stats(
+    stats: &mut DensityStats,
+    camera: &Camera,
+    means_2d: &[[f32; 2]],
+    radii: &[u32],
+) {
+    let (hw, hh) = (camera.width as f32 * 0.5, camera.height as f32 * 0.5);
+    let grad_ndc: Vec<[f32; 2]> = means_2d.iter().map(|m| [m[0] * hw, m[1] * hh]).collect();
+    let radius: Vec<f32> = radii.iter().map(|&r| r as f32).collect();
+    stats.accumulate(&grad_ndc, &radius);
+}
+
+/// True when the 1-based step count `done` falls on a density-control pass of the schedule
+/// `from..=until` every `every` steps (`every = 0` disables it).
+pub fn on_schedule(done: usize, from: usize, until: usize, every: usize) -> bool {
+    every > 0 && done >= from && done <= until && done.is_multiple_of(every)
+}
+
 /// Optimises `set` (whose `features` feed `net`) and `net` against `views` for `config.steps` steps.
 /// Calls `on_step` after every step. Stops with an error if a loss or gradient becomes non-finite; the
 /// parameters are then those of the last finite step.
@@ -242,20 +262,14 @@ impl StaticTrainer {
             .map_err(|e| TrainError::Config(e.to_string()))?;
         self.net_adam
             .step(&mut self.net.mlp.params, &g.colour_params)?;
-        // Density statistics in INRIA's NDC convention: pixel gradients × (W/2, H/2).
-        let (hw, hh) = (
-            view.camera.width as f32 * 0.5,
-            view.camera.height as f32 * 0.5,
-        );
-        let grad_ndc: Vec<[f32; 2]> = g.means_2d.iter().map(|m| [m[0] * hw, m[1] * hh]).collect();
-        let radius: Vec<f32> = out.radii.iter().map(|&r| r as f32).collect();
-        self.stats.accumulate(&grad_ndc, &radius);
+        accumulate_screen_stats(&mut self.stats, &view.camera, &g.means_2d, &out.radii);
         let done = step + 1;
-        if done >= config.densify_from
-            && done <= config.densify_until
-            && config.densify_every > 0
-            && done.is_multiple_of(config.densify_every)
-        {
+        if on_schedule(
+            done,
+            config.densify_from,
+            config.densify_until,
+            config.densify_every,
+        ) {
             let mut densify = config.densify;
             densify.scene_extent = config.scene_extent;
             densify_and_prune(

@@ -12,7 +12,7 @@ use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, Chec
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::config::TrainConfig;
 use crate::data::Dataset;
-use crate::fit::exponential_rate;
+use crate::fit::{accumulate_screen_stats, exponential_rate, on_schedule};
 use crate::image_loss::{l1, psnr, ssim, ImageShape};
 use crate::init::{initialise, InitConfig};
 use crate::model::{
@@ -39,6 +39,15 @@ use std::time::Instant;
 
 /// Identifier stored in every checkpoint of this trainer.
 pub const CHECKPOINT_FORMAT: &str = "e-sem3dgs-trainer-v1";
+
+/// Checkpoint names of the network optimisers, in the order of their step counts in the metadata.
+const NET_OPTIMISERS: [&str; 5] = [
+    "nonrigid",
+    "skinning",
+    "human_colour",
+    "scene_colour",
+    "latent",
+];
 
 /// Number of rendered channels: linear RGB and the human probability.
 pub const RENDER_CHANNELS: usize = 4;
@@ -810,20 +819,14 @@ impl Trainer {
         times.adam = t0.elapsed().as_secs_f64();
 
         let t0 = Instant::now();
-        let (hw_half, hh_half) = (camera.width as f32 * 0.5, camera.height as f32 * 0.5);
-        let grad_ndc: Vec<[f32; 2]> = rg
-            .means_2d
-            .iter()
-            .map(|m| [m[0] * hw_half, m[1] * hh_half])
-            .collect();
-        let radius: Vec<f32> = out.radii.iter().map(|&r| r as f32).collect();
-        self.stats.accumulate(&grad_ndc, &radius);
+        accumulate_screen_stats(&mut self.stats, camera, &rg.means_2d, &out.radii);
         let done = step + 1;
-        if done >= config.densify_from
-            && done <= config.densify_until
-            && config.densify_every > 0
-            && done.is_multiple_of(config.densify_every)
-        {
+        if on_schedule(
+            done,
+            config.densify_from,
+            config.densify_until,
+            config.densify_every,
+        ) {
             let densify = DensifyConfig {
                 grad_threshold: config.densify_grad_threshold,
                 scene_extent: self.scene_extent,
@@ -875,13 +878,17 @@ impl Trainer {
         w.push("human_colour", self.nets.human_colour.mlp.params.clone());
         w.push("scene_colour", self.nets.scene_colour.mlp.params.clone());
         w.push("latents", self.latents.clone());
-        let net_adam_steps = vec![
-            w.push_adam("nonrigid_adam", &self.nonrigid_adam),
-            w.push_adam("skinning_adam", &self.skinning_adam),
-            w.push_adam("human_colour_adam", &self.human_colour_adam),
-            w.push_adam("scene_colour_adam", &self.scene_colour_adam),
-            w.push_adam("latent_adam", &self.latent_adam),
-        ];
+        let net_adam_steps: Vec<u64> = NET_OPTIMISERS
+            .iter()
+            .zip([
+                &self.nonrigid_adam,
+                &self.skinning_adam,
+                &self.human_colour_adam,
+                &self.scene_colour_adam,
+                &self.latent_adam,
+            ])
+            .map(|(name, adam)| w.push_adam(&format!("{name}_adam"), adam))
+            .collect();
         w.push_stats("stats", &self.stats);
         // Indices as float32: exact below 2^24, which `TrainConfig::validate` bounds the count by.
         w.push(
@@ -938,41 +945,33 @@ impl Trainer {
         let frame_indices = ctx.frames.iter().map(|f| f.index).collect();
         let mut t = Self::from_parts(config, set, nets, latents, frame_indices, meta.scene_extent)?;
         r.gaussian_adam("adam", &mut t.adam, &meta.adam_steps)?;
-        if meta.net_adam_steps.len() != 5 {
-            return Err(r.error("expected 5 network optimiser step counts"));
+        if meta.net_adam_steps.len() != NET_OPTIMISERS.len() {
+            return Err(r.error(format!(
+                "expected {} network optimiser step counts",
+                NET_OPTIMISERS.len()
+            )));
         }
         let c = &t.config;
-        let s = &meta.net_adam_steps;
-        t.nonrigid_adam = r.adam(
-            "nonrigid_adam",
-            adam_config(c.lr_nonrigid),
-            t.nets.nonrigid.mlp.num_params(),
-            s[0],
-        )?;
-        t.skinning_adam = r.adam(
-            "skinning_adam",
-            adam_config(c.lr_skinning),
-            t.nets.skinning.mlp.num_params(),
-            s[1],
-        )?;
-        t.human_colour_adam = r.adam(
-            "human_colour_adam",
-            adam_config(c.lr_colour),
-            t.nets.human_colour.mlp.num_params(),
-            s[2],
-        )?;
-        t.scene_colour_adam = r.adam(
-            "scene_colour_adam",
-            adam_config(c.lr_colour),
-            t.nets.scene_colour.mlp.num_params(),
-            s[3],
-        )?;
-        t.latent_adam = r.adam(
-            "latent_adam",
-            adam_config(c.lr_latent),
-            t.latents.len(),
-            s[4],
-        )?;
+        let rates = [
+            c.lr_nonrigid,
+            c.lr_skinning,
+            c.lr_colour,
+            c.lr_colour,
+            c.lr_latent,
+        ];
+        let load = |k: usize, len: usize| {
+            r.adam(
+                &format!("{}_adam", NET_OPTIMISERS[k]),
+                adam_config(rates[k]),
+                len,
+                meta.net_adam_steps[k],
+            )
+        };
+        t.nonrigid_adam = load(0, t.nets.nonrigid.mlp.num_params())?;
+        t.skinning_adam = load(1, t.nets.skinning.mlp.num_params())?;
+        t.human_colour_adam = load(2, t.nets.human_colour.mlp.num_params())?;
+        t.scene_colour_adam = load(3, t.nets.scene_colour.mlp.num_params())?;
+        t.latent_adam = load(4, t.latents.len())?;
         t.stats = r.stats("stats", t.set.len())?;
         let n = t.set.len();
         let index = r.get("aiap.index")?;
