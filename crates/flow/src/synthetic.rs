@@ -33,6 +33,8 @@ pub struct PairConfig {
     pub max_rotation: f32,
     /// Largest relative scale change.
     pub max_scale: f32,
+    /// Largest number of moving foreground layers (a pair has between `min(1, max)` and `max`).
+    pub max_foreground_layers: usize,
 }
 
 impl Default for PairConfig {
@@ -42,6 +44,7 @@ impl Default for PairConfig {
             max_translation: 0.12,
             max_rotation: 0.15,
             max_scale: 0.1,
+            max_foreground_layers: 3,
         }
     }
 }
@@ -249,7 +252,10 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
         rot: 0.0,
         ellipse: false,
     }];
-    let count = 1 + (r.next_u64() % 3) as usize;
+    let count = match cfg.max_foreground_layers {
+        0 => 0,
+        m => 1 + (r.next_u64() % m as u64) as usize,
+    };
     for _ in 0..count {
         let c = [r.f() * nf, r.f() * nf];
         layers.push(Layer {
