@@ -29,7 +29,7 @@ use crate::error::{Result, SynthError};
 use crate::flow::{ground_truth_flow, warp_error};
 use crate::mesh::{Light, Mesh};
 use crate::motion::Motion;
-use crate::raster::{render, GBuffer, NO_HIT};
+use crate::raster::{render_over, GBuffer, StaticSamples, NO_HIT};
 use crate::{preview, room};
 
 /// Vertical field of view of the camera (degrees).
@@ -393,6 +393,9 @@ pub fn generate_with_body(
     };
 
     let all_tris = room_and_body_tris(&room.mesh, &body);
+    // The room and camera are static: rasterize and shade the room's samples once; every render
+    // below re-rasterizes only the body over them (bit-identical to a full render).
+    let room_samples = StaticSamples::new(&room.mesh, &materials, &cam, &light, ss);
     let mut prev: Option<Sharp> = None;
     let mut scene_frames = Vec::with_capacity(frames);
     for k in 0..frames {
@@ -419,7 +422,7 @@ pub fn generate_with_body(
             let verts = body.posed_vertices(&pose, transl)?;
             let mut mesh = room.mesh.clone();
             mesh.append(&body.mesh(verts, body_base));
-            let r = render(&mesh, &materials, &cam, &light, ss);
+            let r = render_over(&room_samples, &mesh, &materials, &cam, &light, ss);
             let is_sub = !is_sharp || odd_middle;
             if is_sub {
                 for (a, b) in blur_sum.iter_mut().zip(&r.rgb) {

@@ -5,7 +5,7 @@ use glam::Vec3;
 use synth::camera::PinholeCamera;
 use synth::flow::{ground_truth_flow, warp_error};
 use synth::mesh::{Light, Material, Mesh};
-use synth::raster::{render, NO_HIT};
+use synth::raster::{render, render_over, StaticSamples, NO_HIT};
 use synth::texture::{self, Texture};
 
 fn cam(w: u32, h: u32) -> PinholeCamera {
@@ -307,5 +307,47 @@ fn flow_of_a_translated_plane_is_its_projection_and_warps_back() {
     assert!(
         warp < 0.5 * identity,
         "warp error {warp} not well below zero-flow error {identity}"
+    );
+}
+
+#[test]
+fn rendering_over_cached_static_samples_is_bit_identical_to_a_full_render() {
+    let c = cam(40, 30);
+    let mats = materials();
+    let back = Mesh::quad(
+        Vec3::new(-2.0, -2.0, -1.0),
+        Vec3::X * 4.0,
+        Vec3::Y * 4.0,
+        4,
+        4,
+        1.0,
+        0,
+    );
+    let base = StaticSamples::new(&back, &mats, &c, &LIGHT, 3);
+    assert_eq!(base.triangle_count(), back.tris.len());
+    // The moving quad in front, sliding across, and coplanar with the back plane (every sample a
+    // depth tie, which the static triangles must win as in a full render).
+    for (dx, z) in [(0.0, 0.5), (0.37, 0.2), (-1.1, -0.4), (0.25, -1.0)] {
+        let mut mesh = back.clone();
+        mesh.append(&Mesh::quad(
+            Vec3::new(-0.3 + dx, -0.3, z),
+            Vec3::X * 0.6,
+            Vec3::Y * 0.6,
+            2,
+            1,
+            1.0,
+            1,
+        ));
+        let full = render(&mesh, &mats, &c, &LIGHT, 3);
+        let over = render_over(&base, &mesh, &mats, &c, &LIGHT, 3);
+        assert!(full.gbuf.tri.iter().any(|&t| t as usize >= back.tris.len()) || z == -1.0);
+        assert_eq!(full, over, "offset {dx}, depth {z}");
+    }
+    // A base that does not fit (other supersampling) falls back to a full render.
+    let mut mesh = back.clone();
+    mesh.append(&two_planes());
+    assert_eq!(
+        render_over(&base, &mesh, &mats, &c, &LIGHT, 1),
+        render(&mesh, &mats, &c, &LIGHT, 1)
     );
 }
