@@ -9,8 +9,9 @@
 //! - `smpl-only`: only the human Gaussians.
 //!
 //! Semantic logits follow the paper: ±λ_logit (λ = 3) for the labelled class (human (−3, +3), scene
-//! (+3, −3)); `--semantic-init half` starts every Gaussian at p = 0.5 instead; the scalar mode stores a
-//! single logit (±3, or 0 for half). Scales come from the 3-nearest-neighbour rule, rotations are the
+//! (+3, −3)); `--semantic-init half` starts every Gaussian at p = 0.5 instead. The scalar ablation
+//! stores a single logit initialised to 0 (p = sigmoid(0) = 0.5) for every Gaussian, as the issue
+//! defines it ("one sigmoid value initialised 0.5"), whatever `--semantic-init` says. Scales come from the 3-nearest-neighbour rule, rotations are the
 //! identity, opacity 0.1, features small random values, and the SH DC colour (used only for previews
 //! before the colour networks are trained) is white for human and grey for scene Gaussians.
 
@@ -249,7 +250,6 @@ pub fn initialise(
             (SemanticMode::OneHot, true) => {
                 logits.copy_from_slice(&if is_human { [-l, l] } else { [l, -l] });
             }
-            (SemanticMode::Scalar, true) => logits[0] = if is_human { l } else { -l },
             _ => logits.iter_mut().for_each(|v| *v = 0.0),
         }
     }
@@ -388,7 +388,7 @@ mod tests {
             },
         );
         assert_eq!(scalar.set.semantic_classes, 1);
-        assert_eq!(scalar.set.semantic_logits[0], 3.0);
+        assert!(scalar.set.semantic_logits.iter().all(|&l| l == 0.0));
         let none = initialise(
             &v,
             &f,
