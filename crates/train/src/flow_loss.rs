@@ -7,7 +7,9 @@
 //! themselves are resized by the same operator inside the training step (`nn::resize_bilinear_*`).
 //! Flows are planar (2, H, W) in pixels, forward k → k+1 (DESIGN.md §3).
 
-use nn::{resize_bilinear_forward, NnError, Real};
+use crate::TrainError;
+use flow::SpyNet;
+use nn::{resize_bilinear_backward, resize_bilinear_forward, NnError, Real};
 
 /// Event flow at the network's resolution, with the supervision mask.
 #[derive(Clone, Debug, PartialEq)]
@@ -114,6 +116,69 @@ pub fn masked_l1<T: Real>(pred: &[T], target: &FlowTarget<T>, grad: Option<&mut 
         }
     }
     total * inv
+}
+
+/// [`pair_flow_loss`]'s result: the loss, the network's prediction, and the loss gradient w.r.t. both
+/// full-resolution renders.
+#[derive(Clone, Debug)]
+pub struct PairFlowLoss<T> {
+    /// L_flow (pixels at the network's resolution).
+    pub loss: T,
+    /// Predicted flow (2, h, w) at the target's resolution.
+    pub predicted: Vec<T>,
+    /// ∂L_flow/∂(render of frame k), planar (3, H, W).
+    pub d_first: Vec<T>,
+    /// ∂L_flow/∂(render of frame k+1), planar (3, H, W).
+    pub d_second: Vec<T>,
+    /// Identifies the smooth piece of the loss the inputs fall in (the network's ReLU and warp-cell
+    /// pattern and the signs of the L1 residuals): finite-difference probes whose signatures differ
+    /// straddle a kink.
+    pub region_signature: u64,
+}
+
+/// L_flow of two renders (planar (3, H, W) RGB, frames k and k+1): both are resized to the target's
+/// resolution (bilinear, `align_corners = true`), the frozen network predicts the flow between them,
+/// [`masked_l1`] compares it with the target, and the gradient goes back through the network's input
+/// gradient and the resize into both renders. The network's weights are not differentiated.
+pub fn pair_flow_loss<T: Real>(
+    net: &SpyNet<T>,
+    first: &[T],
+    second: &[T],
+    height: usize,
+    width: usize,
+    target: &FlowTarget<T>,
+) -> Result<PairFlowLoss<T>, TrainError> {
+    let (h, w) = (target.height, target.width);
+    let mut small = [vec![T::zero(); 3 * h * w], vec![T::zero(); 3 * h * w]];
+    for (img, out) in [first, second].into_iter().zip(small.iter_mut()) {
+        resize_bilinear_forward(3, height, width, img, h, w, true, out)?;
+    }
+    let tape = net.forward(&small[0], &small[1], h, w)?;
+    let mut d_flow = vec![T::zero(); 2 * h * w];
+    let loss = masked_l1(&tape.flow, target, Some(&mut d_flow));
+    let (d_small_first, d_small_second) = net.backward(&tape, &d_flow, None)?;
+    let mut d_first = vec![T::zero(); 3 * height * width];
+    let mut d_second = vec![T::zero(); 3 * height * width];
+    resize_bilinear_backward(3, height, width, h, w, true, &d_small_first, &mut d_first)?;
+    resize_bilinear_backward(3, height, width, h, w, true, &d_small_second, &mut d_second)?;
+    // Fold the L1 residual signs of supervised pixels into the network's region signature.
+    let plane = h * w;
+    let mut signature = tape.region_signature();
+    for (i, &g) in d_flow.iter().enumerate() {
+        if target.mask[i % plane] {
+            let sign = if g > T::zero() { 1u64 } else { 2 };
+            signature = (signature ^ sign.wrapping_add(i as u64))
+                .wrapping_mul(0x1000_0000_01B3)
+                .rotate_left(5);
+        }
+    }
+    Ok(PairFlowLoss {
+        loss,
+        predicted: tape.flow,
+        d_first,
+        d_second,
+        region_signature: signature,
+    })
 }
 
 #[cfg(test)]

@@ -33,6 +33,9 @@ pub enum TrainError {
     /// The rasterizer rejected its inputs.
     #[error(transparent)]
     Raster(#[from] rasterize_cpu::RasterError),
+    /// The flow network rejected its inputs or weights.
+    #[error("flow network: {0}")]
+    Flow(#[from] flow::FlowError),
     /// A configuration or input that cannot be trained on.
     #[error("{0}")]
     Config(String),
