@@ -126,6 +126,61 @@ pub struct TrainConfig {
     pub opacity_reset_every: usize,
     /// Steps between checkpoints (0: only at the end).
     pub checkpoint_every: usize,
+    /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
+    /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
+    /// between the two renders is pulled towards that flow (see `train::flow_loss`).
+    pub flow_loss: bool,
+    /// Which flow of `scene.json` supervises (`ground-truth`, `events`, `file`).
+    pub flow_source: FlowSource,
+    /// λ_flow, the weight of L_flow in the step's loss. Provisional: not yet chosen by a sweep on the
+    /// benchmark.
+    pub flow_weight: f32,
+    /// τ: pixels whose target flow is at most this long (pixels at the network's resolution) are not
+    /// supervised. Provisional, like `flow_weight`.
+    pub flow_tau: f32,
+    /// The renders and the flow are resized by this factor before the network (paper: 0.25).
+    pub flow_scale: f32,
+    /// SPyNet-style weights (safetensors) of the frozen flow network; `None`: the project's shipped
+    /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
+    pub flow_network: Option<std::path::PathBuf>,
+}
+
+/// Source of the flow that supervises the flow loss.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlowSource {
+    /// The generator's exact flow (`ground_truth` in `scene.json`; the paper's "ideal event flow").
+    GroundTruth,
+    /// Flow from the events alone by contrast maximisation (`events_cm`).
+    Events,
+    /// Flow made by another tool (`external`).
+    File,
+}
+
+impl FlowSource {
+    /// The `scene.json` flow kind this source reads.
+    pub fn kind(self) -> scene::FlowKind {
+        match self {
+            Self::GroundTruth => scene::FlowKind::GroundTruth,
+            Self::Events => scene::FlowKind::EventsCm,
+            Self::File => scene::FlowKind::External,
+        }
+    }
+}
+
+impl std::str::FromStr for FlowSource {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "gt" | "ground-truth" => Ok(Self::GroundTruth),
+            "events" => Ok(Self::Events),
+            "file" => Ok(Self::File),
+            _ => Err(format!(
+                "unknown flow source `{s}` (expected gt, events or file)"
+            )),
+        }
+    }
 }
 
 impl Default for TrainConfig {
@@ -180,6 +235,12 @@ impl TrainConfig {
             prune_min_opacity: 0.005,
             opacity_reset_every: 0,
             checkpoint_every: 500,
+            flow_loss: false,
+            flow_source: FlowSource::Events,
+            flow_weight: 0.05,
+            flow_tau: 0.25,
+            flow_scale: 0.25,
+            flow_network: None,
         };
         match preset {
             Preset::Quick => quick,
@@ -255,6 +316,15 @@ impl TrainConfig {
         }
         if !(0.0..=1.0).contains(&self.ssim_weight) {
             return bad("ssim_weight", "must be in [0, 1]");
+        }
+        if !(self.flow_weight >= 0.0 && self.flow_weight.is_finite()) {
+            return bad("flow_weight", "must be a finite number ≥ 0");
+        }
+        if !(self.flow_tau >= 0.0 && self.flow_tau.is_finite()) {
+            return bad("flow_tau", "must be a finite number ≥ 0");
+        }
+        if !(self.flow_scale > 0.0 && self.flow_scale <= 1.0) {
+            return bad("flow_scale", "must be in (0, 1]");
         }
         if !(self.max_initial_scale > 0.0) {
             return bad("max_initial_scale", "must be positive");

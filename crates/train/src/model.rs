@@ -146,6 +146,30 @@ pub struct ModelGradients<T> {
     pub bones: Vec<Affine<T>>,
 }
 
+impl<T: Real> ModelGradients<T> {
+    /// Adds `other`'s gradients of the parameters shared by every frame (Gaussians and networks) to
+    /// these; `latent` and `bones` belong to one frame each and are left alone.
+    pub fn add_shared(&mut self, other: &ModelGradients<T>) {
+        fn add<T: Real>(a: &mut [T], b: &[T]) {
+            for (x, &y) in a.iter_mut().zip(b) {
+                *x = *x + y;
+            }
+        }
+        add(self.means.as_flattened_mut(), other.means.as_flattened());
+        add(
+            self.log_scales.as_flattened_mut(),
+            other.log_scales.as_flattened(),
+        );
+        add(self.quats.as_flattened_mut(), other.quats.as_flattened());
+        add(&mut self.features, &other.features);
+        add(&mut self.semantic_logits, &other.semantic_logits);
+        add(&mut self.nonrigid, &other.nonrigid);
+        add(&mut self.skinning, &other.skinning);
+        add(&mut self.human_colour, &other.human_colour);
+        add(&mut self.scene_colour, &other.scene_colour);
+    }
+}
+
 /// Σ = M diag(e^{2s}) Mᵀ for a row-major M.
 fn deformed_covariance<T: Real>(m: &Mat3<T>, s: &[T; 3]) -> [[T; 3]; 3] {
     let d = s.map(|v| (v + v).exp());

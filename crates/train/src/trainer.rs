@@ -13,6 +13,7 @@ use crate::colour::{ColourNet, ColourNetConfig};
 use crate::config::TrainConfig;
 use crate::data::Dataset;
 use crate::fit::{accumulate_screen_stats, exponential_rate, on_schedule};
+use crate::flow_loss::{pair_flow_loss, prepare_target, FlowTarget};
 use crate::image_loss::{l1, psnr, ssim, ImageShape};
 use crate::init::{initialise, InitConfig};
 use crate::model::{
@@ -20,6 +21,7 @@ use crate::model::{
     PosedFrame,
 };
 use crate::TrainError;
+use flow::SpyNet;
 use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};
 use gaussians::density::{densify_and_prune, reset_opacity, DensifyConfig, DensityStats};
@@ -111,6 +113,15 @@ pub struct TrainingFrame {
     pub pose: PreparedPose,
 }
 
+/// Flow supervision of one training frame k: the next training frame and the target flow k → k+1.
+#[derive(Clone, Debug)]
+pub struct FlowPair {
+    /// Slot (position in [`TrainContext::frames`]) of frame k+1.
+    pub next_slot: usize,
+    /// The supervising flow at the network's resolution, with its mask.
+    pub target: FlowTarget<f32>,
+}
+
 /// Everything fixed during training: camera, training frames, body and skinning-loss samples.
 #[derive(Clone, Debug)]
 pub struct TrainContext {
@@ -124,6 +135,12 @@ pub struct TrainContext {
     pub skin_points: Vec<[f32; 3]>,
     /// Body skinning weights of `skin_points`, row-major (N, 24).
     pub skin_weights: Vec<f32>,
+    /// Per training slot, the flow supervision of the pair (k, k+1) (empty unless
+    /// [`TrainContext::enable_flow`] was called; `None` for a frame whose next frame is not a training
+    /// frame).
+    pub flow_pairs: Vec<Option<FlowPair>>,
+    /// The frozen flow network of the flow loss.
+    pub flow_net: Option<SpyNet<f32>>,
 }
 
 impl TrainContext {
@@ -156,7 +173,101 @@ impl TrainContext {
             body,
             skin_points: samples.points,
             skin_weights: samples.weights,
+            flow_pairs: Vec::new(),
+            flow_net: None,
         })
+    }
+
+    /// Prepares the flow loss: for every training frame whose next frame in `scene.json` is also a
+    /// training frame, reads the flow of `config.flow_source` (and its validity mask) and resizes it
+    /// to the network's resolution (`config.flow_scale`, τ = `config.flow_tau`). A pair without that
+    /// flow, or with a flow of the wrong size, is an error naming the frame and the file — refused
+    /// here, not mid-training. Frames whose next frame is a test frame (or the last frame) have no
+    /// pair.
+    pub fn enable_flow(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+        net: SpyNet<f32>,
+    ) -> Result<(), TrainError> {
+        let kind = config.flow_source.kind();
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        let h_out = ((h as f64 * config.flow_scale as f64).round() as usize).max(1);
+        let w_out = ((w as f64 * config.flow_scale as f64).round() as usize).max(1);
+        let mut pairs = vec![None; self.frames.len()];
+        let mut slot = 0usize;
+        for (p, f) in data.frames.iter().enumerate() {
+            if f.split != Split::Train {
+                continue;
+            }
+            let next_is_train = data
+                .frames
+                .get(p + 1)
+                .is_some_and(|n| n.split == Split::Train);
+            if next_is_train {
+                let sf = &data.scene.frames[p];
+                let Some(fr) = sf.flow(kind) else {
+                    return Err(TrainError::Config(format!(
+                        "{}: frame {} has no `{}` flow to the next training frame {} (needed by \
+                         the flow loss with flow source {:?})",
+                        data.dir.display(),
+                        f.index,
+                        kind.as_str(),
+                        data.frames[p + 1].index,
+                        config.flow_source
+                    )));
+                };
+                let path = scene::Scene::resolve(&data.dir, &fr.path);
+                let flow = events::read_flow(&path)
+                    .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+                if (flow.width, flow.height) != (w, h) {
+                    return Err(TrainError::Config(format!(
+                        "{}: flow is {}x{}, the camera is {w}x{h}",
+                        path.display(),
+                        flow.width,
+                        flow.height
+                    )));
+                }
+                let valid = match &fr.valid_mask {
+                    Some(rel) => {
+                        let mp = scene::Scene::resolve(&data.dir, rel);
+                        let (mw, mh, m) = scene::read_mask(&mp)?;
+                        if (mw as usize, mh as usize) != (w, h) {
+                            return Err(TrainError::Config(format!(
+                                "{}: mask is {mw}x{mh}, the camera is {w}x{h}",
+                                mp.display()
+                            )));
+                        }
+                        Some(m)
+                    }
+                    None => None,
+                };
+                let target = prepare_target(
+                    &flow.data,
+                    valid.as_deref(),
+                    h,
+                    w,
+                    h_out,
+                    w_out,
+                    config.flow_tau,
+                )?;
+                pairs[slot] = Some(FlowPair {
+                    next_slot: slot + 1,
+                    target,
+                });
+            }
+            slot += 1;
+        }
+        if pairs.iter().all(Option::is_none) {
+            return Err(TrainError::Config(format!(
+                "{}: no two consecutive frames are both training frames, so the flow loss has \
+                 nothing to supervise",
+                data.dir.display()
+            )));
+        }
+        self.flow_pairs = pairs;
+        self.flow_net = Some(net);
+        Ok(())
     }
 
     /// Number of pixels per channel.
@@ -182,6 +293,9 @@ pub struct StageTimes {
     pub adam: f64,
     /// Density control and opacity reset.
     pub density: f64,
+    /// The flow loss: posing and rendering frame k+1, the flow network forward and backward, frame
+    /// k+1's rasterizer and model backward (0 without a flow pair).
+    pub flow: f64,
 }
 
 /// What one step did.
@@ -201,6 +315,8 @@ pub struct StepReport {
     pub skinning: f32,
     /// The weighted AIAP loss (positions + covariances).
     pub aiap: f32,
+    /// The weighted flow loss λ_flow·L_flow (0 on steps without a flow pair).
+    pub flow: f32,
     /// PSNR (dB) of the render against the (blurred) training frame.
     pub psnr: f64,
     /// Gaussians with human probability ≥ 0.5 after the step.
@@ -625,6 +741,44 @@ impl Trainer {
         }
         times.loss = t0.elapsed().as_secs_f64();
 
+        // Flow loss on the pair (k, k+1): render frame k+1 too; L_flow's gradient w.r.t. frame k's
+        // render joins the photometric one, frame k+1's goes back through its own render and pose.
+        let t_flow = Instant::now();
+        let pair = match (config.flow_loss, ctx.flow_net.as_ref()) {
+            (true, Some(net)) => ctx
+                .flow_pairs
+                .get(slot)
+                .and_then(Option::as_ref)
+                .map(|p| (net, p)),
+            _ => None,
+        };
+        let mut flow_value = 0.0f32;
+        let mut second = None;
+        if let Some((net, pair)) = pair {
+            let next = &ctx.frames[pair.next_slot];
+            let latent2 = self.latents[pair.next_slot * d..(pair.next_slot + 1) * d].to_vec();
+            let (posed2, cache2, out2) = self.forward(camera, &next.pose, &latent2)?;
+            let fl = pair_flow_loss(
+                net,
+                rgb,
+                &out2.image[..3 * hw],
+                camera.height as usize,
+                camera.width as usize,
+                &pair.target,
+            )?;
+            let lambda = config.flow_weight;
+            flow_value = lambda * fl.loss;
+            for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl.d_first) {
+                *o += lambda * g;
+            }
+            let mut d_image2 = vec![0.0f32; RENDER_CHANNELS * hw];
+            for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&fl.d_second) {
+                *o = lambda * g;
+            }
+            second = Some((pair.next_slot, latent2, posed2, cache2, out2, d_image2));
+        }
+        times.flow = t_flow.elapsed().as_secs_f64();
+
         let t0 = Instant::now();
         let rg = render_cov_backward(
             camera,
@@ -732,6 +886,64 @@ impl Trainer {
                 grads.quats[i][ax] += dq[ax];
             }
         }
+        // Frame k+1 of the flow pair: its rasterizer and model backward, accumulated.
+        let mut opacity_grads = rg.opacity_logits.clone();
+        let mut second_latent = None;
+        if let Some((next_slot, latent2, posed2, cache2, out2, d_image2)) = second {
+            let t_flow = Instant::now();
+            let channels2 = interleave_channels(&posed2);
+            let splats2 = CovSplats {
+                means: &posed2.means,
+                covariances: &posed2.covariances,
+                opacity_logits: &self.set.opacity_logits,
+                channels: &channels2,
+                num_channels: RENDER_CHANNELS,
+            };
+            let rg2 = render_cov_backward(
+                camera,
+                &splats2,
+                &settings,
+                &out2,
+                &Cotangents {
+                    image: &d_image2,
+                    alpha: None,
+                    depth: None,
+                },
+            )?;
+            let mut d_colours2 = vec![0.0f32; n * 3];
+            let mut d_prob2 = vec![0.0f32; n];
+            for i in 0..n {
+                d_colours2[i * 3..i * 3 + 3]
+                    .copy_from_slice(&rg2.channels[i * RENDER_CHANNELS..i * RENDER_CHANNELS + 3]);
+                d_prob2[i] = rg2.channels[i * RENDER_CHANNELS + 3];
+            }
+            let next = &ctx.frames[next_slot];
+            let inputs2 = FrameInputs {
+                pose_code: &next.pose.pose_code,
+                bones: &next.pose.bones,
+                camera_centre: centre,
+                latent: &latent2,
+            };
+            let grads2 = pose_frame_backward(
+                &self.nets,
+                config.semantic,
+                &self.params(),
+                &inputs2,
+                &cache2,
+                &FrameCotangents {
+                    means: &rg2.means,
+                    covariances: &rg2.covariances,
+                    colours: &d_colours2,
+                    human_probability: &d_prob2,
+                },
+            )?;
+            grads.add_shared(&grads2);
+            for (o, &g) in opacity_grads.iter_mut().zip(&rg2.opacity_logits) {
+                *o += g;
+            }
+            second_latent = Some((next_slot, grads2.latent));
+            times.flow += t_flow.elapsed().as_secs_f64();
+        }
         // Skinning loss on canonical surface samples (a window of the pool that moves every step).
         let mut skinning_value = 0.0f32;
         if step < config.skinning_until
@@ -760,9 +972,12 @@ impl Trainer {
         }
         times.model_backward = t0.elapsed().as_secs_f64();
 
-        let loss = photometric + aiap_value + skinning_value;
+        let loss = photometric + aiap_value + skinning_value + flow_value;
         let finite = loss.is_finite()
-            && rg.opacity_logits.iter().all(|v| v.is_finite())
+            && opacity_grads.iter().all(|v| v.is_finite())
+            && second_latent
+                .as_ref()
+                .is_none_or(|(_, g)| g.iter().all(|v| v.is_finite()))
             && grads.means.iter().flatten().all(|v| v.is_finite())
             && grads.log_scales.iter().flatten().all(|v| v.is_finite())
             && grads.quats.iter().flatten().all(|v| v.is_finite())
@@ -782,7 +997,7 @@ impl Trainer {
         set_grads.means = grads.means;
         set_grads.log_scales = grads.log_scales;
         set_grads.quats = grads.quats;
-        set_grads.opacity_logits = rg.opacity_logits;
+        set_grads.opacity_logits = opacity_grads;
         set_grads.features = grads.features;
         set_grads.semantic_logits = grads.semantic_logits;
         let rates = GaussianLearningRates {
@@ -815,6 +1030,9 @@ impl Trainer {
             .step(&mut self.nets.scene_colour.mlp.params, &grads.scene_colour)?;
         let mut latent_grads = vec![0.0f32; self.latents.len()];
         latent_grads[slot * d..(slot + 1) * d].copy_from_slice(&grads.latent);
+        if let Some((next_slot, g)) = &second_latent {
+            latent_grads[next_slot * d..(next_slot + 1) * d].copy_from_slice(g);
+        }
         self.latent_adam.step(&mut self.latents, &latent_grads)?;
         times.adam = t0.elapsed().as_secs_f64();
 
@@ -860,6 +1078,7 @@ impl Trainer {
             ssim: ssim_value,
             skinning: skinning_value,
             aiap: aiap_value,
+            flow: flow_value,
             psnr: psnr(rgb, &frame.image),
             gaussians_human: human,
             gaussians_scene: self.set.len() - human,

@@ -128,3 +128,81 @@ fn one_and_two_threads_give_identical_bits() {
     };
     assert_same_bits(&run(1), &run(2));
 }
+
+/// A context with the flow loss on (ground-truth flow of the fixture, a random 2-level network).
+fn flow_context(config: &TrainConfig) -> TrainContext {
+    let data = load_dataset(&fixture()).unwrap();
+    let mut ctx = context();
+    ctx.enable_flow(&data, config, flow::SpyNet::random(2, 7))
+        .unwrap();
+    ctx
+}
+
+#[test]
+fn the_flow_loss_trains_pairs_of_consecutive_training_frames() {
+    let config = TrainConfig {
+        flow_loss: true,
+        flow_source: train::config::FlowSource::GroundTruth,
+        flow_tau: 0.0,
+        ..tiny_config(8)
+    };
+    let ctx = flow_context(&config);
+    // The fixture's split is 7 train / 3 test per block of 10: pairs exist, and a frame followed by a
+    // test frame has none.
+    let pairs = ctx.flow_pairs.iter().filter(|p| p.is_some()).count();
+    assert!(pairs > 0 && pairs < ctx.frames.len(), "{pairs} pairs");
+    for (slot, p) in ctx.flow_pairs.iter().enumerate() {
+        if let Some(p) = p {
+            assert_eq!(p.next_slot, slot + 1);
+            assert_eq!((p.target.height, p.target.width), (16, 16));
+        }
+    }
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+                let mut flow_steps = 0;
+                t.run(&ctx, 8, |_, r| {
+                    assert!(r.flow.is_finite() && r.flow >= 0.0);
+                    flow_steps += usize::from(r.flow > 0.0);
+                    Ok(())
+                })
+                .unwrap();
+                (bits(&t), flow_steps)
+            })
+    };
+    let (one, flow_steps) = run(1);
+    assert!(flow_steps > 0, "no step had a flow pair");
+    assert_same_bits(&one, &run(2).0);
+    // The same run without the flow loss ends elsewhere: the term changes the parameters.
+    let mut off = Trainer::new(
+        &ctx,
+        TrainConfig {
+            flow_loss: false,
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    off.run(&ctx, 8, |_, _| Ok(())).unwrap();
+    assert_ne!(bits(&off), one);
+}
+
+#[test]
+fn a_flow_source_the_scene_lacks_is_refused_at_load_time() {
+    let data = load_dataset(&fixture()).unwrap();
+    let mut ctx = context();
+    // The tiny fixture has no event-only flow.
+    let config = TrainConfig {
+        flow_loss: true,
+        flow_source: train::config::FlowSource::Events,
+        ..tiny_config(8)
+    };
+    let err = ctx
+        .enable_flow(&data, &config, flow::SpyNet::random(2, 7))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("events_cm") && err.contains("frame"), "{err}");
+}
