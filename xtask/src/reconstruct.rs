@@ -13,7 +13,7 @@ use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::blend::SemanticMode;
-use train::config::{Preset, TrainConfig};
+use train::config::{FlowSource, Preset, TrainConfig};
 use train::init::{InitMode, SemanticInit};
 use train::trainer::{Body, StepReport, TrainContext, Trainer};
 use train::TrainError;
@@ -49,6 +49,23 @@ pub struct Args {
     /// Initial semantic logits: one-hot (paper) or half (p = 0.5 everywhere).
     #[arg(long, value_parser = parse_semantic_init)]
     pub semantic_init: Option<SemanticInit>,
+    /// Event-flow supervision (paper §4.4): `on` or `off` (default off).
+    #[arg(long, value_parser = parse_on_off)]
+    pub flow_loss: Option<bool>,
+    /// Flow that supervises the flow loss: gt (the generator's exact flow), events (contrast
+    /// maximisation on the events), file (an external flow named in scene.json).
+    #[arg(long)]
+    pub flow_source: Option<FlowSource>,
+    /// λ_flow, the weight of the flow loss.
+    #[arg(long)]
+    pub flow_weight: Option<f32>,
+    /// τ: target flows no longer than this (pixels at 1/4 resolution) are not supervised.
+    #[arg(long)]
+    pub flow_tau: Option<f32>,
+    /// Weights of the frozen flow network (safetensors). Default: the shipped
+    /// data-fixtures/flow/spynet-synthetic.safetensors.
+    #[arg(long)]
+    pub flow_network: Option<PathBuf>,
     /// Continue from OUT/checkpoint.safetensors (same bits as an uninterrupted run).
     #[arg(long)]
     pub resume: bool,
@@ -70,6 +87,49 @@ fn parse_init(s: &str) -> Result<InitMode, String> {
 fn parse_semantic_init(s: &str) -> Result<SemanticInit, String> {
     serde_json::from_value(serde_json::Value::String(s.into()))
         .map_err(|_| format!("`{s}`: expected one-hot or half"))
+}
+
+fn parse_on_off(s: &str) -> Result<bool, String> {
+    match s {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("`{s}`: expected on or off")),
+    }
+}
+
+/// The project's own flow-network weights (`cargo xtask train-flow` writes them there).
+pub fn shipped_flow_network() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data-fixtures/flow/spynet-synthetic.safetensors")
+}
+
+/// Loads the frozen flow network of `config` and prepares the flow pairs of `ctx`.
+fn enable_flow(
+    ctx: &mut TrainContext,
+    data: &train::data::Dataset,
+    config: &TrainConfig,
+) -> Result<()> {
+    let path = config
+        .flow_network
+        .clone()
+        .unwrap_or_else(shipped_flow_network);
+    let net = flow::load_safetensors(&path).with_context(|| {
+        format!(
+            "loading the flow network {} (train one with `cargo xtask train-flow`, or pass \
+             --flow-network)",
+            path.display()
+        )
+    })?;
+    ctx.enable_flow(data, config, net)
+        .context("preparing the flow loss")?;
+    let pairs = ctx.flow_pairs.iter().filter(|p| p.is_some()).count();
+    println!(
+        "flow loss: {pairs} pairs of consecutive training frames, source {:?}, λ {}, τ {} px, network {}",
+        config.flow_source,
+        config.flow_weight,
+        config.flow_tau,
+        path.display()
+    );
+    Ok(())
 }
 
 /// The workspace's `target/` directory.
@@ -140,6 +200,21 @@ fn resolve_config(args: &Args) -> Result<TrainConfig> {
     if let Some(v) = args.semantic_init {
         c.semantic_init = v;
     }
+    if let Some(v) = args.flow_loss {
+        c.flow_loss = v;
+    }
+    if let Some(v) = args.flow_source {
+        c.flow_source = v;
+    }
+    if let Some(v) = args.flow_weight {
+        c.flow_weight = v;
+    }
+    if let Some(v) = args.flow_tau {
+        c.flow_tau = v;
+    }
+    if let Some(v) = &args.flow_network {
+        c.flow_network = Some(v.clone());
+    }
     c.validate()?;
     Ok(c)
 }
@@ -188,7 +263,7 @@ pub fn run(args: Args) -> Result<()> {
     let data = train::data::load_dataset(&data_dir)
         .with_context(|| format!("loading the scene {}", data_dir.display()))?;
     let body = scene_body(&data)?;
-    let ctx = TrainContext::new(&data, body.clone(), config.seed)?;
+    let mut ctx = TrainContext::new(&data, body.clone(), config.seed)?;
     let checkpoint = out.join("checkpoint.safetensors");
     let log_path = out.join("log.jsonl");
     let (mut trainer, mut train_seconds) = if args.resume {
@@ -204,6 +279,9 @@ pub fn run(args: Args) -> Result<()> {
         (Trainer::new(&ctx, config)?, 0.0)
     };
     let config = trainer.config.clone();
+    if config.flow_loss {
+        enable_flow(&mut ctx, &data, &config)?;
+    }
     let config_path = out.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
@@ -316,6 +394,10 @@ pub fn run(args: Args) -> Result<()> {
             "semantic": config.semantic,
             "init": config.init,
             "semantic_init": config.semantic_init,
+            "flow_loss": config.flow_loss,
+            "flow_source": config.flow_source,
+            "flow_weight": config.flow_weight,
+            "flow_tau": config.flow_tau,
             "seed": config.seed,
             "threads": rayon::current_num_threads(),
             "step_seconds_breakdown": breakdown,
@@ -343,7 +425,8 @@ fn mean_times(recent: &[StepReport]) -> serde_json::Value {
         "model_backward": sum(|r| r.times.model_backward),
         "adam": sum(|r| r.times.adam),
         "density": sum(|r| r.times.density),
+        "flow": sum(|r| r.times.flow),
         "total": sum(|r| r.times.pose + r.times.render + r.times.loss + r.times.render_backward
-            + r.times.model_backward + r.times.adam + r.times.density),
+            + r.times.model_backward + r.times.adam + r.times.density + r.times.flow),
     })
 }

@@ -229,3 +229,80 @@ fn bad_flags_and_configs_are_refused_with_a_message() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("missing"));
 }
+
+#[test]
+fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    let weights = dir.path().join("spynet.safetensors");
+    flow::save_safetensors(&flow::SpyNet::<f32>::random(2, 3), &weights).unwrap();
+    let out = dir.path().join("flow");
+    let o = reconstruct(
+        &out,
+        &config,
+        &[
+            "--flow-loss",
+            "on",
+            "--flow-source",
+            "gt",
+            "--flow-weight",
+            "0.1",
+            "--flow-tau",
+            "0",
+            "--flow-network",
+            weights.to_str().unwrap(),
+        ],
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("flow loss:"));
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    let text = metrics.to_string();
+    assert!(text.contains("\"flow_loss\":true"), "{text}");
+    assert!(text.contains("\"flow_source\":\"ground-truth\""), "{text}");
+    let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
+    assert!(
+        log.lines().any(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            v["flow"].as_f64().is_some_and(|f| f > 0.0)
+        }),
+        "no step logged a flow loss"
+    );
+    // A source the scene does not have, and a missing network, are refused before training.
+    for (extra, expect) in [
+        (
+            [
+                "--flow-source",
+                "events",
+                "--flow-network",
+                weights.to_str().unwrap(),
+            ],
+            "events_cm",
+        ),
+        (
+            [
+                "--flow-source",
+                "gt",
+                "--flow-network",
+                "/nonexistent/w.safetensors",
+            ],
+            "train-flow",
+        ),
+    ] {
+        let mut args = vec!["--flow-loss", "on"];
+        args.extend(extra);
+        let o = xtask()
+            .arg("reconstruct")
+            .arg("--data")
+            .arg(fixture())
+            .arg("--out")
+            .arg(dir.path().join("bad"))
+            .arg("--config")
+            .arg(&config)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(expect), "{expect}: {err}");
+    }
+}
