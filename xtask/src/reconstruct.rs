@@ -66,6 +66,16 @@ pub struct Args {
     /// data-fixtures/flow/spynet-synthetic.safetensors.
     #[arg(long)]
     pub flow_network: Option<PathBuf>,
+    /// The event-generation loss of EventNeRF / E-NeRF (log-intensity change between renders of
+    /// consecutive frames vs C × the events in between; the paper's Table 6 alternative): on or off.
+    #[arg(long, value_parser = parse_on_off)]
+    pub event_loss: Option<bool>,
+    /// Weight of the event-generation loss.
+    #[arg(long)]
+    pub event_weight: Option<f32>,
+    /// Contrast threshold C of the event camera (log-intensity units).
+    #[arg(long)]
+    pub event_threshold: Option<f32>,
     /// Continue from OUT/checkpoint.safetensors (same bits as an uninterrupted run).
     #[arg(long)]
     pub resume: bool,
@@ -215,6 +225,15 @@ fn resolve_config(args: &Args) -> Result<TrainConfig> {
     if let Some(v) = &args.flow_network {
         c.flow_network = Some(v.clone());
     }
+    if let Some(v) = args.event_loss {
+        c.event_loss = v;
+    }
+    if let Some(v) = args.event_weight {
+        c.event_weight = v;
+    }
+    if let Some(v) = args.event_threshold {
+        c.event_threshold = v;
+    }
     c.validate()?;
     Ok(c)
 }
@@ -281,6 +300,16 @@ pub fn run(args: Args) -> Result<()> {
     let config = trainer.config.clone();
     if config.flow_loss {
         enable_flow(&mut ctx, &data, &config)?;
+    }
+    if config.event_loss {
+        ctx.enable_events(&data, &config)
+            .context("preparing the event-generation loss")?;
+        println!(
+            "event loss: {} pairs of consecutive training frames, weight {}, C {}",
+            ctx.event_pairs.iter().flatten().count(),
+            config.event_weight,
+            config.event_threshold
+        );
     }
     let config_path = out.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)
@@ -398,6 +427,9 @@ pub fn run(args: Args) -> Result<()> {
             "flow_source": config.flow_source,
             "flow_weight": config.flow_weight,
             "flow_tau": config.flow_tau,
+            "event_loss": config.event_loss,
+            "event_weight": config.event_weight,
+            "event_threshold": config.event_threshold,
             "seed": config.seed,
             "threads": rayon::current_num_threads(),
             "step_seconds_breakdown": breakdown,

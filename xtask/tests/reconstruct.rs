@@ -267,6 +267,16 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
         }),
         "no step logged a flow loss"
     );
+    // The event-generation loss alternative runs from the command line too.
+    let out_ev = dir.path().join("events");
+    let o = reconstruct(
+        &out_ev,
+        &config,
+        &["--event-loss", "on", "--event-threshold", "0.2"],
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("event loss:"));
+    let metrics = std::fs::read_to_string(out_ev.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"event_loss\": true"), "{metrics}");
     // A source the scene does not have, and a missing network, are refused before training.
     for (extra, expect) in [
         (

@@ -143,6 +143,16 @@ pub struct TrainConfig {
     /// SPyNet-style weights (safetensors) of the frozen flow network; `None`: the project's shipped
     /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
     pub flow_network: Option<std::path::PathBuf>,
+    /// The event-generation loss of EventNeRF / E-NeRF (the paper's Table 6 alternative to the flow
+    /// loss, see `train::event_loss`), on the same pairs of consecutive training frames, from each
+    /// frame's `events` file.
+    pub event_loss: bool,
+    /// Weight of the event-generation loss. Provisional: not yet chosen by a sweep.
+    pub event_weight: f32,
+    /// Contrast threshold C of the camera (log-intensity units; the benchmark's simulator: 0.2).
+    pub event_threshold: f32,
+    /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
+    pub event_log_eps: f32,
 }
 
 /// Source of the flow that supervises the flow loss.
@@ -241,6 +251,10 @@ impl TrainConfig {
             flow_tau: 0.25,
             flow_scale: 0.25,
             flow_network: None,
+            event_loss: false,
+            event_weight: 1.0,
+            event_threshold: 0.2,
+            event_log_eps: 1e-3,
         };
         match preset {
             Preset::Quick => quick,
@@ -325,6 +339,15 @@ impl TrainConfig {
         }
         if !(self.flow_scale > 0.0 && self.flow_scale <= 1.0) {
             return bad("flow_scale", "must be in (0, 1]");
+        }
+        if !(self.event_weight >= 0.0 && self.event_weight.is_finite()) {
+            return bad("event_weight", "must be a finite number ≥ 0");
+        }
+        if !(self.event_threshold > 0.0 && self.event_threshold.is_finite()) {
+            return bad("event_threshold", "must be a finite number > 0");
+        }
+        if !(self.event_log_eps > 0.0 && self.event_log_eps.is_finite()) {
+            return bad("event_log_eps", "must be a finite number > 0");
         }
         if !(self.max_initial_scale > 0.0) {
             return bad("max_initial_scale", "must be positive");

@@ -9,6 +9,7 @@ pub mod colour;
 pub mod config;
 pub mod data;
 pub mod eval;
+pub mod event_loss;
 pub mod export;
 pub mod fit;
 pub mod flow_loss;

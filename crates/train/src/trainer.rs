@@ -12,6 +12,7 @@ use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, Chec
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::config::TrainConfig;
 use crate::data::Dataset;
+use crate::event_loss::pair_event_loss;
 use crate::fit::{accumulate_screen_stats, exponential_rate, on_schedule};
 use crate::flow_loss::{pair_flow_loss, prepare_target, FlowTarget};
 use crate::image_loss::{l1, psnr, ssim, ImageShape};
@@ -122,6 +123,16 @@ pub struct FlowPair {
     pub target: FlowTarget<f32>,
 }
 
+/// Event supervision of one training frame k: the next training frame and C·E per pixel (C the
+/// contrast threshold, E the signed event count of [t_k, t_{k+1})), row-major H × W.
+#[derive(Clone, Debug)]
+pub struct EventPair {
+    /// Slot (position in [`TrainContext::frames`]) of frame k+1.
+    pub next_slot: usize,
+    /// Expected log-intensity change per pixel.
+    pub expected: Vec<f32>,
+}
+
 /// Everything fixed during training: camera, training frames, body and skinning-loss samples.
 #[derive(Clone, Debug)]
 pub struct TrainContext {
@@ -141,6 +152,9 @@ pub struct TrainContext {
     pub flow_pairs: Vec<Option<FlowPair>>,
     /// The frozen flow network of the flow loss.
     pub flow_net: Option<SpyNet<f32>>,
+    /// Per training slot, the event supervision of the pair (k, k+1) (empty unless
+    /// [`TrainContext::enable_events`] was called).
+    pub event_pairs: Vec<Option<EventPair>>,
 }
 
 impl TrainContext {
@@ -175,7 +189,71 @@ impl TrainContext {
             skin_weights: samples.weights,
             flow_pairs: Vec::new(),
             flow_net: None,
+            event_pairs: Vec::new(),
         })
+    }
+
+    /// Slots of consecutive training frames: `(slot of k, position of k in data.frames)` for every
+    /// training frame whose next frame in `scene.json` is also a training frame (slot k+1 = slot k + 1).
+    fn consecutive_training_pairs(data: &Dataset) -> Vec<(usize, usize)> {
+        let mut out = Vec::new();
+        let mut slot = 0usize;
+        for (p, f) in data.frames.iter().enumerate() {
+            if f.split != Split::Train {
+                continue;
+            }
+            if data
+                .frames
+                .get(p + 1)
+                .is_some_and(|n| n.split == Split::Train)
+            {
+                out.push((slot, p));
+            }
+            slot += 1;
+        }
+        out
+    }
+
+    /// Prepares the event-generation loss: for every pair of consecutive training frames, reads frame
+    /// k's `events` file (the events of [t_k, t_{k+1})) and turns it into C·E per pixel
+    /// (`config.event_threshold`). A pair whose frame has no events file, or whose events file cannot
+    /// be read, is an error naming the frame and the file — refused here, not mid-training.
+    pub fn enable_events(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+    ) -> Result<(), TrainError> {
+        let (w, h) = (self.camera.width, self.camera.height);
+        let sensor = events::SensorSize::new(w, h);
+        let mut pairs = vec![None; self.frames.len()];
+        let found = Self::consecutive_training_pairs(data);
+        for &(slot, p) in &found {
+            let f = &data.frames[p];
+            let Some(rel) = &data.scene.frames[p].events else {
+                return Err(TrainError::Config(format!(
+                    "{}: frame {} has no events file (needed by the event loss)",
+                    data.dir.display(),
+                    f.index
+                )));
+            };
+            let path = scene::Scene::resolve(&data.dir, rel);
+            let stream = events::read_events(&path)
+                .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+            let counts = events::count_frame(&stream.as_slice(), sensor, events::CountMode::Signed);
+            pairs[slot] = Some(EventPair {
+                next_slot: slot + 1,
+                expected: counts.iter().map(|c| c * config.event_threshold).collect(),
+            });
+        }
+        if found.is_empty() {
+            return Err(TrainError::Config(format!(
+                "{}: no two consecutive frames are both training frames, so the event loss has \
+                 nothing to supervise",
+                data.dir.display()
+            )));
+        }
+        self.event_pairs = pairs;
+        Ok(())
     }
 
     /// Prepares the flow loss: for every training frame whose next frame in `scene.json` is also a
@@ -195,68 +273,58 @@ impl TrainContext {
         let h_out = ((h as f64 * config.flow_scale as f64).round() as usize).max(1);
         let w_out = ((w as f64 * config.flow_scale as f64).round() as usize).max(1);
         let mut pairs = vec![None; self.frames.len()];
-        let mut slot = 0usize;
-        for (p, f) in data.frames.iter().enumerate() {
-            if f.split != Split::Train {
-                continue;
+        for (slot, p) in Self::consecutive_training_pairs(data) {
+            let f = &data.frames[p];
+            let sf = &data.scene.frames[p];
+            let Some(fr) = sf.flow(kind) else {
+                return Err(TrainError::Config(format!(
+                    "{}: frame {} has no `{}` flow to the next training frame {} (needed by \
+                     the flow loss with flow source {:?})",
+                    data.dir.display(),
+                    f.index,
+                    kind.as_str(),
+                    data.frames[p + 1].index,
+                    config.flow_source
+                )));
+            };
+            let path = scene::Scene::resolve(&data.dir, &fr.path);
+            let flow = events::read_flow(&path)
+                .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+            if (flow.width, flow.height) != (w, h) {
+                return Err(TrainError::Config(format!(
+                    "{}: flow is {}x{}, the camera is {w}x{h}",
+                    path.display(),
+                    flow.width,
+                    flow.height
+                )));
             }
-            let next_is_train = data
-                .frames
-                .get(p + 1)
-                .is_some_and(|n| n.split == Split::Train);
-            if next_is_train {
-                let sf = &data.scene.frames[p];
-                let Some(fr) = sf.flow(kind) else {
-                    return Err(TrainError::Config(format!(
-                        "{}: frame {} has no `{}` flow to the next training frame {} (needed by \
-                         the flow loss with flow source {:?})",
-                        data.dir.display(),
-                        f.index,
-                        kind.as_str(),
-                        data.frames[p + 1].index,
-                        config.flow_source
-                    )));
-                };
-                let path = scene::Scene::resolve(&data.dir, &fr.path);
-                let flow = events::read_flow(&path)
-                    .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
-                if (flow.width, flow.height) != (w, h) {
-                    return Err(TrainError::Config(format!(
-                        "{}: flow is {}x{}, the camera is {w}x{h}",
-                        path.display(),
-                        flow.width,
-                        flow.height
-                    )));
-                }
-                let valid = match &fr.valid_mask {
-                    Some(rel) => {
-                        let mp = scene::Scene::resolve(&data.dir, rel);
-                        let (mw, mh, m) = scene::read_mask(&mp)?;
-                        if (mw as usize, mh as usize) != (w, h) {
-                            return Err(TrainError::Config(format!(
-                                "{}: mask is {mw}x{mh}, the camera is {w}x{h}",
-                                mp.display()
-                            )));
-                        }
-                        Some(m)
+            let valid = match &fr.valid_mask {
+                Some(rel) => {
+                    let mp = scene::Scene::resolve(&data.dir, rel);
+                    let (mw, mh, m) = scene::read_mask(&mp)?;
+                    if (mw as usize, mh as usize) != (w, h) {
+                        return Err(TrainError::Config(format!(
+                            "{}: mask is {mw}x{mh}, the camera is {w}x{h}",
+                            mp.display()
+                        )));
                     }
-                    None => None,
-                };
-                let target = prepare_target(
-                    &flow.data,
-                    valid.as_deref(),
-                    h,
-                    w,
-                    h_out,
-                    w_out,
-                    config.flow_tau,
-                )?;
-                pairs[slot] = Some(FlowPair {
-                    next_slot: slot + 1,
-                    target,
-                });
-            }
-            slot += 1;
+                    Some(m)
+                }
+                None => None,
+            };
+            let target = prepare_target(
+                &flow.data,
+                valid.as_deref(),
+                h,
+                w,
+                h_out,
+                w_out,
+                config.flow_tau,
+            )?;
+            pairs[slot] = Some(FlowPair {
+                next_slot: slot + 1,
+                target,
+            });
         }
         if pairs.iter().all(Option::is_none) {
             return Err(TrainError::Config(format!(
@@ -293,8 +361,8 @@ pub struct StageTimes {
     pub adam: f64,
     /// Density control and opacity reset.
     pub density: f64,
-    /// The flow loss: posing and rendering frame k+1, the flow network forward and backward, frame
-    /// k+1's rasterizer and model backward (0 without a flow pair).
+    /// The pair losses (flow, events): posing and rendering frame k+1, the flow network forward and
+    /// backward, the event loss, frame k+1's rasterizer and model backward (0 without a pair).
     pub flow: f64,
 }
 
@@ -317,6 +385,8 @@ pub struct StepReport {
     pub aiap: f32,
     /// The weighted flow loss λ_flow·L_flow (0 on steps without a flow pair).
     pub flow: f32,
+    /// The weighted event-generation loss (0 on steps without an event pair).
+    pub event: f32,
     /// PSNR (dB) of the render against the (blurred) training frame.
     pub psnr: f64,
     /// Gaussians with human probability ≥ 0.5 after the step.
@@ -744,7 +814,7 @@ impl Trainer {
         // Flow loss on the pair (k, k+1): render frame k+1 too; L_flow's gradient w.r.t. frame k's
         // render joins the photometric one, frame k+1's goes back through its own render and pose.
         let t_flow = Instant::now();
-        let pair = match (config.flow_loss, ctx.flow_net.as_ref()) {
+        let flow_pair = match (config.flow_loss, ctx.flow_net.as_ref()) {
             (true, Some(net)) => ctx
                 .flow_pairs
                 .get(slot)
@@ -752,30 +822,52 @@ impl Trainer {
                 .map(|p| (net, p)),
             _ => None,
         };
-        let mut flow_value = 0.0f32;
+        let event_pair = if config.event_loss {
+            ctx.event_pairs.get(slot).and_then(Option::as_ref)
+        } else {
+            None
+        };
+        let next_slot = flow_pair
+            .map(|(_, p)| p.next_slot)
+            .or(event_pair.map(|p| p.next_slot));
+        let (mut flow_value, mut event_value) = (0.0f32, 0.0f32);
         let mut second = None;
-        if let Some((net, pair)) = pair {
-            let next = &ctx.frames[pair.next_slot];
-            let latent2 = self.latents[pair.next_slot * d..(pair.next_slot + 1) * d].to_vec();
+        if let Some(next_slot) = next_slot {
+            let next = &ctx.frames[next_slot];
+            let latent2 = self.latents[next_slot * d..(next_slot + 1) * d].to_vec();
             let (posed2, cache2, out2) = self.forward(camera, &next.pose, &latent2)?;
-            let fl = pair_flow_loss(
-                net,
-                rgb,
-                &out2.image[..3 * hw],
-                camera.height as usize,
-                camera.width as usize,
-                &pair.target,
-            )?;
-            let lambda = config.flow_weight;
-            flow_value = lambda * fl.loss;
-            for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl.d_first) {
-                *o += lambda * g;
-            }
+            let rgb2 = &out2.image[..3 * hw];
             let mut d_image2 = vec![0.0f32; RENDER_CHANNELS * hw];
-            for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&fl.d_second) {
-                *o = lambda * g;
+            if let Some((net, pair)) = flow_pair {
+                let fl = pair_flow_loss(
+                    net,
+                    rgb,
+                    rgb2,
+                    camera.height as usize,
+                    camera.width as usize,
+                    &pair.target,
+                )?;
+                let lambda = config.flow_weight;
+                flow_value = lambda * fl.loss;
+                for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl.d_first) {
+                    *o += lambda * g;
+                }
+                for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&fl.d_second) {
+                    *o += lambda * g;
+                }
             }
-            second = Some((pair.next_slot, latent2, posed2, cache2, out2, d_image2));
+            if let Some(pair) = event_pair {
+                let el = pair_event_loss(rgb, rgb2, &pair.expected, config.event_log_eps);
+                let lambda = config.event_weight;
+                event_value = lambda * el.loss;
+                for (o, &g) in d_image[..3 * hw].iter_mut().zip(&el.d_first) {
+                    *o += lambda * g;
+                }
+                for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&el.d_second) {
+                    *o += lambda * g;
+                }
+            }
+            second = Some((next_slot, latent2, posed2, cache2, out2, d_image2));
         }
         times.flow = t_flow.elapsed().as_secs_f64();
 
@@ -972,7 +1064,7 @@ impl Trainer {
         }
         times.model_backward = t0.elapsed().as_secs_f64();
 
-        let loss = photometric + aiap_value + skinning_value + flow_value;
+        let loss = photometric + aiap_value + skinning_value + flow_value + event_value;
         let finite = loss.is_finite()
             && opacity_grads.iter().all(|v| v.is_finite())
             && second_latent
@@ -1079,6 +1171,7 @@ impl Trainer {
             skinning: skinning_value,
             aiap: aiap_value,
             flow: flow_value,
+            event: event_value,
             psnr: psnr(rgb, &frame.image),
             gaussians_human: human,
             gaussians_scene: self.set.len() - human,

@@ -206,3 +206,41 @@ fn a_flow_source_the_scene_lacks_is_refused_at_load_time() {
         .to_string();
     assert!(err.contains("events_cm") && err.contains("frame"), "{err}");
 }
+
+#[test]
+fn the_event_generation_loss_trains_pairs_from_the_event_files() {
+    let data = load_dataset(&fixture()).unwrap();
+    let config = TrainConfig {
+        event_loss: true,
+        ..tiny_config(6)
+    };
+    let mut ctx = context();
+    ctx.enable_events(&data, &config).unwrap();
+    let pairs: Vec<_> = ctx.event_pairs.iter().flatten().collect();
+    assert!(!pairs.is_empty());
+    // The fixture's events are real: some pixels fired, in both polarities.
+    let expected: Vec<f32> = pairs
+        .iter()
+        .flat_map(|p| p.expected.iter().copied())
+        .collect();
+    assert!(expected.iter().any(|&e| e > 0.0) && expected.iter().any(|&e| e < 0.0));
+    let mut on = Trainer::new(&ctx, config.clone()).unwrap();
+    let mut event_steps = 0;
+    on.run(&ctx, 6, |_, r| {
+        assert!(r.event.is_finite() && r.event >= 0.0);
+        event_steps += usize::from(r.event > 0.0);
+        Ok(())
+    })
+    .unwrap();
+    assert!(event_steps > 0, "no step had an event pair");
+    let mut off = Trainer::new(
+        &ctx,
+        TrainConfig {
+            event_loss: false,
+            ..config
+        },
+    )
+    .unwrap();
+    off.run(&ctx, 6, |_, _| Ok(())).unwrap();
+    assert_ne!(bits(&off), bits(&on));
+}
