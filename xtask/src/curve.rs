@@ -51,7 +51,8 @@ fn glyph(c: char) -> Option<[u8; 5]> {
     })
 }
 
-fn text(img: &mut RgbImage, x: u32, y: u32, s: &str, colour: Rgb<u8>) {
+/// Draws `s` with the 3×5 font at twice its size (unknown characters are skipped).
+pub fn text(img: &mut RgbImage, x: u32, y: u32, s: &str, colour: Rgb<u8>) {
     const SCALE: u32 = 2;
     for (k, c) in s.chars().enumerate() {
         let Some(g) = glyph(c) else { continue };

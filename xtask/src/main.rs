@@ -4,6 +4,7 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+mod ablate;
 mod bench_deform;
 mod bench_events;
 mod bench_flow;
@@ -35,6 +36,10 @@ enum Command {
     /// Train E-Sem3DGS (person + scene) on a scene directory — by default the synthetic benchmark —
     /// then evaluate the test split and write the model, metrics.json, strips and a curve.
     Reconstruct(reconstruct::Args),
+    /// The paper's ablation set (semantics none/scalar/one-hot, event loss, flow loss with
+    /// ground-truth and event-only flow): one reconstruct run each, a Markdown table, ablation.json
+    /// and an image grid.
+    Ablate(ablate::Args),
     /// Evaluate a saved model on a scene's test split (metrics.json + comparison strips).
     Eval(eval_cmd::Args),
     /// Render a saved model in new body poses (PNG, optionally posed 3DGS PLY).
@@ -79,6 +84,7 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Reconstruct(args) => reconstruct::run(args),
+        Command::Ablate(args) => ablate::run(args),
         Command::Eval(args) => eval_cmd::run(args),
         Command::RenderPose(args) => render_pose::run(args),
         Command::PlyInfo(args) => ply_info::run(args),

@@ -316,3 +316,47 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
         assert!(err.contains(expect), "{expect}: {err}");
     }
 }
+
+#[test]
+fn ablate_writes_a_table_json_and_grid_and_records_failed_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    let out = dir.path().join("ablate");
+    let o = xtask()
+        .arg("ablate")
+        .arg("--data")
+        .arg(fixture())
+        .arg("--out")
+        .arg(&out)
+        .arg("--config")
+        .arg(&config)
+        // The tiny fixture has no event-only flow: that run must fail and be recorded.
+        .args(["--only", "one-hot,flow-events"])
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "ablate failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let md = std::fs::read_to_string(out.join("ablation.md")).unwrap();
+    assert!(md.contains("| 1 | `one-hot` |"), "{md}");
+    assert!(
+        md.contains("| 2 | `flow-events` |") && md.contains("failed"),
+        "{md}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    assert!(json[0]["metrics"]["test_psnr_full"].as_f64().unwrap() > 5.0);
+    assert!(json[1]["error"].as_str().is_some());
+    let grid = image::open(out.join("ablation_grid.png")).unwrap();
+    assert!(grid.width() > 28 && grid.height() > 0);
+    // An unknown run name is refused.
+    let o = xtask()
+        .args(["ablate", "--only", "everything", "--data"])
+        .arg(fixture())
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("semantic-none"));
+}

@@ -1,0 +1,302 @@
+//! `cargo xtask ablate`: the paper's ablation set on one scene — semantic none / scalar / one-hot
+//! without events, one-hot + the event-generation loss, one-hot + the flow loss with ground-truth flow
+//! and with event-only flow — each a full `reconstruct` run in `OUT/<run>/`, then `OUT/ablation.md`
+//! (a Markdown table), `OUT/ablation.json` and `OUT/ablation_grid.png` (the strip of the first test
+//! frame of every run, one row per run, numbered as in the table). A run that fails (e.g. no flow
+//! network weights, or a scene without event-only flow) is recorded with its error and the others go
+//! on.
+
+use anyhow::{Context, Result};
+use image::{Rgb, RgbImage};
+use std::path::{Path, PathBuf};
+use train::blend::SemanticMode;
+use train::config::{FlowSource, Preset};
+
+/// Arguments of `ablate`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Scene directory (default: the synthetic benchmark's `default` preset, generated once).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Output directory (default: target/ablate/<data name>-<preset>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Hyper-parameter preset of every run.
+    #[arg(long, default_value = "quick")]
+    pub preset: Preset,
+    /// TOML or JSON file overriding preset values for every run.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Optimisation steps of every run.
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Seed of every run.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Weights of the frozen flow network (default: the shipped ones).
+    #[arg(long)]
+    pub flow_network: Option<PathBuf>,
+    /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
+    /// one-hot, event-loss, flow-gt, flow-events).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Option<Vec<String>>,
+}
+
+/// One configuration of the ablation set.
+struct Run {
+    name: &'static str,
+    what: &'static str,
+    semantic: SemanticMode,
+    event_loss: bool,
+    flow: Option<FlowSource>,
+}
+
+const RUNS: [Run; 6] = [
+    Run {
+        name: "semantic-none",
+        what: "no semantics (every Gaussian deformed), no events",
+        semantic: SemanticMode::None,
+        event_loss: false,
+        flow: None,
+    },
+    Run {
+        name: "semantic-scalar",
+        what: "one sigmoid logit (p = 0.5 at start), no events",
+        semantic: SemanticMode::Scalar,
+        event_loss: false,
+        flow: None,
+    },
+    Run {
+        name: "one-hot",
+        what: "one-hot semantics (paper), no events",
+        semantic: SemanticMode::OneHot,
+        event_loss: false,
+        flow: None,
+    },
+    Run {
+        name: "event-loss",
+        what: "one-hot + event-generation loss (EventNeRF/E-NeRF)",
+        semantic: SemanticMode::OneHot,
+        event_loss: true,
+        flow: None,
+    },
+    Run {
+        name: "flow-gt",
+        what: "one-hot + flow loss, ground-truth flow",
+        semantic: SemanticMode::OneHot,
+        event_loss: false,
+        flow: Some(FlowSource::GroundTruth),
+    },
+    Run {
+        name: "flow-events",
+        what: "one-hot + flow loss, event-only flow (contrast maximisation)",
+        semantic: SemanticMode::OneHot,
+        event_loss: false,
+        flow: Some(FlowSource::Events),
+    },
+];
+
+/// The metrics of `metrics.json` shown in the table, in order.
+const COLUMNS: [(&str, &str); 6] = [
+    ("test_psnr_full", "PSNR full (dB)"),
+    ("test_psnr_human_box", "PSNR human box (dB)"),
+    ("test_ssim_full", "SSIM full"),
+    ("test_ssim_human_box", "SSIM human box"),
+    ("mask_iou", "mask IoU"),
+    ("train_seconds", "train s"),
+];
+
+/// Runs `ablate`.
+pub fn run(args: Args) -> Result<()> {
+    if let Some(only) = &args.only {
+        for name in only {
+            anyhow::ensure!(
+                RUNS.iter().any(|r| r.name == name),
+                "--only: unknown run `{name}` (expected one of: {})",
+                RUNS.iter().map(|r| r.name).collect::<Vec<_>>().join(", ")
+            );
+        }
+    }
+    let data = match &args.data {
+        Some(d) => d.clone(),
+        None => crate::reconstruct::default_benchmark()?,
+    };
+    let preset_name = match args.preset {
+        Preset::Quick => "quick",
+        Preset::Full => "full",
+    };
+    let out = args.out.clone().unwrap_or_else(|| {
+        let name = data
+            .file_name()
+            .map_or_else(|| "data".into(), |n| n.to_string_lossy().into_owned());
+        crate::reconstruct::target_dir()
+            .join("ablate")
+            .join(format!("{name}-{preset_name}"))
+    });
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let selected: Vec<&Run> = RUNS
+        .iter()
+        .filter(|r| {
+            args.only
+                .as_ref()
+                .is_none_or(|o| o.iter().any(|n| n == r.name))
+        })
+        .collect();
+    let mut results = Vec::new();
+    for (k, r) in selected.iter().enumerate() {
+        println!(
+            "=== ablation run {}/{}: {} ({}) ===",
+            k + 1,
+            selected.len(),
+            r.name,
+            r.what
+        );
+        let run_out = out.join(r.name);
+        let run_args = crate::reconstruct::Args {
+            data: Some(data.clone()),
+            out: Some(run_out.clone()),
+            preset: args.preset,
+            config: args.config.clone(),
+            steps: args.steps,
+            seed: args.seed,
+            semantic: Some(r.semantic),
+            init: None,
+            semantic_init: None,
+            flow_loss: Some(r.flow.is_some()),
+            flow_source: r.flow,
+            flow_weight: None,
+            flow_tau: None,
+            flow_network: args.flow_network.clone(),
+            event_loss: Some(r.event_loss),
+            event_weight: None,
+            event_threshold: None,
+            resume: false,
+            stop_after: None,
+        };
+        let outcome = crate::reconstruct::run(run_args).and_then(|()| {
+            let path = run_out.join("metrics.json");
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            serde_json::from_str::<serde_json::Value>(&text)
+                .with_context(|| format!("parsing {}", path.display()))
+        });
+        match &outcome {
+            Ok(_) => println!("{}: done", r.name),
+            Err(e) => eprintln!("{}: failed: {e:#}", r.name),
+        }
+        results.push((*r, run_out, outcome));
+    }
+    write_table(&out, &data, preset_name, &results)?;
+    write_grid(&out, &results)?;
+    println!(
+        "ablation: {} and {}",
+        out.join("ablation.md").display(),
+        out.join("ablation_grid.png").display()
+    );
+    Ok(())
+}
+
+type Outcome<'a> = (&'a Run, PathBuf, Result<serde_json::Value>);
+
+fn write_table(out: &Path, data: &Path, preset: &str, results: &[Outcome<'_>]) -> Result<()> {
+    let mut md = format!(
+        "# Ablation on {} (preset `{preset}`)\n\nRows are numbered as in `ablation_grid.png`.\n\n| # | run | what |",
+        data.display()
+    );
+    for (_, title) in COLUMNS {
+        md.push_str(&format!(" {title} |"));
+    }
+    md.push_str("\n| ---: | --- | --- |");
+    md.push_str(&" ---: |".repeat(COLUMNS.len()));
+    md.push('\n');
+    let mut json = Vec::new();
+    for (k, (r, dir, outcome)) in results.iter().enumerate() {
+        md.push_str(&format!("| {} | `{}` | {} |", k + 1, r.name, r.what));
+        match outcome {
+            Ok(m) => {
+                for (key, _) in COLUMNS {
+                    let cell = m[key].as_f64().map_or_else(
+                        || "—".to_string(),
+                        |v| match key {
+                            "train_seconds" => format!("{v:.0}"),
+                            "mask_iou" | "test_ssim_full" | "test_ssim_human_box" => {
+                                format!("{v:.3}")
+                            }
+                            _ => format!("{v:.2}"),
+                        },
+                    );
+                    md.push_str(&format!(" {cell} |"));
+                }
+                json.push(serde_json::json!({
+                    "run": r.name, "what": r.what, "dir": dir.display().to_string(), "metrics": m,
+                }));
+            }
+            Err(e) => {
+                let msg = format!("{e:#}").replace('|', "/").replace('\n', " ");
+                md.push_str(&format!(" failed: {msg} |"));
+                md.push_str(&" |".repeat(COLUMNS.len() - 1));
+                json.push(serde_json::json!({
+                    "run": r.name, "what": r.what, "dir": dir.display().to_string(),
+                    "error": format!("{e:#}"),
+                }));
+            }
+        }
+        md.push('\n');
+    }
+    let md_path = out.join("ablation.md");
+    std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+    let json_path = out.join("ablation.json");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&json)?)
+        .with_context(|| format!("writing {}", json_path.display()))?;
+    print!("{md}");
+    Ok(())
+}
+
+/// Stacks the first test strip of every successful run, each row headed by its table number.
+fn write_grid(out: &Path, results: &[Outcome<'_>]) -> Result<()> {
+    const LABEL_W: u32 = 28;
+    let mut rows: Vec<(usize, RgbImage)> = Vec::new();
+    for (k, (_, dir, outcome)) in results.iter().enumerate() {
+        if outcome.is_err() {
+            continue;
+        }
+        let strips = dir.join("eval");
+        let mut names: Vec<PathBuf> = std::fs::read_dir(&strips)
+            .with_context(|| format!("listing {}", strips.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with("strip_"))
+            })
+            .collect();
+        names.sort();
+        if let Some(first) = names.first() {
+            let img = image::open(first)
+                .with_context(|| format!("reading {}", first.display()))?
+                .to_rgb8();
+            rows.push((k + 1, img));
+        }
+    }
+    if rows.is_empty() {
+        return Ok(());
+    }
+    let width = LABEL_W + rows.iter().map(|(_, i)| i.width()).max().unwrap_or(0);
+    let height: u32 = rows.iter().map(|(_, i)| i.height()).sum();
+    let mut grid = RgbImage::from_pixel(width, height, Rgb([255, 255, 255]));
+    let mut y = 0;
+    for (number, img) in &rows {
+        image::imageops::replace(&mut grid, img, i64::from(LABEL_W), i64::from(y));
+        crate::curve::text(
+            &mut grid,
+            4,
+            y + img.height() / 2 - 5,
+            &number.to_string(),
+            Rgb([0, 0, 0]),
+        );
+        y += img.height();
+    }
+    let path = out.join("ablation_grid.png");
+    grid.save(&path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
