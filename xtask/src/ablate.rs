@@ -4,11 +4,14 @@
 //! (a Markdown table), `OUT/ablation.json` and `OUT/ablation_grid.png` (the strip of the first test
 //! frame of every run, one row per run, numbered as in the table). A run that fails (e.g. no flow
 //! network weights, or a scene without event-only flow) is recorded with its error and the others go
-//! on.
+//! on. With `--blur-levels` it runs the paper's Figure 5 study instead: one-hot without events and
+//! with the flow loss (ground-truth and event-only flow) on the `slow`, `medium` and `fast` variants
+//! of the default benchmark (each generated once under `target/benchmark/default-<speed>`).
 
 use anyhow::{Context, Result};
 use image::{Rgb, RgbImage};
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::path::PathBuf;
 use train::blend::SemanticMode;
 use train::config::{FlowSource, Preset};
 
@@ -40,6 +43,10 @@ pub struct Args {
     /// one-hot, event-loss, flow-gt, flow-events).
     #[arg(long, value_delimiter = ',')]
     pub only: Option<Vec<String>>,
+    /// Run the blur-level study (paper Figure 5) instead of the ablation set: one-hot, flow-gt and
+    /// flow-events on the slow, medium and fast variants of the default benchmark (ignores --data).
+    #[arg(long)]
+    pub blur_levels: bool,
 }
 
 /// One configuration of the ablation set.
@@ -97,9 +104,11 @@ const RUNS: [Run; 6] = [
 ];
 
 /// The metrics of `metrics.json` shown in the table, in order.
-const COLUMNS: [(&str, &str); 6] = [
+const COLUMNS: [(&str, &str); 8] = [
     ("test_psnr_full", "PSNR full (dB)"),
     ("test_psnr_human_box", "PSNR human box (dB)"),
+    ("blurred_psnr_full", "blurred full (dB)"),
+    ("blurred_psnr_human_box", "blurred human box (dB)"),
     ("test_ssim_full", "SSIM full"),
     ("test_ssim_human_box", "SSIM human box"),
     ("mask_iou", "mask IoU"),
@@ -117,41 +126,67 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
-    let data = match &args.data {
-        Some(d) => d.clone(),
-        None => crate::reconstruct::default_benchmark()?,
-    };
     let preset_name = match args.preset {
         Preset::Quick => "quick",
         Preset::Full => "full",
     };
-    let out = args.out.clone().unwrap_or_else(|| {
-        let name = data
+    // (row label, scene directory, run) in table order.
+    let mut jobs: Vec<(String, PathBuf, &Run)> = Vec::new();
+    let selected = |names: &[&str]| -> Vec<&'static Run> {
+        RUNS.iter()
+            .filter(|r| names.contains(&r.name))
+            .filter(|r| {
+                args.only
+                    .as_ref()
+                    .is_none_or(|o| o.iter().any(|n| n == r.name))
+            })
+            .collect()
+    };
+    let scene_name;
+    if args.blur_levels {
+        scene_name = "blur-levels".to_string();
+        for (speed, label) in [
+            (::synth::Speed::Slow, "slow"),
+            (::synth::Speed::Medium, "medium"),
+            (::synth::Speed::Fast, "fast"),
+        ] {
+            let cfg = ::synth::SynthConfig {
+                speed,
+                ..::synth::SynthConfig::preset(::synth::Preset::Default)
+            };
+            let data = crate::reconstruct::benchmark(&cfg, &format!("default-{label}"))?;
+            for r in selected(&["one-hot", "flow-gt", "flow-events"]) {
+                jobs.push((format!("{label}/{}", r.name), data.clone(), r));
+            }
+        }
+    } else {
+        let data = match &args.data {
+            Some(d) => d.clone(),
+            None => crate::reconstruct::default_benchmark()?,
+        };
+        scene_name = data
             .file_name()
             .map_or_else(|| "data".into(), |n| n.to_string_lossy().into_owned());
+        for r in selected(&RUNS.map(|r| r.name)) {
+            jobs.push((r.name.to_string(), data.clone(), r));
+        }
+    }
+    let out = args.out.clone().unwrap_or_else(|| {
         crate::reconstruct::target_dir()
             .join("ablate")
-            .join(format!("{name}-{preset_name}"))
+            .join(format!("{scene_name}-{preset_name}"))
     });
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let selected: Vec<&Run> = RUNS
-        .iter()
-        .filter(|r| {
-            args.only
-                .as_ref()
-                .is_none_or(|o| o.iter().any(|n| n == r.name))
-        })
-        .collect();
     let mut results = Vec::new();
-    for (k, r) in selected.iter().enumerate() {
+    for (k, (label, data, r)) in jobs.iter().enumerate() {
         println!(
-            "=== ablation run {}/{}: {} ({}) ===",
+            "=== run {}/{}: {label} ({}) on {} ===",
             k + 1,
-            selected.len(),
-            r.name,
-            r.what
+            jobs.len(),
+            r.what,
+            data.display()
         );
-        let run_out = out.join(r.name);
+        let run_out = out.join(label);
         let run_args = crate::reconstruct::Args {
             data: Some(data.clone()),
             out: Some(run_out.clone()),
@@ -181,12 +216,12 @@ pub fn run(args: Args) -> Result<()> {
                 .with_context(|| format!("parsing {}", path.display()))
         });
         match &outcome {
-            Ok(_) => println!("{}: done", r.name),
-            Err(e) => eprintln!("{}: failed: {e:#}", r.name),
+            Ok(_) => println!("{label}: done"),
+            Err(e) => eprintln!("{label}: failed: {e:#}"),
         }
-        results.push((*r, run_out, outcome));
+        results.push((label.clone(), *r, run_out, outcome));
     }
-    write_table(&out, &data, preset_name, &results)?;
+    write_table(&out, &scene_name, preset_name, &results)?;
     write_grid(&out, &results)?;
     println!(
         "ablation: {} and {}",
@@ -196,12 +231,12 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-type Outcome<'a> = (&'a Run, PathBuf, Result<serde_json::Value>);
+type Outcome<'a> = (String, &'a Run, PathBuf, Result<serde_json::Value>);
 
-fn write_table(out: &Path, data: &Path, preset: &str, results: &[Outcome<'_>]) -> Result<()> {
+fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -> Result<()> {
     let mut md = format!(
-        "# Ablation on {} (preset `{preset}`)\n\nRows are numbered as in `ablation_grid.png`.\n\n| # | run | what |",
-        data.display()
+        "# Ablation on {scene} (preset `{preset}`)\n\nRows are numbered as in `ablation_grid.png`; \
+         `blurred` columns are the input frames against the same references.\n\n| # | run | what |"
     );
     for (_, title) in COLUMNS {
         md.push_str(&format!(" {title} |"));
@@ -210,8 +245,8 @@ fn write_table(out: &Path, data: &Path, preset: &str, results: &[Outcome<'_>]) -
     md.push_str(&" ---: |".repeat(COLUMNS.len()));
     md.push('\n');
     let mut json = Vec::new();
-    for (k, (r, dir, outcome)) in results.iter().enumerate() {
-        md.push_str(&format!("| {} | `{}` | {} |", k + 1, r.name, r.what));
+    for (k, (label, r, dir, outcome)) in results.iter().enumerate() {
+        md.push_str(&format!("| {} | `{label}` | {} |", k + 1, r.what));
         match outcome {
             Ok(m) => {
                 for (key, _) in COLUMNS {
@@ -228,7 +263,7 @@ fn write_table(out: &Path, data: &Path, preset: &str, results: &[Outcome<'_>]) -
                     md.push_str(&format!(" {cell} |"));
                 }
                 json.push(serde_json::json!({
-                    "run": r.name, "what": r.what, "dir": dir.display().to_string(), "metrics": m,
+                    "run": label, "what": r.what, "dir": dir.display().to_string(), "metrics": m,
                 }));
             }
             Err(e) => {
@@ -236,7 +271,7 @@ fn write_table(out: &Path, data: &Path, preset: &str, results: &[Outcome<'_>]) -
                 md.push_str(&format!(" failed: {msg} |"));
                 md.push_str(&" |".repeat(COLUMNS.len() - 1));
                 json.push(serde_json::json!({
-                    "run": r.name, "what": r.what, "dir": dir.display().to_string(),
+                    "run": label, "what": r.what, "dir": dir.display().to_string(),
                     "error": format!("{e:#}"),
                 }));
             }
@@ -256,7 +291,7 @@ fn write_table(out: &Path, data: &Path, preset: &str, results: &[Outcome<'_>]) -
 fn write_grid(out: &Path, results: &[Outcome<'_>]) -> Result<()> {
     const LABEL_W: u32 = 28;
     let mut rows: Vec<(usize, RgbImage)> = Vec::new();
-    for (k, (_, dir, outcome)) in results.iter().enumerate() {
+    for (k, (_, _, dir, outcome)) in results.iter().enumerate() {
         if outcome.is_err() {
             continue;
         }

@@ -152,20 +152,28 @@ pub fn target_dir() -> PathBuf {
 /// Generates the default synthetic benchmark under `target/benchmark/default` unless a complete copy
 /// made with the same generator settings is already there.
 pub fn default_benchmark() -> Result<PathBuf> {
-    let dir = target_dir().join("benchmark/default");
-    let cfg = ::synth::SynthConfig::preset(::synth::Preset::Default);
-    let stamp = serde_json::to_string(&cfg).context("serialising the generator settings")?;
+    benchmark(
+        &::synth::SynthConfig::preset(::synth::Preset::Default),
+        "default",
+    )
+}
+
+/// Generates the synthetic benchmark `cfg` under `target/benchmark/<name>` unless a complete copy made
+/// with the same generator settings is already there (a `.complete` stamp holds the settings).
+pub fn benchmark(cfg: &::synth::SynthConfig, name: &str) -> Result<PathBuf> {
+    let dir = target_dir().join("benchmark").join(name);
+    let stamp = serde_json::to_string(cfg).context("serialising the generator settings")?;
     let marker = dir.join(".complete");
     if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {
         return Ok(dir);
     }
     eprintln!(
-        "generating the default synthetic benchmark into {} (once)",
+        "generating the synthetic benchmark `{name}` into {} (once)",
         dir.display()
     );
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let bar = crate::progress_bar(u64::from(cfg.frames), "synth")?;
-    ::synth::generate(&cfg, &dir, &mut |done, _| bar.set_position(u64::from(done)))
+    ::synth::generate(cfg, &dir, &mut |done, _| bar.set_position(u64::from(done)))
         .with_context(|| format!("generating the benchmark into {}", dir.display()))?;
     bar.finish_and_clear();
     std::fs::write(&marker, stamp).with_context(|| format!("writing {}", marker.display()))?;
