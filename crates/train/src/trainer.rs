@@ -981,6 +981,7 @@ impl Trainer {
         // Frame k+1 of the flow pair: its rasterizer and model backward, accumulated.
         let mut opacity_grads = rg.opacity_logits.clone();
         let mut second_latent = None;
+        let mut second_backward_seconds = 0.0;
         if let Some((next_slot, latent2, posed2, cache2, out2, d_image2)) = second {
             let t_flow = Instant::now();
             let channels2 = interleave_channels(&posed2);
@@ -1034,7 +1035,8 @@ impl Trainer {
                 *o += g;
             }
             second_latent = Some((next_slot, grads2.latent));
-            times.flow += t_flow.elapsed().as_secs_f64();
+            second_backward_seconds = t_flow.elapsed().as_secs_f64();
+            times.flow += second_backward_seconds;
         }
         // Skinning loss on canonical surface samples (a window of the pool that moves every step).
         let mut skinning_value = 0.0f32;
@@ -1062,7 +1064,8 @@ impl Trainer {
                 .skinning
                 .backward(&skin_cache, &d_pred, &mut grads.skinning)?;
         }
-        times.model_backward = t0.elapsed().as_secs_f64();
+        // (Frame k+1's backward ran inside this interval; it is counted under `flow`.)
+        times.model_backward = t0.elapsed().as_secs_f64() - second_backward_seconds;
 
         let loss = photometric + aiap_value + skinning_value + flow_value + event_value;
         let finite = loss.is_finite()
