@@ -55,6 +55,11 @@ pub fn gaussian_window<T: Float>() -> [T; SSIM_WINDOW] {
 
 /// Separable "same" correlation of one (H, W) plane with the Gaussian window, zero padding.
 /// The window is symmetric, so this operator is its own transpose (used by the backward pass).
+///
+/// Every output is the sum of its in-range taps in increasing tap order, starting from zero; the
+/// horizontal pass reads a zero-padded copy of the row (an out-of-range tap adds an exact +0) and the
+/// vertical pass accumulates whole rows tap by tap, so both loops run over contiguous memory and
+/// vectorise while each value is the same sum, in the same order, as the direct loops.
 fn blur_plane<T: Float>(
     src: &[T],
     dst: &mut [T],
@@ -64,27 +69,27 @@ fn blur_plane<T: Float>(
     k: &[T; SSIM_WINDOW],
 ) {
     let r = SSIM_WINDOW / 2;
+    let mut padded = vec![T::zero(); w + 2 * r];
     for y in 0..h {
-        let row = &src[y * w..(y + 1) * w];
-        for x in 0..w {
-            let mut acc = T::zero();
-            let lo = x.saturating_sub(r);
-            let hi = (x + r).min(w - 1);
-            for xx in lo..=hi {
-                acc = acc + k[xx + r - x] * row[xx];
+        padded[r..r + w].copy_from_slice(&src[y * w..(y + 1) * w]);
+        let out = &mut tmp[y * w..(y + 1) * w];
+        out.iter_mut().for_each(|v| *v = T::zero());
+        for (j, &kj) in k.iter().enumerate() {
+            for (o, &p) in out.iter_mut().zip(&padded[j..j + w]) {
+                *o = *o + kj * p;
             }
-            tmp[y * w + x] = acc;
         }
     }
     for y in 0..h {
         let lo = y.saturating_sub(r);
         let hi = (y + r).min(h - 1);
-        for x in 0..w {
-            let mut acc = T::zero();
-            for yy in lo..=hi {
-                acc = acc + k[yy + r - y] * tmp[yy * w + x];
+        let out = &mut dst[y * w..(y + 1) * w];
+        out.iter_mut().for_each(|v| *v = T::zero());
+        for yy in lo..=hi {
+            let kj = k[yy + r - y];
+            for (o, &t) in out.iter_mut().zip(&tmp[yy * w..(yy + 1) * w]) {
+                *o = *o + kj * t;
             }
-            dst[y * w + x] = acc;
         }
     }
 }
@@ -281,6 +286,51 @@ mod tests {
     use super::*;
 
     /// Slow oracle: SSIM with a direct 2D window sum and explicit zero padding.
+    /// The direct loops `blur_plane` replaced (per output, in-range taps in increasing order).
+    fn blur_plane_direct(src: &[f32], h: usize, w: usize) -> Vec<f32> {
+        let k = gaussian_window::<f32>();
+        let r = SSIM_WINDOW / 2;
+        let mut tmp = vec![0.0f32; h * w];
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0f32;
+                for xx in x.saturating_sub(r)..=(x + r).min(w - 1) {
+                    acc += k[xx + r - x] * src[y * w + xx];
+                }
+                tmp[y * w + x] = acc;
+            }
+        }
+        let mut dst = vec![0.0f32; h * w];
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0f32;
+                for yy in y.saturating_sub(r)..=(y + r).min(h - 1) {
+                    acc += k[yy + r - y] * tmp[yy * w + x];
+                }
+                dst[y * w + x] = acc;
+            }
+        }
+        dst
+    }
+
+    #[test]
+    fn blur_is_bit_identical_to_the_direct_loops() {
+        for (h, w) in [(1, 1), (3, 17), (23, 5), (40, 33)] {
+            let mut s = 0x2545_f491u32;
+            let src: Vec<f32> = (0..h * w)
+                .map(|_| {
+                    s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    (s >> 8) as f32 / (1u32 << 24) as f32 - 0.3
+                })
+                .collect();
+            let (mut dst, mut tmp) = (vec![0.0f32; h * w], vec![0.0f32; h * w]);
+            blur_plane(&src, &mut dst, &mut tmp, h, w, &gaussian_window::<f32>());
+            let direct = blur_plane_direct(&src, h, w);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&dst), bits(&direct), "{h}x{w}");
+        }
+    }
+
     fn naive_ssim(pred: &[f64], target: &[f64], shape: ImageShape) -> f64 {
         let k = gaussian_window::<f64>();
         let r = (SSIM_WINDOW / 2) as isize;
