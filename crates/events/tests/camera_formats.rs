@@ -185,3 +185,149 @@ proptest::proptest! {
         if let Ok(mut r) = PropheseeReader::new(&e3[..], "fuzz.raw", false) { let _ = read_all(&mut r); }
     }
 }
+
+/// A stream whose times span several 2^24 µs wraps of the EVT 3.0 counter, with jumps of exactly
+/// one wrap, of several wraps, across TIME_HIGH boundaries and repeated timestamps.
+fn long_stream() -> EventStream {
+    let mut s = sample(5000);
+    let jumps = [
+        0i64,
+        1,
+        4095,
+        4096,
+        1 << 24,
+        (1 << 24) - 1,
+        (3 << 24) + 17,
+        1 << 12,
+        (1 << 24) + 4096,
+        63,
+        64,
+    ];
+    let mut extra = 0i64;
+    for i in 0..s.len() {
+        if i % 450 == 0 {
+            extra += jumps[(i / 450) % jumps.len()];
+        }
+        s.t[i] += extra;
+    }
+    s
+}
+
+#[test]
+fn prophesee_writers_round_trip_losslessly() {
+    use events::io::prophesee::{encode, write_dat, write_raw, PropheseeFormat};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let long = long_stream();
+    let span = long.t[long.len() - 1] - long.t[0];
+    assert!(span > 5 << 24, "the stream spans {span} us");
+    for (name, s) in [("short", sample(20_000)), ("long", long)] {
+        for (fmt, ext) in [
+            (PropheseeFormat::Evt2, "raw"),
+            (PropheseeFormat::Evt3, "raw"),
+            (PropheseeFormat::Dat, "dat"),
+        ] {
+            let p = dir.path().join(format!("{name}_{fmt:?}.{ext}"));
+            if fmt == PropheseeFormat::Dat {
+                write_dat(&p, &s).expect("write dat");
+            } else {
+                write_raw(&p, &s, fmt).expect("write raw");
+            }
+            let mut r = PropheseeReader::open(&p).expect("open");
+            assert_eq!(r.encoding(), fmt, "{name}");
+            let back = read_all(&mut r).expect("read");
+            assert_eq!(back, s, "{name} {fmt:?}");
+            // The in-memory encoder writes the same bytes as the file writer.
+            let bytes = std::fs::read(&p).expect("bytes");
+            assert_eq!(encode(&s, fmt).expect("encode"), bytes, "{name} {fmt:?}");
+        }
+    }
+    // EVT 3.0 words are emitted only on change: one TIME_HIGH + TIME_LOW + ADDR_Y + ADDR_X for
+    // the first event, then one ADDR_X per event on the same row and time.
+    let mut same = EventStream::new();
+    for x in 0..10u16 {
+        same.push(Event {
+            t: 77,
+            x,
+            y: 3,
+            p: 1,
+        });
+    }
+    let bytes = encode(&same, PropheseeFormat::Evt3).expect("encode");
+    let body = bytes.len() - bytes.windows(6).position(|w| w == b"% end\n").expect("end") - 6;
+    assert_eq!(body, 2 * (3 + 10));
+}
+
+#[test]
+fn every_format_reads_the_same_stream() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = sample(20_000);
+    let mut first: Option<EventStream> = None;
+    for ext in ["txt", "npz", "aedat4", "raw", "dat"] {
+        let p = dir.path().join(format!("s.{ext}"));
+        write_events(&p, &s).expect("write");
+        let mut r = read_events(&p).expect("read");
+        // npz stores no sensor size.
+        r.sensor = r.sensor.or(s.sensor);
+        assert_eq!(r, s, "{ext}");
+        if let Some(f) = &first {
+            assert_eq!(&r, f, "{ext}");
+        }
+        first.get_or_insert(r);
+    }
+    // EVT 2.0 through write_raw.
+    let p = dir.path().join("s2.raw");
+    events::io::prophesee::write_raw(&p, &s, events::io::prophesee::PropheseeFormat::Evt2)
+        .expect("evt2");
+    assert_eq!(read_events(&p).expect("read evt2"), s);
+}
+
+#[test]
+fn prophesee_writers_refuse_what_the_format_cannot_hold() {
+    use events::io::prophesee::{write_dat, write_raw, PropheseeFormat};
+    use events::EventsError;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let one = |t: i64, x: u16, y: u16| {
+        let mut s = EventStream::new();
+        s.push(Event { t, x, y, p: 1 });
+        s
+    };
+    let raw = dir.path().join("bad.raw");
+    let dat = dir.path().join("bad.dat");
+    let is_arg = |r: Result<(), EventsError>| matches!(r, Err(EventsError::InvalidArgument { .. }));
+    for fmt in [PropheseeFormat::Evt2, PropheseeFormat::Evt3] {
+        assert!(write_raw(&raw, &one(0, 2047, 2047), fmt).is_ok(), "{fmt:?}");
+        assert!(is_arg(write_raw(&raw, &one(0, 2048, 0), fmt)), "{fmt:?} x");
+        assert!(is_arg(write_raw(&raw, &one(0, 0, 2048), fmt)), "{fmt:?} y");
+        assert!(
+            is_arg(write_raw(&raw, &one(-1, 0, 0), fmt)),
+            "{fmt:?} t < 0"
+        );
+    }
+    assert!(is_arg(write_raw(
+        &raw,
+        &one(1 << 34, 0, 0),
+        PropheseeFormat::Evt2
+    )));
+    assert!(write_dat(&dat, &one(u32::MAX as i64, 16383, 16383)).is_ok());
+    assert!(is_arg(write_dat(&dat, &one(0, 16384, 0))), "dat x");
+    assert!(is_arg(write_dat(&dat, &one(0, 0, 16384))), "dat y");
+    assert!(
+        is_arg(write_dat(&dat, &one(u32::MAX as i64 + 1, 0, 0))),
+        "dat t"
+    );
+    // EVT 3.0 cannot encode decreasing times.
+    let mut back = one(10, 0, 0);
+    back.push(Event {
+        t: 9,
+        x: 0,
+        y: 0,
+        p: 1,
+    });
+    assert!(matches!(
+        write_raw(&raw, &back, PropheseeFormat::Evt3),
+        Err(EventsError::NonMonotonic { index: 1, .. })
+    ));
+    // write_events dispatches on the extension.
+    assert!(is_arg(write_events(&raw, &one(0, 4000, 0))));
+    assert!(is_arg(write_events(&dat, &one(0, 20000, 0))));
+}

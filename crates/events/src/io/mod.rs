@@ -43,9 +43,10 @@ pub enum EventFormat {
     Npz,
     /// AEDAT 4 (iniVation DV).
     Aedat4,
-    /// Prophesee `.raw` (EVT 2.0 / 3.0, from the header); read only.
+    /// Prophesee `.raw` (EVT 2.0 / 3.0, from the header); [`write_events`] writes EVT 3.0 (use
+    /// [`prophesee::write_raw`] for EVT 2.0).
     PropheseeRaw,
-    /// Prophesee `.dat`; read only.
+    /// Prophesee `.dat` (8-byte records, 14-bit coordinates, u32 µs times).
     PropheseeDat,
 }
 
@@ -96,18 +97,19 @@ pub fn read_all(r: &mut dyn EventReader) -> Result<EventStream> {
     Ok(s)
 }
 
-/// Writes a stream (format from the extension; AEDAT 4 uncompressed; Prophesee formats are read
-/// only).
+/// Writes a stream (format from the extension): text, npz, AEDAT 4 uncompressed, `.raw` as
+/// Prophesee EVT 3.0 (times must not decrease), `.dat` as Prophesee DAT. Events a format cannot
+/// hold (e.g. coordinates ≥ 2048 in EVT 3.0) are an [`EventsError::InvalidArgument`].
 pub fn write_events(path: impl AsRef<Path>, events: &EventStream) -> Result<()> {
     let path = path.as_ref();
     match EventFormat::from_path(path)? {
         EventFormat::Text => text::write_text(path, events),
         EventFormat::Npz => npz::write_npz(path, events),
         EventFormat::Aedat4 => aedat4::write_aedat4(path, events, aedat4::Compression::None),
-        EventFormat::PropheseeRaw | EventFormat::PropheseeDat => Err(EventsError::format(
-            path,
-            "writing Prophesee files is not supported (read only)".to_string(),
-        )),
+        EventFormat::PropheseeRaw => {
+            prophesee::write_raw(path, events, prophesee::PropheseeFormat::Evt3)
+        }
+        EventFormat::PropheseeDat => prophesee::write_dat(path, events),
     }
 }
 
