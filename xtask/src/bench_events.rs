@@ -1,11 +1,14 @@
 //! `cargo xtask bench events [--quick]`: throughput of the `events` crate on seeded synthetic
 //! streams, one JSON line per case `{"bench":"events","case","events","threads","seconds","mev_per_s",
-//! "target_mev_per_s"}`: voxelising (5 bins, 640x480), reading text, reading npz (binary).
+//! "target_mev_per_s"}`: voxelising (5 bins, 640x480), then reading every format the crate writes:
+//! text, npz, AEDAT 4 (uncompressed, LZ4, zstd), Prophesee EVT 2.0, EVT 3.0 and `.dat`.
 //! Files go to a temporary directory that is removed afterwards.
 
 use std::time::Instant;
 
 use anyhow::{Context, Result};
+use events::io::aedat4::{write_aedat4, Compression};
+use events::io::prophesee::{write_dat, write_raw, PropheseeFormat};
 use events::{Event, EventStream, SensorSize};
 
 /// Arguments of `bench events`.
@@ -74,15 +77,37 @@ pub fn run(args: Args) -> Result<()> {
     let dir = std::env::temp_dir().join(format!("xtask-bench-events-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let result = (|| -> Result<()> {
-        for (case, file, target) in [("read_text", "e.txt", 5.0), ("read_npz", "e.npz", 30.0)] {
+        type Writer = fn(&std::path::Path, &EventStream) -> events::Result<()>;
+        let cases: [(&str, &str, f64, Writer); 8] = [
+            ("read_text", "e.txt", 5.0, |p, s| events::write_events(p, s)),
+            ("read_npz", "e.npz", 30.0, |p, s| events::write_events(p, s)),
+            ("read_aedat4", "e.aedat4", 30.0, |p, s| {
+                write_aedat4(p, s, Compression::None)
+            }),
+            ("read_aedat4_lz4", "l.aedat4", 30.0, |p, s| {
+                write_aedat4(p, s, Compression::Lz4)
+            }),
+            ("read_aedat4_zstd", "z.aedat4", 30.0, |p, s| {
+                write_aedat4(p, s, Compression::Zstd)
+            }),
+            ("read_evt2", "e2.raw", 30.0, |p, s| {
+                write_raw(p, s, PropheseeFormat::Evt2)
+            }),
+            ("read_evt3", "e3.raw", 30.0, |p, s| {
+                write_raw(p, s, PropheseeFormat::Evt3)
+            }),
+            ("read_dat", "e.dat", 30.0, |p, s| write_dat(p, s)),
+        ];
+        for (case, file, target, write) in cases {
             let p = dir.join(file);
-            events::write_events(&p, &s).with_context(|| format!("writing {}", p.display()))?;
+            write(&p, &s).with_context(|| format!("writing {}", p.display()))?;
             let secs = best_of(repeats, || {
                 let r = events::read_events(&p)?;
                 anyhow::ensure!(r.len() == n, "{case}: read {} of {n} events", r.len());
                 Ok(())
             })?;
             line(case, n, secs, target);
+            let _ = std::fs::remove_file(&p);
         }
         Ok(())
     })();
