@@ -1,6 +1,6 @@
 //! f64 finite-difference check of the contrast-maximisation objective's analytic gradient
 //! (`events::CmaxProblem`): IWE bilinear voting, Gaussian blur, variance, tile interpolation, and the
-//! smoothness and divergence penalties.
+//! smoothness, curvature and divergence penalties.
 //!
 //! The bilinear vote has kinks where a warped event crosses a pixel boundary; events are generated
 //! with dithering (non-integer positions) and times away from the reference so that a ±h probe
@@ -36,14 +36,20 @@ fn stream(n: usize, w: u16, h: u16, seed: u64) -> EventStream {
 fn cmax_objective_gradient_matches_finite_differences() {
     let mut checker = GradientChecker::new();
     let (w, h) = (24u16, 20u16);
-    for (case, (tx, ty, smooth, div)) in [(1, 1, 0.0, 0.0), (2, 2, 0.01, 5.0), (3, 2, 0.001, 50.0)]
-        .into_iter()
-        .enumerate()
+    for (case, (tx, ty, smooth, curv, div)) in [
+        (1, 1, 0.0, 0.0, 0.0),
+        (2, 2, 0.01, 0.0, 5.0),
+        (3, 2, 0.001, 0.3, 50.0),
+        (4, 3, 0.0, 1.0, 50.0),
+    ]
+    .into_iter()
+    .enumerate()
     {
         let ev = stream(600, w, h, 11 + case as u64);
         let t_b = ev.t[ev.len() - 1] + 1;
         let cfg = CmaxConfig {
             smoothness: smooth,
+            curvature: curv,
             divergence: div,
             ..CmaxConfig::default()
         };
