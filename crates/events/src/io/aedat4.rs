@@ -205,6 +205,9 @@ pub struct Aedat4Reader<R: Read> {
     file_len: u64,
     raw: Vec<u8>,
     packet: Vec<u8>,
+    /// zstd decompression context, created at the first zstd packet and reused for every packet
+    /// (a fresh context per packet re-allocates its window and dominated the decoding time).
+    zstd: Option<zstd::zstd_safe::DCtx<'static>>,
     cursor: usize,
     count: usize,
     done: bool,
@@ -267,6 +270,7 @@ impl<R: Read> Aedat4Reader<R> {
             file_len,
             raw: Vec::new(),
             packet: Vec::new(),
+            zstd: None,
             cursor: 0,
             count: 0,
             done: false,
@@ -330,8 +334,19 @@ impl<R: Read> Aedat4Reader<R> {
                         .read_to_end(&mut self.packet)
                 }
                 Compression::Zstd | Compression::ZstdHigh => {
-                    zstd::stream::read::Decoder::new(&self.raw[..])
-                        .and_then(|d| d.take(cap).read_to_end(&mut self.packet))
+                    if self.zstd.is_none() {
+                        self.zstd = zstd::zstd_safe::DCtx::try_create();
+                    }
+                    match self.zstd.as_mut() {
+                        // `with_context` resets the session, so a failed packet leaves nothing.
+                        Some(ctx) => zstd::stream::read::Decoder::with_context(&self.raw[..], ctx)
+                            .take(cap)
+                            .read_to_end(&mut self.packet),
+                        None => Err(std::io::Error::new(
+                            std::io::ErrorKind::OutOfMemory,
+                            "cannot create a zstd decompression context",
+                        )),
+                    }
                 }
             };
             res.map_err(|e| EventsError::format(&self.path, format!("decompressing packet: {e}")))?;
@@ -392,6 +407,11 @@ impl<R: Read> EventReader for Aedat4Reader<R> {
                 break;
             }
             let take = self.count.min(max - n);
+            // `take` events are present in the decoded packet (checked against its length).
+            out.t.reserve(take);
+            out.x.reserve(take);
+            out.y.reserve(take);
+            out.p.reserve(take);
             for k in 0..take {
                 let b = &self.packet[self.cursor + 16 * k..self.cursor + 16 * k + 16];
                 let t = i64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);

@@ -220,6 +220,12 @@ impl<R: BufRead> PropheseeReader<R> {
 
     fn decode(&mut self, out: &mut EventStream) -> usize {
         let before = out.len();
+        // At most one event per word except EVT 3.0 vectors: bounded by the bytes actually read.
+        let words = self.buf.len() / self.word_size();
+        out.t.reserve(words);
+        out.x.reserve(words);
+        out.y.reserve(words);
+        out.p.reserve(words);
         match self.format {
             PropheseeFormat::Evt2 => {
                 for c in self.buf.chunks_exact(4) {
