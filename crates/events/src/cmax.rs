@@ -247,22 +247,28 @@ impl CmaxProblem {
         out
     }
 
-    /// Warped position of event i and its bilinear cell: (ix, iy, fx, fy).
+    /// Warped position of event i as its bilinear cell: (ix, iy, fx, fy).
     #[inline]
-    fn warp(&self, i: usize, v: &[f64]) -> (i64, i64, f64, f64) {
+    fn warp(&self, i: usize, v: &[f64]) -> Cell {
         let (vx, vy) = self.event_velocity(i, v);
         let wx = self.x[i] - self.s[i] * vx;
         let wy = self.y[i] - self.s[i] * vy;
-        let (fx0, fy0) = (wx.floor(), wy.floor());
-        (fx0 as i64, fy0 as i64, wx - fx0, wy - fy0)
+        let (ix, iy) = (floor_i64(wx), floor_i64(wy));
+        (ix, iy, wx - ix as f64, wy - iy as f64)
     }
 
-    /// The image of warped events (bilinear voting, unblurred), `H × W`.
-    pub fn iwe(&self, v: &[f64]) -> Vec<f64> {
+    /// Warps every event once: its bilinear cells, and the unblurred IWE voted from them.
+    fn warp_all(&self, v: &[f64]) -> (Vec<Cell>, Vec<f64>) {
+        let cells: Vec<_> = (0..self.x.len()).map(|i| self.warp(i, v)).collect();
+        let img = self.vote(&cells);
+        (cells, img)
+    }
+
+    /// Bilinear voting of warped events into an `H × W` image.
+    fn vote(&self, cells: &[Cell]) -> Vec<f64> {
         let (w, h) = (self.width as i64, self.height as i64);
         let mut img = vec![0.0; self.width * self.height];
-        for i in 0..self.x.len() {
-            let (ix, iy, fx, fy) = self.warp(i, v);
+        for &(ix, iy, fx, fy) in cells {
             for (dx, dy, wgt) in [
                 (0, 0, (1.0 - fx) * (1.0 - fy)),
                 (1, 0, fx * (1.0 - fy)),
@@ -276,6 +282,11 @@ impl CmaxProblem {
             }
         }
         img
+    }
+
+    /// The image of warped events (bilinear voting, unblurred), `H × W`.
+    pub fn iwe(&self, v: &[f64]) -> Vec<f64> {
+        self.warp_all(v).1
     }
 
     fn smoothness_term(&self, v: &[f64], grad: Option<&mut [f64]>) -> f64 {
@@ -374,7 +385,8 @@ impl CmaxProblem {
     /// The objective and its analytic gradient with respect to the tile velocities.
     pub fn objective_and_gradient(&self, v: &[f64]) -> (f64, Vec<f64>) {
         let (w, h) = (self.width as i64, self.height as i64);
-        let b = self.blur(&self.iwe(v));
+        let (cells, img) = self.warp_all(v);
+        let b = self.blur(&img);
         let n = b.len() as f64;
         let mean = b.iter().sum::<f64>() / n;
         let var = b.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
@@ -389,8 +401,7 @@ impl CmaxProblem {
                 0.0
             }
         };
-        for i in 0..self.x.len() {
-            let (ix, iy, fx, fy) = self.warp(i, v);
+        for (i, &(ix, iy, fx, fy)) in cells.iter().enumerate() {
             let (g00, g10, g01, g11) = (
                 at(ix, iy),
                 at(ix + 1, iy),
@@ -412,6 +423,21 @@ impl CmaxProblem {
     /// Dense velocity (pixels per window) by bilinear interpolation of tile velocities `v`.
     pub fn dense(&self, v: &[f64]) -> Flow {
         dense_from_tiles(v, self.width, self.height, self.tiles_x, self.tiles_y)
+    }
+}
+
+/// A warped event's bilinear cell: integer pixel (ix, iy) and fractions (fx, fy) ∈ [0, 1).
+type Cell = (i64, i64, f64, f64);
+
+/// `x.floor() as i64` without the libm call (the baseline x86-64 target has no SSE4.1 `roundsd`):
+/// the same value for every finite `x` in the i64 range.
+#[inline]
+fn floor_i64(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x {
+        i - 1
+    } else {
+        i
     }
 }
 
