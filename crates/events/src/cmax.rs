@@ -475,6 +475,41 @@ pub fn dense_from_tiles(v: &[f64], w: usize, h: usize, tx: usize, ty: usize) -> 
     f
 }
 
+/// Centres of the 2×2 tiles relative to the image centre, in units of the image size: the
+/// position `p` of a tile centre is `c + (dx·W, dy·H)`.
+const AFFINE_CENTRES: [(f64, f64); 4] =
+    [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
+
+/// The 2×2 tile velocities `[vx_0, vy_0, …]` (pixels per window) of the affine field
+/// `v(p) = a + B·((p_x − c_x)/(W/2), (p_y − c_y)/(H/2))` with
+/// `theta = [a_x, a_y, B_xx, B_xy, B_yx, B_yy]` (pixels per window); bilinear interpolation of these
+/// tiles reproduces the field between the tile centres.
+fn affine_tiles(theta: &[f64]) -> Vec<f64> {
+    let mut v = vec![0.0; 8];
+    for (k, &(dx, dy)) in AFFINE_CENTRES.iter().enumerate() {
+        let (ux, uy) = (2.0 * dx, 2.0 * dy);
+        v[2 * k] = theta[0] + theta[2] * ux + theta[3] * uy;
+        v[2 * k + 1] = theta[1] + theta[4] * ux + theta[5] * uy;
+    }
+    v
+}
+
+/// The gradient with respect to `theta` of a function of [`affine_tiles`]`(theta)`, given its
+/// gradient `g` with respect to the 8 tile velocities (the transpose of the linear map).
+fn affine_pullback(g: &[f64]) -> Vec<f64> {
+    let mut gt = vec![0.0; 6];
+    for (k, &(dx, dy)) in AFFINE_CENTRES.iter().enumerate() {
+        let (ux, uy) = (2.0 * dx, 2.0 * dy);
+        gt[0] += g[2 * k];
+        gt[2] += g[2 * k] * ux;
+        gt[3] += g[2 * k] * uy;
+        gt[1] += g[2 * k + 1];
+        gt[4] += g[2 * k + 1] * ux;
+        gt[5] += g[2 * k + 1] * uy;
+    }
+    gt
+}
+
 /// Maximises an objective from `init` given its gradient: Adam's first moment with one shared
 /// second moment (so the relative step sizes follow the gradient); the step decays linearly
 /// from `lr` to `lr/10`.
@@ -547,44 +582,14 @@ pub fn flow_from_events(
             if problem.num_events() == 0 {
                 break;
             }
-            let (rx, ry) = (w as f64 / 2.0, h as f64 / 2.0);
-            // Tile centres relative to the image centre, scaled: ±1/2.
-            let rel = |k: usize| -> (f64, f64) {
-                let (i, j) = ((k % 2) as f64, (k / 2) as f64);
-                let cx = (i + 0.5) * w as f64 / 2.0 - 0.5 - (w as f64 - 1.0) / 2.0;
-                let cy = (j + 0.5) * h as f64 / 2.0 - 0.5 - (h as f64 - 1.0) / 2.0;
-                (cx / rx, cy / ry)
-            };
-            let tiles_of = |th: &[f64]| -> Vec<f64> {
-                let mut tv = vec![0.0; 8];
-                for k in 0..4 {
-                    let (dx, dy) = rel(k);
-                    tv[2 * k] = th[0] + th[2] * dx + th[3] * dy;
-                    tv[2 * k + 1] = th[1] + th[4] * dx + th[5] * dy;
-                }
-                tv
-            };
             let theta = adam(
-                |th| {
-                    let (_, g) = problem.objective_and_gradient(&tiles_of(th));
-                    let mut gt = vec![0.0; 6];
-                    for k in 0..4 {
-                        let (dx, dy) = rel(k);
-                        gt[0] += g[2 * k];
-                        gt[2] += g[2 * k] * dx;
-                        gt[3] += g[2 * k] * dy;
-                        gt[1] += g[2 * k + 1];
-                        gt[4] += g[2 * k + 1] * dx;
-                        gt[5] += g[2 * k + 1] * dy;
-                    }
-                    gt
-                },
+                |th| affine_pullback(&problem.objective_and_gradient(&affine_tiles(th)).1),
                 vec![0.0; 6],
                 config.affine_iterations,
                 lr,
             );
             tiles = (2, 2);
-            v = tiles_of(&theta);
+            v = affine_tiles(&theta);
             continue;
         }
         let problem = CmaxProblem::new(events, sensor, t_a_us, t_b_us, tiles.0, tiles.1, config)?;
@@ -599,4 +604,34 @@ pub fn flow_from_events(
         );
     }
     Ok(dense_from_tiles(&v, w, h, tiles.0, tiles.1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The affine pull-back is the exact transpose of `affine_tiles` (`<A θ, g> = <θ, Aᵀ g>`), and
+    /// the tiles of a pure rotation lie where the rotation puts the 2×2 tile centres.
+    #[test]
+    fn affine_parametrisation_and_its_transpose_agree() {
+        let theta = [0.3, -1.1, 0.7, -2.0, 1.3, 0.4];
+        let g = [0.5, -0.25, 1.5, 2.0, -0.75, 0.1, 0.9, -1.3];
+        let at = affine_tiles(&theta);
+        let lhs: f64 = at.iter().zip(&g).map(|(a, b)| a * b).sum();
+        let rhs: f64 = affine_pullback(&g)
+            .iter()
+            .zip(&theta)
+            .map(|(a, b)| a * b)
+            .sum();
+        assert!((lhs - rhs).abs() < 1e-12, "{lhs} vs {rhs}");
+        // Rotation by ω about the centre of a 96×64 image: v = ω·(−(y − c_y), x − c_x).
+        let (w, h, om) = (96.0, 64.0, 0.04);
+        let rot = affine_tiles(&[0.0, 0.0, 0.0, -om * h / 2.0, om * w / 2.0, 0.0]);
+        for (k, &(dx, dy)) in AFFINE_CENTRES.iter().enumerate() {
+            // Tile centres of a 2×2 grid sit at a quarter and three quarters of each axis.
+            let (px, py) = (dx * w, dy * h);
+            assert!((rot[2 * k] + om * py).abs() < 1e-12, "tile {k} x");
+            assert!((rot[2 * k + 1] - om * px).abs() < 1e-12, "tile {k} y");
+        }
+    }
 }
