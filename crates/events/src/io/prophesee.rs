@@ -213,11 +213,6 @@ impl<R: BufRead> PropheseeReader<R> {
         }
     }
 
-    #[inline]
-    fn t3(&self) -> i64 {
-        (self.wraps << 24) | (self.time_high << 12) | self.time_low
-    }
-
     fn decode(&mut self, out: &mut EventStream) -> usize {
         let before = out.len();
         // At most one event per word except EVT 3.0 vectors: bounded by the bytes actually read.
@@ -244,48 +239,58 @@ impl<R: BufRead> PropheseeReader<R> {
                 }
             }
             PropheseeFormat::Evt3 => {
-                let buf = std::mem::take(&mut self.buf);
-                for c in buf.chunks_exact(2) {
+                // The decoder state lives in locals for the loop (the current time is kept
+                // assembled and only recomputed when a time word arrives) and is stored back after.
+                let (mut y, mut base_x, mut pol) = (self.y, self.base_x, self.pol);
+                let (mut time_low, mut time_high) = (self.time_low, self.time_high);
+                let (mut seen, mut wraps) = (self.time_high_seen, self.wraps);
+                let mut t = (wraps << 24) | (time_high << 12) | time_low;
+                for c in self.buf.chunks_exact(2) {
                     let w = u16::from_le_bytes([c[0], c[1]]);
                     let payload = w & 0x0FFF;
                     match w >> 12 {
-                        0x0 => self.y = payload & 0x7FF,
+                        0x0 => y = payload & 0x7FF,
                         0x2 => {
-                            out.t.push(self.t3());
+                            out.t.push(t);
                             out.x.push(payload & 0x7FF);
-                            out.y.push(self.y);
+                            out.y.push(y);
                             out.p.push(if payload & 0x800 != 0 { 1 } else { -1 });
                         }
                         0x3 => {
-                            self.base_x = payload & 0x7FF;
-                            self.pol = if payload & 0x800 != 0 { 1 } else { -1 };
+                            base_x = payload & 0x7FF;
+                            pol = if payload & 0x800 != 0 { 1 } else { -1 };
                         }
                         0x4 | 0x5 => {
                             let n = if w >> 12 == 0x4 { 12 } else { 8 };
-                            let t = self.t3();
                             for i in 0..n {
                                 if payload & (1 << i) != 0 {
                                     out.t.push(t);
-                                    out.x.push(self.base_x.wrapping_add(i));
-                                    out.y.push(self.y);
-                                    out.p.push(self.pol);
+                                    out.x.push(base_x.wrapping_add(i));
+                                    out.y.push(y);
+                                    out.p.push(pol);
                                 }
                             }
-                            self.base_x = self.base_x.wrapping_add(n);
+                            base_x = base_x.wrapping_add(n);
                         }
-                        0x6 => self.time_low = payload as i64,
+                        0x6 => {
+                            time_low = payload as i64;
+                            t = (wraps << 24) | (time_high << 12) | time_low;
+                        }
                         0x8 => {
                             let high = payload as i64;
-                            if self.time_high_seen && high < self.time_high {
-                                self.wraps += 1;
+                            if seen && high < time_high {
+                                wraps += 1;
                             }
-                            self.time_high = high;
-                            self.time_high_seen = true;
+                            time_high = high;
+                            seen = true;
+                            t = (wraps << 24) | (time_high << 12) | time_low;
                         }
                         _ => {}
                     }
                 }
-                self.buf = buf;
+                (self.y, self.base_x, self.pol) = (y, base_x, pol);
+                (self.time_low, self.time_high) = (time_low, time_high);
+                (self.time_high_seen, self.wraps) = (seen, wraps);
             }
             PropheseeFormat::Dat => {
                 for c in self.buf.chunks_exact(8) {
