@@ -37,7 +37,9 @@ pub mod t7;
 pub mod train;
 mod weights;
 
-pub use net::{SpyNet, Tape, IMAGENET_MEAN, IMAGENET_STD, KERNEL, LAYER_CHANNELS};
+pub use net::{
+    SpyNet, Tape, IMAGENET_MEAN, IMAGENET_STD, KERNEL, LAYER_CHANNELS, PAIRED_DIFF_GAIN,
+};
 pub use weights::{load_safetensors, read_safetensors, save_safetensors, write_safetensors};
 
 /// Errors of the `flow` crate.

@@ -16,6 +16,9 @@ use nn::{
 pub const KERNEL: usize = 7;
 /// `(c_in, c_out)` of the five convolutions of every level.
 pub const LAYER_CHANNELS: [(usize, usize); 5] = [(8, 32), (32, 64), (64, 32), (32, 16), (16, 2)];
+/// Scale of the temporal-difference filters relative to the appearance filters in the first
+/// convolution of [`SpyNet::random_init`] with `paired_input`.
+pub const PAIRED_DIFF_GAIN: f64 = 3.0;
 /// ImageNet channel means (RGB) subtracted from the `[0, 1]` input images.
 pub const IMAGENET_MEAN: [f64; 3] = [0.485, 0.456, 0.406];
 /// ImageNet channel standard deviations (RGB) dividing the centred input images.
@@ -56,6 +59,19 @@ pub struct Tape<T> {
 }
 
 impl<T: Real> Tape<T> {
+    /// Fraction of positive outputs of each of the four ReLU layers of level `level` (training
+    /// diagnostics: a layer whose fraction falls to ~0 is dead). Empty if the level was not run.
+    pub fn live_relu_fractions(&self, level: usize) -> Vec<f64> {
+        self.levels.get(level).map_or_else(Vec::new, |lt| {
+            lt.acts[1..]
+                .iter()
+                .map(|a| {
+                    a.iter().filter(|&&v| v > T::zero()).count() as f64 / a.len().max(1) as f64
+                })
+                .collect()
+        })
+    }
+
     /// Fingerprint of the piecewise-smooth region the forward pass ran in: the sign pattern of every
     /// ReLU, and for every warp sample its bilinear cell and whether it was clamped at the border.
     /// Two passes with equal signatures are evaluations of the same smooth branch of the network;
@@ -208,15 +224,55 @@ impl<T: Real> SpyNet<T> {
     /// convolution of each level scaled by 0.1 so that the initial residual flow is small),
     /// deterministic from `seed`.
     pub fn random(levels: usize, seed: u64) -> Self {
+        Self::random_with_output_gain(levels, seed, 0.1)
+    }
+
+    /// [`SpyNet::random`] with the output convolution's He bound scaled by `output_gain` instead of
+    /// 0.1 (`0` = a zero output convolution: the untrained network predicts exactly the upsampled
+    /// coarser flow, and the first gradient steps fit the read-out instead of suppressing random
+    /// output noise by silencing the hidden ReLUs). Draws the same random numbers for any gain.
+    pub fn random_with_output_gain(levels: usize, seed: u64, output_gain: f64) -> Self {
+        Self::random_init(levels, seed, output_gain, false)
+    }
+
+    /// [`SpyNet::random_with_output_gain`], and with `paired_input` the first convolution's image
+    /// weights rewritten as `w₁ = a − d`, `w₂ = a + d` (so each filter responds to `a ∗ (I₁ + I₂) +
+    /// d ∗ (I₂ − I₁)`), with `a` the drawn image-1 weights minus their mean (no response to the
+    /// image's DC level) and `d` the drawn image-2 weights × [`PAIRED_DIFF_GAIN`]. With independent
+    /// random weights the temporal difference `I₂ − I₁` (the only part of the input that carries
+    /// motion) is a small component of every feature, swamped by appearance, and the network has to
+    /// discover it from a weak correlation; here every first-layer feature mixes a spatial-derivative
+    /// like response and the temporal difference at comparable scales, so that the ReLUs form the
+    /// `|∂I + ∂ₜI|`-type terms a motion estimate is built from.
+    pub fn random_init(levels: usize, seed: u64, output_gain: f64, paired_input: bool) -> Self {
         let mut net = Self::zeros(levels);
         let mut rng = SplitMix(seed ^ 0x5EED_F10F);
         for level in &mut net.levels {
             for (i, conv) in level.iter_mut().enumerate() {
                 let fan_in = (LAYER_CHANNELS[i].0 * KERNEL * KERNEL) as f64;
-                let gain = if i == 4 { 0.1 } else { 1.0 };
+                let gain = if i == 4 { output_gain } else { 1.0 };
                 let bound = gain * (6.0 / fan_in).sqrt();
                 for v in &mut conv.weight {
                     *v = T::of(bound * rng.uniform());
+                }
+                if i == 0 && paired_input {
+                    // Per output channel: the image-1 weights become a zero-mean (no DC) filter
+                    // `a` of the frames' sum, the image-2 weights a filter `d` of the temporal
+                    // difference with PAIRED_DIFF_GAIN× the scale; w1 = a − d, w2 = a + d.
+                    let (c_in, kk) = (LAYER_CHANNELS[0].0, KERNEL * KERNEL);
+                    let gain = T::of(PAIRED_DIFF_GAIN);
+                    for w in conv.weight.chunks_exact_mut(c_in * kk) {
+                        let (img1, rest) = w.split_at_mut(3 * kk);
+                        let img2 = &mut rest[..3 * kk];
+                        for (a, d) in img1.chunks_exact_mut(kk).zip(img2.chunks_exact_mut(kk)) {
+                            let mean = a.iter().fold(T::zero(), |m, &v| m + v) / T::of(kk as f64);
+                            for (av, dv) in a.iter_mut().zip(d.iter_mut()) {
+                                let (s, t) = (*av - mean, gain * *dv);
+                                *av = s - t;
+                                *dv = s + t;
+                            }
+                        }
+                    }
                 }
             }
         }

@@ -35,6 +35,20 @@ pub struct PairConfig {
     pub max_scale: f32,
     /// Largest number of moving foreground layers (a pair has between `min(1, max)` and `max`).
     pub max_foreground_layers: usize,
+    /// Highest texture frequency in cycles per pixel; `0` = unlimited (the original generator:
+    /// base frequencies of 3–12 cycles per image and value-noise octaves up to 16× that, i.e. mostly
+    /// above Nyquist on small images). With a limit `f`, base frequencies are log-uniform in
+    /// `[max(f/16, 2 cycles per image), f]` and value-noise octaves above `f` are dropped, so the texture is resolved at the
+    /// image's own resolution and sub-pixel motion is visible in it.
+    pub max_cycles_per_pixel: f32,
+    /// Samples per pixel side for the images (`s × s` box-filtered samples); `1` = point sampling at
+    /// pixel centres (the original generator). With point sampling a hard edge moving by less than a
+    /// pixel often does not change the image at all; area sampling makes the images' change
+    /// proportional to the motion. The ground-truth flow is always taken at pixel centres.
+    pub supersampling: usize,
+    /// Scale of the second frame's brightness jitter (gain `1 ± 0.1·j`, offset `± 0.05·j`); `1` is the
+    /// original generator, `0` turns it off (draws the same random numbers either way).
+    pub brightness_jitter: f32,
 }
 
 impl Default for PairConfig {
@@ -45,6 +59,22 @@ impl Default for PairConfig {
             max_rotation: 0.15,
             max_scale: 0.1,
             max_foreground_layers: 3,
+            max_cycles_per_pixel: 0.25,
+            supersampling: 3,
+            brightness_jitter: 1.0,
+        }
+    }
+}
+
+impl PairConfig {
+    /// The original generator (before the texture-frequency limit and area sampling) at `size`:
+    /// draws the same pairs as the first trainer's runs recorded in `docs/BENCHMARKS.md`.
+    pub fn original(size: usize) -> Self {
+        Self {
+            size,
+            max_cycles_per_pixel: 0.0,
+            supersampling: 1,
+            ..Self::default()
         }
     }
 }
@@ -91,10 +121,12 @@ struct Texture {
     c1: [f32; 3],
     freq: f32,
     angle: f32,
+    /// Value-noise octaves above this frequency (cycles per pixel) are dropped.
+    max_freq: f32,
 }
 
 impl Texture {
-    fn random(r: &mut Rng, size: f32) -> Self {
+    fn random(r: &mut Rng, size: f32, max_cycles: f32) -> Self {
         let kind = match r.next_u64() % 4 {
             0 => Kind::Noise,
             1 => Kind::Stripes,
@@ -107,16 +139,30 @@ impl Texture {
             seed: r.next_u64(),
             c0: col(r),
             c1: col(r),
-            freq: (3.0 + 9.0 * r.f()) / size,
+            freq: if max_cycles > 0.0 {
+                // Log-uniform in [lo, max_cycles], lo = max(max_cycles / 16, 2 cycles per image).
+                let lo = (max_cycles / 16.0).max(2.0 / size).min(max_cycles);
+                lo * (max_cycles / lo).powf(r.f())
+            } else {
+                (3.0 + 9.0 * r.f()) / size
+            },
             angle: r.sym(std::f32::consts::PI),
+            max_freq: if max_cycles > 0.0 {
+                max_cycles
+            } else {
+                f32::INFINITY
+            },
         }
     }
 
     fn value_noise(&self, x: f32, y: f32) -> f32 {
-        let mut total = 0.0;
+        let (mut total, mut norm) = (0.0, 0.0);
         let mut amp = 0.5;
         let mut f = self.freq * 2.0;
         for o in 0..4 {
+            if o > 0 && f > self.max_freq {
+                break;
+            }
             let (px, py) = (x * f, y * f);
             let (ix, iy) = (px.floor(), py.floor());
             let (fx, fy) = (px - ix, py - iy);
@@ -128,10 +174,11 @@ impl Texture {
             let c = hash2(s, ix, iy + 1);
             let d = hash2(s, ix + 1, iy + 1);
             total += amp * (a + (b - a) * sx + (c - a) * sy + (a - b - c + d) * sx * sy);
+            norm += amp;
             amp *= 0.5;
             f *= 2.0;
         }
-        total / 0.9375
+        total / norm
     }
 
     /// Colour at layer-local coordinates (pixels).
@@ -239,7 +286,7 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
     let nf = n as f32;
     let centre = [nf / 2.0, nf / 2.0];
     let mut layers = vec![Layer {
-        tex: Texture::random(&mut r, nf),
+        tex: Texture::random(&mut r, nf, cfg.max_cycles_per_pixel),
         motion: Motion::random(
             &mut r,
             centre,
@@ -259,7 +306,7 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
     for _ in 0..count {
         let c = [r.f() * nf, r.f() * nf];
         layers.push(Layer {
-            tex: Texture::random(&mut r, nf),
+            tex: Texture::random(&mut r, nf, cfg.max_cycles_per_pixel),
             motion: Motion::random(
                 &mut r,
                 c,
@@ -273,8 +320,10 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
             ellipse: r.f() < 0.5,
         });
     }
-    let gain = 1.0 + r.sym(0.1);
-    let bias = r.sym(0.05);
+    let gain = 1.0 + r.sym(0.1) * cfg.brightness_jitter;
+    let bias = r.sym(0.05) * cfg.brightness_jitter;
+    let ss = cfg.supersampling.max(1);
+    let inv_samples = 1.0 / (ss * ss) as f32;
     let hw = n * n;
     let mut img1 = vec![0.0f32; 3 * hw];
     let mut img2 = vec![0.0f32; 3 * hw];
@@ -283,27 +332,43 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
         for x in 0..n {
             let p = [x as f32 + 0.5, y as f32 + 0.5];
             let i = y * n + x;
-            // Frame 1: topmost layer covering p.
+            // Ground truth at the pixel centre: the topmost layer covering it in frame 1.
             if let Some(l) = layers.iter().rev().find(|l| l.covers(p)) {
-                let col = l.tex.sample(p[0], p[1]);
                 let q = l.motion.forward(p);
-                for c in 0..3 {
-                    img1[c * hw + i] = col[c];
-                }
                 flow[i] = q[0] - p[0];
                 flow[hw + i] = q[1] - p[1];
             }
-            // Frame 2: topmost layer whose moved shape covers p.
-            if let Some((l, src)) = layers
-                .iter()
-                .rev()
-                .map(|l| (l, l.motion.inverse(p)))
-                .find(|(l, src)| l.covers(*src))
-            {
-                let col = l.tex.sample(src[0], src[1]);
-                for c in 0..3 {
-                    img2[c * hw + i] = (col[c] * gain + bias).clamp(0.0, 1.0);
+            let (mut c1, mut c2) = ([0.0f32; 3], [0.0f32; 3]);
+            for sy in 0..ss {
+                for sx in 0..ss {
+                    let p = [
+                        x as f32 + (sx as f32 + 0.5) / ss as f32,
+                        y as f32 + (sy as f32 + 0.5) / ss as f32,
+                    ];
+                    // Frame 1: topmost layer covering p.
+                    if let Some(l) = layers.iter().rev().find(|l| l.covers(p)) {
+                        let col = l.tex.sample(p[0], p[1]);
+                        for c in 0..3 {
+                            c1[c] += col[c];
+                        }
+                    }
+                    // Frame 2: topmost layer whose moved shape covers p.
+                    if let Some((l, src)) = layers
+                        .iter()
+                        .rev()
+                        .map(|l| (l, l.motion.inverse(p)))
+                        .find(|(l, src)| l.covers(*src))
+                    {
+                        let col = l.tex.sample(src[0], src[1]);
+                        for c in 0..3 {
+                            c2[c] += (col[c] * gain + bias).clamp(0.0, 1.0);
+                        }
+                    }
                 }
+            }
+            for c in 0..3 {
+                img1[c * hw + i] = c1[c] * inv_samples;
+                img2[c * hw + i] = c2[c] * inv_samples;
             }
         }
     }

@@ -13,6 +13,30 @@ use crate::synthetic::{average_epe, generate_pair, PairConfig};
 use crate::{FlowError, SpyNet};
 use nn::{avg_pool2x2_forward, pooled_size, Adam, AdamConfig, Real};
 
+/// Per-pixel loss of a level's flow against its ground truth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Loss {
+    /// Smoothed end-point error `√(Δu² + Δv² + ε)` (SPyNet's training loss). Its gradient has unit
+    /// norm per pixel whatever the error, so on a noisy batch it pulls towards the median flow (≈ 0).
+    Epe,
+    /// Half the squared end-point error `(Δu² + Δv²)/2`: the gradient is proportional to the error and
+    /// the optimum is the conditional mean, which makes the zero-flow attractor weaker at the start.
+    Mse,
+}
+
+/// Optimiser of a training run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Optimizer {
+    /// Adam with PyTorch's defaults apart from the learning rate.
+    Adam,
+    /// Plain SGD with (heavy-ball) momentum `v ← μv + g`, `p ← p − lr·v`: steps proportional to the
+    /// gradient, so pure-noise directions are not amplified to learning-rate-sized steps.
+    Sgd {
+        /// Momentum `μ` (0.9 is the usual value).
+        momentum: f64,
+    },
+}
+
 /// Smoothing `ε` (px²) of the end-point-error loss `√(Δu² + Δv² + ε)`: keeps the loss differentiable
 /// where the prediction is exact, far below the EPE values of interest (≥ 0.01 px).
 pub const EPE_EPS: f64 = 1e-6;
@@ -26,8 +50,21 @@ pub struct TrainConfig {
     pub pairs: PairConfig,
     /// Pairs per optimiser step.
     pub batch: usize,
-    /// Adam learning rate.
+    /// Peak learning rate of the optimiser.
     pub lr: f64,
+    /// Optimiser.
+    pub optimizer: Optimizer,
+    /// Steps of linear learning-rate warm-up at the start of every level (0 = none).
+    pub warmup_steps: usize,
+    /// Scale of the output convolution's initial weights relative to He-uniform (see
+    /// [`SpyNet::random_with_output_gain`]; 0.1 was the original initialisation).
+    pub output_init_gain: f64,
+    /// Motion-aware first-layer initialisation (see [`SpyNet::random_init`]): every first-layer
+    /// filter mixes a zero-mean appearance filter and an amplified temporal-difference filter.
+    pub paired_input_init: bool,
+    /// Steps at the start of every level trained on [`Loss::Mse`] before switching to [`Loss::Epe`]
+    /// (0 = EPE throughout, `usize::MAX` = MSE throughout).
+    pub mse_steps: usize,
     /// Seed of the initial weights and of the training pairs.
     pub seed: u64,
     /// `Some(n)`: cycle over the fixed set of pairs `0..n` of the seed (a small data set, e.g. for
@@ -41,7 +78,22 @@ pub struct Trainer {
     pub net: SpyNet<f32>,
     cfg: TrainConfig,
     adams: Vec<Vec<(Adam<f32>, Adam<f32>)>>,
+    /// SGD momentum buffers, same layout as `net` (used with [`Optimizer::Sgd`]).
+    velocity: SpyNet<f32>,
+    /// Steps taken so far per level (for the warm-up and loss schedules).
+    level_steps: Vec<usize>,
     next_pair: u64,
+}
+
+/// Result of one [`Trainer::step`].
+#[derive(Clone, Debug)]
+pub struct StepReport {
+    /// Batch mean EPE at the level's resolution (level pixels).
+    pub epe: f64,
+    /// Batch mean of the loss that was optimised.
+    pub loss: f64,
+    /// Fraction of positive outputs of the level's four ReLU layers on the batch's first pair.
+    pub live_relu: Vec<f64>,
 }
 
 /// Ground-truth flow `(2, H, W)` reduced to level `level` of an `levels`-level pyramid.
@@ -77,36 +129,64 @@ pub fn level_epe_loss<T: Real>(
     scale: f64,
 ) -> Result<f64, FlowError> {
     let tape = net.forward_to_level(img1, img2, h, w, level)?;
+    Ok(level_loss_on_tape(net, &tape, truth, Loss::Epe, weight_grads, scale)?.0)
+}
+
+/// [`level_epe_loss`] for any [`Loss`], on an existing partial-forward tape of `net` (from
+/// [`SpyNet::forward_to_level`]); returns `(loss, mean EPE)`, both in the level's pixels.
+pub fn level_loss_on_tape<T: Real>(
+    net: &SpyNet<T>,
+    tape: &crate::Tape<T>,
+    truth: &[T],
+    kind: Loss,
+    weight_grads: Option<&mut SpyNet<T>>,
+    scale: f64,
+) -> Result<(f64, f64), FlowError> {
     if truth.len() != tape.flow.len() {
         return Err(FlowError::Size(format!(
-            "level {level} ground truth has {} values, expected {}",
+            "level ground truth has {} values, expected {}",
             truth.len(),
             tape.flow.len()
         )));
     }
     let hw = truth.len() / 2;
     let inv = T::of(1.0 / hw.max(1) as f64);
-    let (eps, scale) = (T::of(EPE_EPS), T::of(scale));
-    let mut loss = T::zero();
+    let (eps, scale, half) = (T::of(EPE_EPS), T::of(scale), T::of(0.5));
+    let (mut loss, mut epe) = (T::zero(), T::zero());
     let mut g = vec![T::zero(); 2 * hw];
     for i in 0..hw {
         let du = tape.flow[i] - truth[i];
         let dv = tape.flow[hw + i] - truth[hw + i];
         let e = (du * du + dv * dv + eps).sqrt();
-        loss = loss + e;
-        g[i] = du / e * inv * scale;
-        g[hw + i] = dv / e * inv * scale;
+        epe = epe + e;
+        match kind {
+            Loss::Epe => {
+                loss = loss + e;
+                g[i] = du / e * inv * scale;
+                g[hw + i] = dv / e * inv * scale;
+            }
+            Loss::Mse => {
+                loss = loss + half * (du * du + dv * dv);
+                g[i] = du * inv * scale;
+                g[hw + i] = dv * inv * scale;
+            }
+        }
     }
     if let Some(grads) = weight_grads {
-        net.backward_last_level_weights(&tape, &g, grads)?;
+        net.backward_last_level_weights(tape, &g, grads)?;
     }
-    Ok((loss * inv).as_f64())
+    Ok(((loss * inv).as_f64(), (epe * inv).as_f64()))
 }
 
 impl Trainer {
-    /// A fresh network (`SpyNet::random(levels, seed)`) and zeroed Adam moments.
+    /// A fresh network ([`SpyNet::random_init`]) and zeroed optimiser state.
     pub fn new(cfg: TrainConfig) -> Self {
-        let net = SpyNet::random(cfg.levels, cfg.seed);
+        let net = SpyNet::random_init(
+            cfg.levels,
+            cfg.seed,
+            cfg.output_init_gain,
+            cfg.paired_input_init,
+        );
         Self::from_net(net, cfg)
     }
 
@@ -130,22 +210,43 @@ impl Trainer {
                     .collect()
             })
             .collect();
+        let velocity = net.zeros_like();
+        let level_steps = vec![0; net.num_levels()];
         Self {
             net,
             cfg,
             adams,
+            velocity,
+            level_steps,
             next_pair: 0,
         }
     }
 
-    /// One Adam step on level `level` over a batch of fresh pairs; returns the batch's mean EPE at
-    /// that level's resolution (in that level's pixels).
+    /// The run's settings.
+    pub fn config(&self) -> &TrainConfig {
+        &self.cfg
+    }
+
+    /// One optimiser step on level `level` over a batch of fresh pairs; returns the batch's mean EPE
+    /// at that level's resolution (in that level's pixels).
     pub fn step(&mut self, level: usize) -> Result<f64, FlowError> {
+        Ok(self.step_report(level)?.epe)
+    }
+
+    /// [`Trainer::step`] with the optimised loss and ReLU diagnostics.
+    pub fn step_report(&mut self, level: usize) -> Result<StepReport, FlowError> {
         let mut grads = self.net.zeros_like();
-        let mut epe = 0.0;
+        let (mut epe, mut loss) = (0.0, 0.0);
+        let mut live_relu = Vec::new();
         let n = self.cfg.pairs.size;
         let scale = 1.0 / self.cfg.batch.max(1) as f64;
-        for _ in 0..self.cfg.batch {
+        let t = self.level_steps.get(level).copied().unwrap_or(0);
+        let kind = if t < self.cfg.mse_steps {
+            Loss::Mse
+        } else {
+            Loss::Epe
+        };
+        for b in 0..self.cfg.batch {
             let index = match self.cfg.distinct_pairs {
                 Some(d) => self.next_pair % d.max(1),
                 None => self.next_pair,
@@ -153,24 +254,55 @@ impl Trainer {
             let pair = generate_pair(self.cfg.seed, index, &self.cfg.pairs);
             self.next_pair += 1;
             let truth = flow_at_level(&pair.flow, n, n, self.cfg.levels, level);
-            epe += level_epe_loss(
-                &self.net,
-                &pair.img1,
-                &pair.img2,
-                n,
-                n,
-                level,
-                &truth,
-                Some(&mut grads),
-                scale,
-            )?;
+            let tape = self
+                .net
+                .forward_to_level(&pair.img1, &pair.img2, n, n, level)?;
+            if b == 0 {
+                live_relu = tape.live_relu_fractions(level);
+            }
+            let (l, e) =
+                level_loss_on_tape(&self.net, &tape, &truth, kind, Some(&mut grads), scale)?;
+            loss += l;
+            epe += e;
+        }
+        let lr = if self.cfg.warmup_steps > 0 {
+            self.cfg.lr * ((t + 1) as f64 / self.cfg.warmup_steps as f64).min(1.0)
+        } else {
+            self.cfg.lr
+        };
+        if let Some(c) = self.level_steps.get_mut(level) {
+            *c += 1;
         }
         for (i, conv) in self.net.levels[level].iter_mut().enumerate() {
-            let (aw, ab) = &mut self.adams[level][i];
-            aw.step(&mut conv.weight, &grads.levels[level][i].weight)?;
-            ab.step(&mut conv.bias, &grads.levels[level][i].bias)?;
+            let g = &grads.levels[level][i];
+            match self.cfg.optimizer {
+                Optimizer::Adam => {
+                    let (aw, ab) = &mut self.adams[level][i];
+                    aw.config.lr = lr;
+                    ab.config.lr = lr;
+                    aw.step(&mut conv.weight, &g.weight)?;
+                    ab.step(&mut conv.bias, &g.bias)?;
+                }
+                Optimizer::Sgd { momentum } => {
+                    let v = &mut self.velocity.levels[level][i];
+                    let (mu, lr) = (momentum as f32, lr as f32);
+                    for (p, (vv, gg)) in conv.weight.iter_mut().chain(conv.bias.iter_mut()).zip(
+                        v.weight
+                            .iter_mut()
+                            .chain(v.bias.iter_mut())
+                            .zip(g.weight.iter().chain(&g.bias)),
+                    ) {
+                        *vv = mu * *vv + gg;
+                        *p -= lr * *vv;
+                    }
+                }
+            }
         }
-        Ok(epe * scale)
+        Ok(StepReport {
+            epe: epe * scale,
+            loss: loss * scale,
+            live_relu,
+        })
     }
 }
 
@@ -191,4 +323,23 @@ pub fn evaluate(
     }
     let c = count.max(1) as f64;
     Ok((e_net / c, e_zero / c))
+}
+
+/// An `levels`-level network whose every level is a copy of level `src_level` of `src`, with the
+/// first convolution's weights on the upsampled-flow inputs (channels 6–7) set to zero: each level
+/// then estimates the residual flow from `img1` and the warped `img2` alone, which is the task a
+/// single level pre-trained at zero input flow has learned (its flow-input weights never received a
+/// gradient there and are still random). The starting point of coarse-to-fine fine-tuning after
+/// single-level pre-training.
+pub fn replicate_level(src: &SpyNet<f32>, src_level: usize, levels: usize) -> SpyNet<f32> {
+    let mut level = src.levels.get(src_level).cloned().unwrap_or_default();
+    if let Some(conv0) = level.first_mut() {
+        let (c_in, kk) = (crate::LAYER_CHANNELS[0].0, crate::KERNEL * crate::KERNEL);
+        for w in conv0.weight.chunks_exact_mut(c_in * kk) {
+            w[6 * kk..].iter_mut().for_each(|v| *v = 0.0);
+        }
+    }
+    SpyNet {
+        levels: vec![level; levels],
+    }
 }

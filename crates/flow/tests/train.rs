@@ -16,6 +16,11 @@ fn config(levels: usize, size: usize) -> TrainConfig {
         },
         batch: 2,
         lr: 1e-3,
+        optimizer: flow::train::Optimizer::Adam,
+        warmup_steps: 0,
+        mse_steps: 0,
+        output_init_gain: 0.1,
+        paired_input_init: false,
         seed: 7,
         distinct_pairs: Some(2),
     }
@@ -116,4 +121,84 @@ fn training_steps_are_bit_identical_for_one_and_two_threads() {
     let (l2, n2) = run(2);
     assert_eq!(l1, l2, "losses differ between 1 and 2 threads");
     assert!(n1 == n2, "weights differ between 1 and 2 threads");
+}
+
+#[test]
+fn replicated_levels_copy_the_source_and_ignore_the_input_flow() {
+    let src = flow::SpyNet::<f32>::random_init(1, 3, 0.1, true);
+    let net = flow::train::replicate_level(&src, 0, 3);
+    assert_eq!(net.num_levels(), 3);
+    let kk = flow::KERNEL * flow::KERNEL;
+    for level in &net.levels {
+        for (i, (c, s)) in level.iter().zip(&src.levels[0]).enumerate() {
+            assert_eq!(c.bias, s.bias);
+            if i > 0 {
+                assert_eq!(c.weight, s.weight);
+                continue;
+            }
+            for (o, (w, sw)) in c
+                .weight
+                .chunks(8 * kk)
+                .zip(s.weight.chunks(8 * kk))
+                .enumerate()
+            {
+                assert_eq!(
+                    w[..6 * kk],
+                    sw[..6 * kk],
+                    "output channel {o}: image weights"
+                );
+                assert!(
+                    w[6 * kk..].iter().all(|&v| v == 0.0),
+                    "output channel {o}: flow weights"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn motion_aware_initialisation_has_zero_mean_appearance_filters() {
+    // w1 = a − d, w2 = a + d with a zero-mean: (w1 + w2) / 2 sums to ~0 per output and colour, and
+    // the difference part is not zero.
+    let net = flow::SpyNet::<f64>::random_init(1, 5, 0.0, true);
+    let kk = flow::KERNEL * flow::KERNEL;
+    let w = &net.levels[0][0].weight;
+    for o in 0..flow::LAYER_CHANNELS[0].1 {
+        for c in 0..3 {
+            let w1 = &w[(o * 8 + c) * kk..][..kk];
+            let w2 = &w[(o * 8 + 3 + c) * kk..][..kk];
+            let sum: f64 = w1.iter().zip(w2).map(|(a, b)| a + b).sum();
+            let diff: f64 = w1.iter().zip(w2).map(|(a, b)| (b - a).abs()).sum();
+            assert!(
+                sum.abs() < 1e-12,
+                "output {o} colour {c}: appearance DC {sum}"
+            );
+            assert!(diff > 1e-3, "output {o} colour {c}: no difference filter");
+        }
+    }
+    assert!(net.levels[0][4].weight.iter().all(|&v| v == 0.0));
+}
+
+#[test]
+fn sgd_with_squared_error_reduces_the_loss_on_a_small_fixed_set() {
+    let cfg = TrainConfig {
+        optimizer: flow::train::Optimizer::Sgd { momentum: 0.9 },
+        mse_steps: usize::MAX,
+        lr: 3e-3,
+        ..config(1, 8)
+    };
+    let zero = zero_baseline(&cfg, 0);
+    let mut trainer = Trainer::new(cfg);
+    let mut last = Vec::new();
+    for k in 0..150 {
+        let e = trainer.step(0).expect("step");
+        if k >= 140 {
+            last.push(e);
+        }
+    }
+    let end = last.iter().sum::<f64>() / last.len() as f64;
+    assert!(
+        end < 0.6 * zero,
+        "150 SGD steps left the training EPE at {end} px (zero-flow baseline {zero} px)"
+    );
 }
