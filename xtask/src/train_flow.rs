@@ -1,12 +1,30 @@
-//! `cargo xtask train-flow`: trains SPyNet-style weights on procedural FlyingChairs-style pairs, coarse
-//! to fine (level by level, lower levels frozen), with an end-point-error loss; deterministic from the
-//! seed. Reports the held-out EPE against the zero-flow baseline and writes the weights.
+//! `cargo xtask train-flow`: trains SPyNet-style weights on procedural FlyingChairs-style pairs and
+//! writes them; deterministic from the seed. Two phases:
+//!
+//! 1. **Pre-training** of a single level on small pairs of pure background translation (no
+//!    brightness jitter, textures resolved at that size) with a squared-error loss, from the
+//!    motion-aware initialisation ([`flow::SpyNet::random_init`]). This is the phase that leaves the
+//!    zero-flow plateau every earlier recipe stayed on (`docs/BENCHMARKS.md`, flow).
+//! 2. The pre-trained level copied into every level ([`flow::train::replicate_level`]) and each level
+//!    fine-tuned coarse to fine on the full generator at `--size` (lower levels frozen).
+//!
+//! Reports the held-out EPE against the zero-flow baseline; the weights are written after every
+//! phase and level, so a stopped run leaves its latest weights behind.
 
 use anyhow::{Context, Result};
 use flow::synthetic::PairConfig;
-use flow::train::{evaluate, TrainConfig, Trainer};
+use flow::train::{evaluate, replicate_level, Optimizer, TrainConfig, Trainer};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+/// Optimiser choice on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum OptimizerArg {
+    /// Adam (PyTorch defaults apart from the learning rate).
+    Adam,
+    /// SGD with momentum `--momentum`.
+    Sgd,
+}
 
 /// Arguments of `train-flow`.
 #[derive(clap::Args, Debug)]
@@ -20,18 +38,54 @@ pub struct Args {
     /// Pyramid levels.
     #[arg(long, default_value_t = 4)]
     pub levels: usize,
-    /// Training image side (pixels; a multiple of 2^(levels-1)).
+    /// Training and evaluation image side of the fine-tuning phase (pixels; a multiple of
+    /// 2^(levels-1)).
     #[arg(long, default_value_t = 64)]
     pub size: usize,
-    /// Optimiser steps per level, coarsest first (comma separated; one value = same for all).
-    #[arg(long, value_delimiter = ',', default_value = "600,400,250,120")]
+    /// Pre-training steps of the single level (0 = no pre-training: a fresh network is trained
+    /// level by level, the original recipe).
+    #[arg(long, default_value_t = 3000)]
+    pub pretrain_steps: usize,
+    /// Image side of the pre-training pairs (pixels).
+    #[arg(long, default_value_t = 16)]
+    pub pretrain_size: usize,
+    /// Largest background translation of the pre-training pairs, as a fraction of their size.
+    #[arg(long, default_value_t = 0.06)]
+    pub pretrain_max_translation: f32,
+    /// Pairs per pre-training step.
+    #[arg(long, default_value_t = 8)]
+    pub pretrain_batch: usize,
+    /// Peak learning rate of the pre-training.
+    #[arg(long, default_value_t = 2e-4)]
+    pub pretrain_lr: f64,
+    /// Fine-tuning steps per level, coarsest first (comma separated; one value = same for all).
+    #[arg(long, value_delimiter = ',', default_value = "300,200,80,20")]
     pub steps: Vec<usize>,
-    /// Pairs per step.
+    /// Pairs per fine-tuning step.
     #[arg(long, default_value_t = 4)]
     pub batch: usize,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = 1e-3)]
+    /// Peak learning rate of the fine-tuning.
+    #[arg(long, default_value_t = 1e-4)]
     pub lr: f64,
+    /// Optimiser of both phases.
+    #[arg(long, value_enum, default_value_t = OptimizerArg::Adam)]
+    pub optimizer: OptimizerArg,
+    /// Momentum of `--optimizer sgd`.
+    #[arg(long, default_value_t = 0.9)]
+    pub momentum: f64,
+    /// Linear learning-rate warm-up steps at the start of every phase and level.
+    #[arg(long, default_value_t = 20)]
+    pub warmup_steps: usize,
+    /// Steps trained on the squared end-point error before switching to the end-point error, per
+    /// phase and level (default: squared error throughout).
+    #[arg(long, default_value_t = usize::MAX)]
+    pub mse_steps: usize,
+    /// Scale of the output convolution's initial weights relative to He-uniform (0 = zero).
+    #[arg(long, default_value_t = 0.0)]
+    pub output_init_gain: f64,
+    /// Use independent random first-layer weights instead of the motion-aware initialisation.
+    #[arg(long)]
+    pub plain_init: bool,
     /// Seed of the initial weights and training pairs.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -41,43 +95,133 @@ pub struct Args {
     /// Number of held-out evaluation pairs.
     #[arg(long, default_value_t = 40)]
     pub eval_pairs: u64,
-    /// Continue from existing weights instead of a fresh initialisation.
+    /// Print the pre-training's held-out ratio every this many steps (0 = never).
+    #[arg(long, default_value_t = 250)]
+    pub report_every: usize,
+    /// Validation pairs (seed `--eval-seed + 1`, disjoint from the held-out set) on which each
+    /// fine-tuned level must beat its pre-fine-tuning weights to be kept (0 = always keep).
+    #[arg(long, default_value_t = 10)]
+    pub validation_pairs: u64,
+    /// Continue from existing weights instead of a fresh initialisation (skips the pre-training).
     #[arg(long)]
     pub init: Option<PathBuf>,
 }
 
-/// Runs the command.
-pub fn run(args: Args) -> Result<()> {
-    let pairs = PairConfig {
-        size: args.size,
-        ..PairConfig::default()
-    };
-    let cfg = TrainConfig {
-        levels: args.levels,
-        pairs,
-        batch: args.batch,
-        lr: args.lr,
-        seed: args.seed,
-        distinct_pairs: None,
-    };
-    let mut trainer = match &args.init {
-        Some(p) => Trainer::from_net(
-            flow::load_safetensors(p).with_context(|| format!("loading {}", p.display()))?,
-            cfg,
-        ),
-        None => Trainer::new(cfg),
-    };
-    let steps: Vec<usize> = (0..args.levels)
-        .map(|l| *args.steps.get(l).or(args.steps.last()).unwrap_or(&0))
-        .collect();
-    let total: usize = steps.iter().sum();
+fn save(net: &flow::SpyNet<f32>, out: &Path) -> Result<()> {
+    if let Some(dir) = out.parent() {
+        if !dir.as_os_str().is_empty() {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+    }
+    flow::save_safetensors(net, out).with_context(|| format!("writing {}", out.display()))
+}
+
+fn bar(total: usize) -> Result<ProgressBar> {
     let bar = ProgressBar::new(total as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta} {msg}")
             .context("progress style")?,
     );
+    Ok(bar)
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<()> {
+    let optimizer = match args.optimizer {
+        OptimizerArg::Adam => Optimizer::Adam,
+        OptimizerArg::Sgd => Optimizer::Sgd {
+            momentum: args.momentum,
+        },
+    };
+    let pairs = PairConfig {
+        size: args.size,
+        ..PairConfig::default()
+    };
+    let config = |levels: usize, pairs: PairConfig, batch: usize, lr: f64| TrainConfig {
+        levels,
+        pairs,
+        batch,
+        lr,
+        optimizer,
+        warmup_steps: args.warmup_steps,
+        mse_steps: args.mse_steps,
+        output_init_gain: args.output_init_gain,
+        paired_input_init: !args.plain_init,
+        seed: args.seed,
+        distinct_pairs: None,
+    };
     let start = std::time::Instant::now();
+    let log = |bar: &ProgressBar, line: String| bar.suspend(|| eprintln!("{line}"));
+    let net = match &args.init {
+        Some(p) => flow::load_safetensors(p).with_context(|| format!("loading {}", p.display()))?,
+        None if args.pretrain_steps > 0 => {
+            let pre = PairConfig {
+                size: args.pretrain_size,
+                max_translation: args.pretrain_max_translation,
+                max_rotation: 0.0,
+                max_scale: 0.0,
+                max_foreground_layers: 0,
+                brightness_jitter: 0.0,
+                ..PairConfig::default()
+            };
+            let mut t = Trainer::new(config(1, pre, args.pretrain_batch, args.pretrain_lr));
+            let bar = bar(args.pretrain_steps)?;
+            let mut recent = Vec::new();
+            for s in 0..args.pretrain_steps {
+                let r = t.step_report(0)?;
+                recent.push(r.epe);
+                if recent.len() > 50 {
+                    recent.remove(0);
+                }
+                let mean = recent.iter().sum::<f64>() / recent.len() as f64;
+                bar.set_message(format!("pre-training epe {mean:.3}"));
+                bar.inc(1);
+                if args.report_every > 0 && (s + 1) % args.report_every == 0 {
+                    let (e, z) = evaluate(&t.net, args.eval_seed, 20, &pre)?;
+                    let live: Vec<String> = r.live_relu.iter().map(|v| format!("{v:.2}")).collect();
+                    log(
+                        &bar,
+                        format!(
+                            "pre-training step {}: last-50 EPE {mean:.3}, held-out {e:.3} / zero {z:.3} = {:.3}, live ReLUs [{}], {:.0} s",
+                            s + 1,
+                            e / z,
+                            live.join(" "),
+                            start.elapsed().as_secs_f64()
+                        ),
+                    );
+                    save(&replicate_level(&t.net, 0, args.levels), &args.out)?;
+                }
+            }
+            bar.finish_and_clear();
+            let net = replicate_level(&t.net, 0, args.levels);
+            save(&net, &args.out)?;
+            net
+        }
+        None => flow::SpyNet::random_init(
+            args.levels,
+            args.seed,
+            args.output_init_gain,
+            !args.plain_init,
+        ),
+    };
+    let pretrain_s = start.elapsed().as_secs_f64();
+    let mut trainer = Trainer::from_net(net, config(args.levels, pairs, args.batch, args.lr));
+    let steps: Vec<usize> = (0..args.levels)
+        .map(|l| *args.steps.get(l).or(args.steps.last()).unwrap_or(&0))
+        .collect();
+    let bar = bar(steps.iter().sum())?;
+    let validation = |net: &flow::SpyNet<f32>| -> Result<f64> {
+        Ok(evaluate(net, args.eval_seed + 1, args.validation_pairs, &pairs)?.0)
+    };
     for (level, &n) in steps.iter().enumerate() {
+        let before = (n > 0 && args.validation_pairs > 0)
+            .then(|| {
+                Ok::<_, anyhow::Error>((
+                    trainer.net.levels[level].clone(),
+                    validation(&trainer.net)?,
+                ))
+            })
+            .transpose()?;
         let mut recent = Vec::new();
         for _ in 0..n {
             let epe = trainer.step(level)?;
@@ -89,31 +233,48 @@ pub fn run(args: Args) -> Result<()> {
             bar.set_message(format!("level {level} epe {mean:.3}"));
             bar.inc(1);
         }
-        let line = format!(
-            "level {level}: {n} steps, last-20 mean EPE {:.3} (level pixels), {:.0} s",
-            recent.iter().sum::<f64>() / recent.len().max(1) as f64,
-            start.elapsed().as_secs_f64()
-        );
-        // `suspend` prints whether or not the bar is drawn (it is hidden when stderr is not a terminal).
-        bar.suspend(|| eprintln!("{line}"));
+        if n > 0 {
+            let mut verdict = String::new();
+            if let Some((old, old_epe)) = before {
+                let new_epe = validation(&trainer.net)?;
+                verdict = format!(", validation EPE {old_epe:.3} -> {new_epe:.3} px");
+                if new_epe >= old_epe {
+                    trainer.net.levels[level] = old;
+                    verdict += " (fine-tuning discarded)";
+                }
+            }
+            save(&trainer.net, &args.out)?;
+            log(
+                &bar,
+                format!(
+                    "level {level}: {n} steps, last-20 mean EPE {:.3} (level pixels){verdict}, {:.0} s",
+                    recent.iter().sum::<f64>() / recent.len().max(1) as f64,
+                    start.elapsed().as_secs_f64()
+                ),
+            );
+        }
     }
     bar.finish();
     let train_s = start.elapsed().as_secs_f64();
-    if let Some(dir) = args.out.parent() {
-        if !dir.as_os_str().is_empty() {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        }
-    }
-    flow::save_safetensors(&trainer.net, &args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    save(&trainer.net, &args.out)?;
     let (epe, zero) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &pairs)?;
+    let still = PairConfig {
+        brightness_jitter: 0.0,
+        ..pairs
+    };
+    let (epe_nj, zero_nj) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &still)?;
     println!(
         "{}",
         serde_json::json!({
             "weights": args.out.display().to_string(), "levels": args.levels, "size": args.size,
+            "pretrain_steps": args.pretrain_steps, "pretrain_size": args.pretrain_size,
+            "pretrain_batch": args.pretrain_batch, "pretrain_lr": args.pretrain_lr,
             "steps": steps, "batch": args.batch, "lr": args.lr, "seed": args.seed,
-            "train_seconds": train_s, "eval_seed": args.eval_seed, "eval_pairs": args.eval_pairs,
+            "pretrain_seconds": pretrain_s, "train_seconds": train_s,
+            "eval_seed": args.eval_seed, "eval_pairs": args.eval_pairs,
             "epe": epe, "zero_flow_epe": zero, "ratio": epe / zero,
+            "no_jitter_epe": epe_nj, "no_jitter_zero_flow_epe": zero_nj,
+            "no_jitter_ratio": epe_nj / zero_nj,
         })
     );
     Ok(())
