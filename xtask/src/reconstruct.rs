@@ -159,10 +159,15 @@ pub fn default_benchmark() -> Result<PathBuf> {
 }
 
 /// Generates the synthetic benchmark `cfg` under `target/benchmark/<name>` unless a complete copy made
-/// with the same generator settings is already there (a `.complete` stamp holds the settings).
+/// with the same generator settings and [`synth::GENERATOR_VERSION`] is already there (a `.complete`
+/// stamp holds both).
 pub fn benchmark(cfg: &::synth::SynthConfig, name: &str) -> Result<PathBuf> {
     let dir = target_dir().join("benchmark").join(name);
-    let stamp = serde_json::to_string(cfg).context("serialising the generator settings")?;
+    let stamp = format!(
+        "generator {} {}",
+        ::synth::GENERATOR_VERSION,
+        serde_json::to_string(cfg).context("serialising the generator settings")?
+    );
     let marker = dir.join(".complete");
     if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {
         return Ok(dir);

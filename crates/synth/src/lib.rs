@@ -19,6 +19,12 @@ pub mod raster;
 pub mod room;
 pub mod texture;
 
+/// Version of the generator's output: bump it whenever the bytes written for some [`SynthConfig`]
+/// change (a new renderer detail, motion, simulator or contrast-maximisation setting), so cached
+/// benchmarks made by an older generator are regenerated. History: 1 — first release; 2 — event-only
+/// flow from the affine/curvature contrast maximisation of `events` (2026-11-22).
+pub const GENERATOR_VERSION: u32 = 2;
+
 pub use config::{Preset, SynthConfig};
 pub use error::{Result, SynthError};
 pub use generate::{generate, generate_with_body, Stats};

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use super::EventReader;
 use crate::error::{EventsError, Result};
 use crate::stream::{EventStream, SensorSize};
+use rayon::prelude::*;
 
 /// File magic.
 pub const MAGIC: &[u8; 14] = b"#!AER-DAT4.0\r\n";
@@ -22,6 +23,18 @@ pub const MAGIC: &[u8; 14] = b"#!AER-DAT4.0\r\n";
 const MAX_HEADER: u64 = 16 << 20;
 /// Largest packet accepted, compressed or not (bytes).
 const MAX_PACKET: u64 = 512 << 20;
+/// Packets read ahead and decompressed in parallel at a time.
+const READ_AHEAD: usize = 16;
+/// Compressed bytes read ahead at most (besides the one packet that crosses it).
+const READ_AHEAD_BYTES: usize = 16 << 20;
+
+/// A packet read ahead: its decompressed payload, its compressed payload if it needs more than the
+/// read-ahead cap, or the decompression error.
+enum Ahead {
+    Decoded(Vec<u8>),
+    TooLarge(Vec<u8>),
+    Failed(String),
+}
 
 /// Packet compression of an AEDAT 4 file (the IOHeader `CompressionType`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -208,6 +221,10 @@ pub struct Aedat4Reader<R: Read> {
     /// zstd decompression context, created at the first zstd packet and reused for every packet
     /// (a fresh context per packet re-allocates its window and dominated the decoding time).
     zstd: Option<zstd::zstd_safe::DCtx<'static>>,
+    /// Packets of our stream read ahead and decompressed in parallel, in file order.
+    ahead: std::collections::VecDeque<Ahead>,
+    /// An error met while reading ahead, raised once the packets before it are consumed.
+    deferred: Option<EventsError>,
     cursor: usize,
     count: usize,
     done: bool,
@@ -271,14 +288,17 @@ impl<R: Read> Aedat4Reader<R> {
             raw: Vec::new(),
             packet: Vec::new(),
             zstd: None,
+            ahead: std::collections::VecDeque::new(),
+            deferred: None,
             cursor: 0,
             count: 0,
             done: false,
         })
     }
 
-    /// Loads the next EVTS packet of our stream; false at the end of the packets.
-    fn next_packet(&mut self) -> Result<bool> {
+    /// Reads the next packet of our stream's compressed payload into `self.raw`; false at the end
+    /// of the packets.
+    fn next_raw(&mut self) -> Result<bool> {
         loop {
             if self.data_table_position >= 0 && self.position >= self.data_table_position as u64 {
                 return Ok(false);
@@ -318,38 +338,131 @@ impl<R: Read> Aedat4Reader<R> {
                 )
             })?;
             self.position += 8 + size;
-            if id != self.stream_id {
-                continue;
+            if id == self.stream_id {
+                return Ok(true);
             }
-            self.packet.clear();
-            let cap = MAX_PACKET;
-            let res = match self.compression {
-                Compression::None => {
-                    std::mem::swap(&mut self.packet, &mut self.raw);
-                    Ok(0)
-                }
-                Compression::Lz4 | Compression::Lz4High => {
-                    lz4_flex::frame::FrameDecoder::new(&self.raw[..])
+        }
+    }
+
+    /// Decompresses `raw` into `out` with at most `cap` bytes of output (+1 to detect overflow).
+    fn decompress(
+        compression: Compression,
+        raw: &[u8],
+        ctx: Option<&mut zstd::zstd_safe::DCtx<'static>>,
+        cap: u64,
+        out: &mut Vec<u8>,
+    ) -> std::io::Result<()> {
+        out.clear();
+        match compression {
+            Compression::None => out.extend_from_slice(raw),
+            Compression::Lz4 | Compression::Lz4High => {
+                lz4_flex::frame::FrameDecoder::new(raw)
+                    .take(cap)
+                    .read_to_end(out)?;
+            }
+            Compression::Zstd | Compression::ZstdHigh => match ctx {
+                // `with_context` resets the session, so a failed packet leaves nothing.
+                Some(ctx) => {
+                    zstd::stream::read::Decoder::with_context(raw, ctx)
                         .take(cap)
-                        .read_to_end(&mut self.packet)
+                        .read_to_end(out)?;
                 }
-                Compression::Zstd | Compression::ZstdHigh => {
+                None => {
+                    return Err(std::io::Error::new(
+                        std::io::ErrorKind::OutOfMemory,
+                        "cannot create a zstd decompression context",
+                    ))
+                }
+            },
+        }
+        Ok(())
+    }
+
+    /// Reads up to [`READ_AHEAD`] packets of our stream and decompresses them in parallel (each
+    /// with its own output cap of `MAX_PACKET / READ_AHEAD`; a packet that needs more is
+    /// decompressed again alone, with the full cap, when its turn comes). False if none was left.
+    fn fill_ahead(&mut self) -> Result<bool> {
+        let mut raws = Vec::new();
+        let mut compressed = 0usize;
+        while raws.len() < READ_AHEAD && compressed < READ_AHEAD_BYTES {
+            match self.next_raw() {
+                Ok(true) => {
+                    compressed += self.raw.len();
+                    raws.push(std::mem::take(&mut self.raw));
+                }
+                Ok(false) => break,
+                // Raise a read error only after the packets before it.
+                Err(e) if !raws.is_empty() => {
+                    self.deferred = Some(e);
+                    break;
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        if raws.is_empty() {
+            return Ok(false);
+        }
+        let compression = self.compression;
+        if compression == Compression::None {
+            self.ahead.extend(raws.into_iter().map(Ahead::Decoded));
+            return Ok(true);
+        }
+        let cap = MAX_PACKET / READ_AHEAD as u64;
+        let decoded: Vec<Ahead> = raws
+            .into_par_iter()
+            .map_init(zstd::zstd_safe::DCtx::try_create, |ctx, raw| {
+                let mut out = Vec::new();
+                match Self::decompress(compression, &raw, ctx.as_mut(), cap + 1, &mut out) {
+                    Ok(()) if (out.len() as u64) <= cap => Ahead::Decoded(out),
+                    Ok(()) => Ahead::TooLarge(raw),
+                    Err(e) => Ahead::Failed(e.to_string()),
+                }
+            })
+            .collect();
+        self.ahead.extend(decoded);
+        Ok(true)
+    }
+
+    /// Loads the next EVTS packet of our stream; false at the end of the packets.
+    fn next_packet(&mut self) -> Result<bool> {
+        loop {
+            if self.ahead.is_empty() {
+                if let Some(e) = self.deferred.take() {
+                    return Err(e);
+                }
+                if !self.fill_ahead()? {
+                    return Ok(false);
+                }
+            }
+            let Some(next) = self.ahead.pop_front() else {
+                return Ok(false);
+            };
+            match next {
+                Ahead::Decoded(p) => self.packet = p,
+                Ahead::Failed(e) => {
+                    return Err(EventsError::format(
+                        &self.path,
+                        format!("decompressing packet: {e}"),
+                    ))
+                }
+                Ahead::TooLarge(raw) => {
                     if self.zstd.is_none() {
                         self.zstd = zstd::zstd_safe::DCtx::try_create();
                     }
-                    match self.zstd.as_mut() {
-                        // `with_context` resets the session, so a failed packet leaves nothing.
-                        Some(ctx) => zstd::stream::read::Decoder::with_context(&self.raw[..], ctx)
-                            .take(cap)
-                            .read_to_end(&mut self.packet),
-                        None => Err(std::io::Error::new(
-                            std::io::ErrorKind::OutOfMemory,
-                            "cannot create a zstd decompression context",
-                        )),
-                    }
+                    let mut out = std::mem::take(&mut self.packet);
+                    Self::decompress(
+                        self.compression,
+                        &raw,
+                        self.zstd.as_mut(),
+                        MAX_PACKET,
+                        &mut out,
+                    )
+                    .map_err(|e| {
+                        EventsError::format(&self.path, format!("decompressing packet: {e}"))
+                    })?;
+                    self.packet = out;
                 }
-            };
-            res.map_err(|e| EventsError::format(&self.path, format!("decompressing packet: {e}")))?;
+            }
             let fb = Fb(&self.packet);
             let bad = |m: String| EventsError::format(&self.path, format!("EventPacket: {m}"));
             if fb.bytes(8, 4) != Some(b"EVTS") {
