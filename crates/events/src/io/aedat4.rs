@@ -28,6 +28,12 @@ const READ_AHEAD: usize = 16;
 /// Compressed bytes read ahead at most (besides the one packet that crosses it).
 const READ_AHEAD_BYTES: usize = 16 << 20;
 
+thread_local! {
+    /// The zstd decompression context of this thread (see `Aedat4Reader::fill_ahead`).
+    static ZSTD_CONTEXT: std::cell::RefCell<Option<zstd::zstd_safe::DCtx<'static>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
 /// A packet read ahead: its decompressed payload, its compressed payload if it needs more than the
 /// read-ahead cap, or the decompression error.
 enum Ahead {
@@ -410,9 +416,19 @@ impl<R: Read> Aedat4Reader<R> {
         let cap = MAX_PACKET / READ_AHEAD as u64;
         let decoded: Vec<Ahead> = raws
             .into_par_iter()
-            .map_init(zstd::zstd_safe::DCtx::try_create, |ctx, raw| {
+            .map(|raw| {
                 let mut out = Vec::new();
-                match Self::decompress(compression, &raw, ctx.as_mut(), cap + 1, &mut out) {
+                // One zstd context per worker thread, kept across packets and batches (creating
+                // one allocates its window, which costs more than decoding a packet).
+                let res = ZSTD_CONTEXT.with(|cell| {
+                    let mut ctx = cell.borrow_mut();
+                    let zstd = matches!(compression, Compression::Zstd | Compression::ZstdHigh);
+                    if ctx.is_none() && zstd {
+                        *ctx = zstd::zstd_safe::DCtx::try_create();
+                    }
+                    Self::decompress(compression, &raw, ctx.as_mut(), cap + 1, &mut out)
+                });
+                match res {
                     Ok(()) if (out.len() as u64) <= cap => Ahead::Decoded(out),
                     Ok(()) => Ahead::TooLarge(raw),
                     Err(e) => Ahead::Failed(e.to_string()),
