@@ -410,6 +410,15 @@ pub struct Rendered {
     pub posed: PosedFrame<f32>,
 }
 
+/// Splits the rasterizer's per-Gaussian channel gradients (`RENDER_CHANNELS` interleaved) into the
+/// colour gradients (N × 3) and the human-probability gradients (N).
+fn split_channel_cotangents(channels: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let per = channels.chunks_exact(RENDER_CHANNELS);
+    let colours = per.clone().flat_map(|c| c[..3].iter().copied()).collect();
+    let prob = per.map(|c| c[3]).collect();
+    (colours, prob)
+}
+
 /// All state of a reconstruction: parameters, optimiser moments, density statistics, the frame-order
 /// RNG and the step count. Saving and loading it resumes a run bit for bit.
 #[derive(Clone, Debug)]
@@ -649,6 +658,18 @@ impl Trainer {
         }
     }
 
+    /// The rasterizer's view of a posed frame: its means and covariances with the set's opacities and
+    /// the interleaved render channels.
+    fn splats<'a>(&'a self, posed: &'a PosedFrame<f32>, channels: &'a [f32]) -> CovSplats<'a, f32> {
+        CovSplats {
+            means: &posed.means,
+            covariances: &posed.covariances,
+            opacity_logits: &self.set.opacity_logits,
+            channels,
+            num_channels: RENDER_CHANNELS,
+        }
+    }
+
     fn settings(&self) -> RenderSettings {
         let mut background: Vec<f64> = self
             .config
@@ -720,13 +741,7 @@ impl Trainer {
             &frame,
         )?;
         let channels = interleave_channels(&posed);
-        let splats = CovSplats {
-            means: &posed.means,
-            covariances: &posed.covariances,
-            opacity_logits: &self.set.opacity_logits,
-            channels: &channels,
-            num_channels: RENDER_CHANNELS,
-        };
+        let splats = self.splats(&posed, &channels);
         let out = render_cov(camera, &splats, &self.settings())?;
         Ok((posed, cache, out))
     }
@@ -781,13 +796,7 @@ impl Trainer {
         times.pose = t0.elapsed().as_secs_f64();
 
         let t0 = Instant::now();
-        let splats = CovSplats {
-            means: &posed.means,
-            covariances: &posed.covariances,
-            opacity_logits: &self.set.opacity_logits,
-            channels: &channels,
-            num_channels: RENDER_CHANNELS,
-        };
+        let splats = self.splats(&posed, &channels);
         let settings = self.settings();
         let out = render_cov(camera, &splats, &settings)?;
         times.render = t0.elapsed().as_secs_f64();
@@ -886,14 +895,7 @@ impl Trainer {
         times.render_backward = t0.elapsed().as_secs_f64();
 
         let t0 = Instant::now();
-        let n = self.set.len();
-        let mut d_colours = vec![0.0f32; n * 3];
-        let mut d_prob = vec![0.0f32; n];
-        for i in 0..n {
-            d_colours[i * 3..i * 3 + 3]
-                .copy_from_slice(&rg.channels[i * RENDER_CHANNELS..i * RENDER_CHANNELS + 3]);
-            d_prob[i] = rg.channels[i * RENDER_CHANNELS + 3];
-        }
+        let (d_colours, d_prob) = split_channel_cotangents(&rg.channels);
         let mut d_posed_means = rg.means.clone();
         let mut d_posed_covs = rg.covariances.clone();
         // AIAP on the human Gaussians: canonical vs posed positions and covariances.
@@ -985,13 +987,7 @@ impl Trainer {
         if let Some((next_slot, latent2, posed2, cache2, out2, d_image2)) = second {
             let t_flow = Instant::now();
             let channels2 = interleave_channels(&posed2);
-            let splats2 = CovSplats {
-                means: &posed2.means,
-                covariances: &posed2.covariances,
-                opacity_logits: &self.set.opacity_logits,
-                channels: &channels2,
-                num_channels: RENDER_CHANNELS,
-            };
+            let splats2 = self.splats(&posed2, &channels2);
             let rg2 = render_cov_backward(
                 camera,
                 &splats2,
@@ -1003,13 +999,7 @@ impl Trainer {
                     depth: None,
                 },
             )?;
-            let mut d_colours2 = vec![0.0f32; n * 3];
-            let mut d_prob2 = vec![0.0f32; n];
-            for i in 0..n {
-                d_colours2[i * 3..i * 3 + 3]
-                    .copy_from_slice(&rg2.channels[i * RENDER_CHANNELS..i * RENDER_CHANNELS + 3]);
-                d_prob2[i] = rg2.channels[i * RENDER_CHANNELS + 3];
-            }
+            let (d_colours2, d_prob2) = split_channel_cotangents(&rg2.channels);
             let next = &ctx.frames[next_slot];
             let inputs2 = FrameInputs {
                 pose_code: &next.pose.pose_code,
