@@ -17,6 +17,10 @@ pub struct Args {
     /// Fewer events (a smoke run: 2 M instead of 20 M).
     #[arg(long)]
     pub quick: bool,
+    /// Run only these cases (comma-separated names as in the JSON lines, e.g.
+    /// `read_aedat4_zstd,read_evt3`); all by default.
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
 }
 
 fn synthetic(n: usize, sensor: SensorSize) -> EventStream {
@@ -60,19 +64,38 @@ fn best_of(repeats: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     Ok(best)
 }
 
+/// Names of the cases, in the order they run.
+const CASES: [&str; 9] = [
+    "voxelize_5bins_640x480",
+    "read_text",
+    "read_npz",
+    "read_aedat4",
+    "read_aedat4_lz4",
+    "read_aedat4_zstd",
+    "read_evt2",
+    "read_evt3",
+    "read_dat",
+];
+
 /// Runs the benchmark cases.
 pub fn run(args: Args) -> Result<()> {
     let n = if args.quick { 2_000_000 } else { 20_000_000 };
     let repeats = if args.quick { 2 } else { 3 };
     let sensor = SensorSize::new(640, 480);
     let s = synthetic(n, sensor);
+    if let Some(bad) = args.only.iter().find(|c| !CASES.contains(&c.as_str())) {
+        anyhow::bail!("--only: unknown case `{bad}` (cases: {})", CASES.join(", "));
+    }
+    let wanted = |case: &str| args.only.is_empty() || args.only.iter().any(|c| c == case);
     let (t0, t1) = (s.t[0], s.t[n - 1] + 1);
-    let secs = best_of(repeats, || {
-        let g = events::voxel_grid(&s.as_slice(), sensor, 5, t0, t1, false)?;
-        std::hint::black_box(g);
-        Ok(())
-    })?;
-    line("voxelize_5bins_640x480", n, secs, 50.0);
+    if wanted("voxelize_5bins_640x480") {
+        let secs = best_of(repeats, || {
+            let g = events::voxel_grid(&s.as_slice(), sensor, 5, t0, t1, false)?;
+            std::hint::black_box(g);
+            Ok(())
+        })?;
+        line("voxelize_5bins_640x480", n, secs, 50.0);
+    }
 
     let dir = std::env::temp_dir().join(format!("xtask-bench-events-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -99,6 +122,9 @@ pub fn run(args: Args) -> Result<()> {
             ("read_dat", "e.dat", 30.0, |p, s| write_dat(p, s)),
         ];
         for (case, file, target, write) in cases {
+            if !wanted(case) {
+                continue;
+            }
             let p = dir.join(file);
             write(&p, &s).with_context(|| format!("writing {}", p.display()))?;
             let secs = best_of(repeats, || {

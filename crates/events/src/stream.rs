@@ -185,6 +185,14 @@ impl EventStream {
         self.p.extend_from_slice(other.p);
     }
 
+    /// Keeps the first `len` events (no effect when there are fewer).
+    pub fn truncate(&mut self, len: usize) {
+        self.t.truncate(len);
+        self.x.truncate(len);
+        self.y.truncate(len);
+        self.p.truncate(len);
+    }
+
     /// Removes all events, keeping the allocation and the sensor size.
     pub fn clear(&mut self) {
         self.t.clear();

@@ -55,6 +55,47 @@ fn aedat4_round_trips_with_every_compression_and_agrees_with_text_and_npz() {
     assert_eq!(from_npz, from_aedat);
 }
 
+/// More packets than one read-ahead batch (16 × 8192 events), so later batches are decompressed in
+/// the background while earlier ones are decoded.
+#[test]
+fn aedat4_reads_many_batches_in_order_and_raises_a_late_error_after_the_packets_before_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = sample(40 * 8192 + 5);
+    for c in [Compression::Lz4, Compression::Zstd] {
+        let p = dir.path().join(format!("many-{c:?}.aedat4"));
+        write_aedat4(&p, &s, c).expect("write");
+        assert_eq!(read_events(&p).expect("read"), s, "compression {c:?}");
+        // Inside a one-thread rayon pool the reader must not wait on a task that pool would run.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .expect("pool");
+        let inside = pool.install(|| read_events(&p)).expect("read in pool");
+        assert_eq!(inside, s, "compression {c:?}, inside a pool");
+        // Truncated in its last quarter: every whole packet before the cut is delivered, then the
+        // error.
+        let bytes = std::fs::read(&p).expect("bytes");
+        let cut = &bytes[..bytes.len() * 3 / 4];
+        let mut r = Aedat4Reader::new(cut, cut.len() as u64, "cut.aedat4").expect("header");
+        let mut got = EventStream::new();
+        let err = loop {
+            match r.read_chunk(&mut got, 5000) {
+                Ok(0) => panic!("truncated file read to the end without an error"),
+                Ok(_) => {}
+                Err(e) => break e,
+            }
+        };
+        assert!(err.to_string().contains("cut.aedat4"), "{err}");
+        assert!(
+            got.len() > 16 * 8192,
+            "only {} events before the error",
+            got.len()
+        );
+        assert_eq!(got.len() % 8192, 0, "a partial packet was delivered");
+        assert_eq!(got.t[..], s.t[..got.len()]);
+    }
+}
+
 #[test]
 fn aedat4_bad_input_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");

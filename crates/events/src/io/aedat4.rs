@@ -28,6 +28,11 @@ const READ_AHEAD: usize = 16;
 /// Compressed bytes read ahead at most (besides the one packet that crosses it).
 const READ_AHEAD_BYTES: usize = 16 << 20;
 
+/// Largest decompressed/compressed size ratio for which a zstd frame's stated content size is used
+/// to size the output buffer up front (event packets compress 3–10×); larger claims are decoded by
+/// streaming, which allocates only as data arrives.
+const ONE_SHOT_MAX_RATIO: u64 = 64;
+
 thread_local! {
     /// The zstd decompression context of this thread (see `Aedat4Reader::fill_ahead`).
     static ZSTD_CONTEXT: std::cell::RefCell<Option<zstd::zstd_safe::DCtx<'static>>> =
@@ -231,6 +236,8 @@ pub struct Aedat4Reader<R: Read> {
     ahead: std::collections::VecDeque<Ahead>,
     /// An error met while reading ahead, raised once the packets before it are consumed.
     deferred: Option<EventsError>,
+    /// The next batch of packets, decompressing on the rayon pool while this one is decoded.
+    in_flight: Option<std::sync::mpsc::Receiver<Vec<Ahead>>>,
     cursor: usize,
     count: usize,
     done: bool,
@@ -296,6 +303,7 @@ impl<R: Read> Aedat4Reader<R> {
             zstd: None,
             ahead: std::collections::VecDeque::new(),
             deferred: None,
+            in_flight: None,
             cursor: 0,
             count: 0,
             done: false,
@@ -350,44 +358,10 @@ impl<R: Read> Aedat4Reader<R> {
         }
     }
 
-    /// Decompresses `raw` into `out` with at most `cap` bytes of output (+1 to detect overflow).
-    fn decompress(
-        compression: Compression,
-        raw: &[u8],
-        ctx: Option<&mut zstd::zstd_safe::DCtx<'static>>,
-        cap: u64,
-        out: &mut Vec<u8>,
-    ) -> std::io::Result<()> {
-        out.clear();
-        match compression {
-            Compression::None => out.extend_from_slice(raw),
-            Compression::Lz4 | Compression::Lz4High => {
-                lz4_flex::frame::FrameDecoder::new(raw)
-                    .take(cap)
-                    .read_to_end(out)?;
-            }
-            Compression::Zstd | Compression::ZstdHigh => match ctx {
-                // `with_context` resets the session, so a failed packet leaves nothing.
-                Some(ctx) => {
-                    zstd::stream::read::Decoder::with_context(raw, ctx)
-                        .take(cap)
-                        .read_to_end(out)?;
-                }
-                None => {
-                    return Err(std::io::Error::new(
-                        std::io::ErrorKind::OutOfMemory,
-                        "cannot create a zstd decompression context",
-                    ))
-                }
-            },
-        }
-        Ok(())
-    }
-
-    /// Reads up to [`READ_AHEAD`] packets of our stream and decompresses them in parallel (each
-    /// with its own output cap of `MAX_PACKET / READ_AHEAD`; a packet that needs more is
-    /// decompressed again alone, with the full cap, when its turn comes). False if none was left.
-    fn fill_ahead(&mut self) -> Result<bool> {
+    /// Reads up to [`READ_AHEAD`] compressed packets of our stream (at most [`READ_AHEAD_BYTES`]
+    /// besides the one that crosses it). A read error is kept in `deferred`, to be raised once the
+    /// packets before it are consumed.
+    fn read_batch(&mut self) -> Vec<Vec<u8>> {
         let mut raws = Vec::new();
         let mut compressed = 0usize;
         while raws.len() < READ_AHEAD && compressed < READ_AHEAD_BYTES {
@@ -397,45 +371,58 @@ impl<R: Read> Aedat4Reader<R> {
                     raws.push(std::mem::take(&mut self.raw));
                 }
                 Ok(false) => break,
-                // Raise a read error only after the packets before it.
-                Err(e) if !raws.is_empty() => {
+                Err(e) => {
                     self.deferred = Some(e);
                     break;
                 }
-                Err(e) => return Err(e),
             }
         }
+        raws
+    }
+
+    /// Reads the next batch and starts decompressing it on the rayon pool, so that it runs while
+    /// the caller decodes the batch before it. Inside the pool (where blocking on the result could
+    /// starve it) or without compression, the batch is decompressed here instead.
+    fn start_next_batch(&mut self) {
+        let raws = self.read_batch();
         if raws.is_empty() {
-            return Ok(false);
+            return;
         }
         let compression = self.compression;
-        if compression == Compression::None {
-            self.ahead.extend(raws.into_iter().map(Ahead::Decoded));
-            return Ok(true);
+        if compression == Compression::None || rayon::current_thread_index().is_some() {
+            self.ahead.extend(decompress_batch(compression, raws));
+            return;
         }
-        let cap = MAX_PACKET / READ_AHEAD as u64;
-        let decoded: Vec<Ahead> = raws
-            .into_par_iter()
-            .map(|raw| {
-                let mut out = Vec::new();
-                // One zstd context per worker thread, kept across packets and batches (creating
-                // one allocates its window, which costs more than decoding a packet).
-                let res = ZSTD_CONTEXT.with(|cell| {
-                    let mut ctx = cell.borrow_mut();
-                    let zstd = matches!(compression, Compression::Zstd | Compression::ZstdHigh);
-                    if ctx.is_none() && zstd {
-                        *ctx = zstd::zstd_safe::DCtx::try_create();
-                    }
-                    Self::decompress(compression, &raw, ctx.as_mut(), cap + 1, &mut out)
-                });
-                match res {
-                    Ok(()) if (out.len() as u64) <= cap => Ahead::Decoded(out),
-                    Ok(()) => Ahead::TooLarge(raw),
-                    Err(e) => Ahead::Failed(e.to_string()),
-                }
-            })
-            .collect();
-        self.ahead.extend(decoded);
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        rayon::spawn(move || {
+            // The reader may have been dropped meanwhile; then nobody wants the packets.
+            let _ = tx.send(decompress_batch(compression, raws));
+        });
+        self.in_flight = Some(rx);
+    }
+
+    /// Refills `ahead` with the next batch of decompressed packets, in file order: the batch that
+    /// was decompressing in the background if any, else one read and decompressed now; then starts
+    /// the batch after it. False if no packet was left (a pending read error is returned instead).
+    fn fill_ahead(&mut self) -> Result<bool> {
+        if let Some(rx) = self.in_flight.take() {
+            let batch = rx.recv().map_err(|_| {
+                EventsError::format(&self.path, "the packet decompression task stopped")
+            })?;
+            self.ahead.extend(batch);
+        } else {
+            let raws = self.read_batch();
+            if raws.is_empty() {
+                return match self.deferred.take() {
+                    Some(e) => Err(e),
+                    None => Ok(false),
+                };
+            }
+            self.ahead.extend(decompress_batch(self.compression, raws));
+        }
+        if self.deferred.is_none() {
+            self.start_next_batch();
+        }
         Ok(true)
     }
 
@@ -443,8 +430,11 @@ impl<R: Read> Aedat4Reader<R> {
     fn next_packet(&mut self) -> Result<bool> {
         loop {
             if self.ahead.is_empty() {
-                if let Some(e) = self.deferred.take() {
-                    return Err(e);
+                // A read error comes after every packet read before it (some may be in flight).
+                if self.in_flight.is_none() {
+                    if let Some(e) = self.deferred.take() {
+                        return Err(e);
+                    }
                 }
                 if !self.fill_ahead()? {
                     return Ok(false);
@@ -466,7 +456,7 @@ impl<R: Read> Aedat4Reader<R> {
                         self.zstd = zstd::zstd_safe::DCtx::try_create();
                     }
                     let mut out = std::mem::take(&mut self.packet);
-                    Self::decompress(
+                    decompress(
                         self.compression,
                         &raw,
                         self.zstd.as_mut(),
@@ -519,6 +509,87 @@ impl<R: Read> Aedat4Reader<R> {
     }
 }
 
+/// Decompresses `raw` into `out` with at most `cap` bytes of output (+1 to detect overflow).
+fn decompress(
+    compression: Compression,
+    raw: &[u8],
+    ctx: Option<&mut zstd::zstd_safe::DCtx<'static>>,
+    cap: u64,
+    out: &mut Vec<u8>,
+) -> std::io::Result<()> {
+    out.clear();
+    match compression {
+        Compression::None => out.extend_from_slice(raw),
+        Compression::Lz4 | Compression::Lz4High => {
+            lz4_flex::frame::FrameDecoder::new(raw)
+                .take(cap)
+                .read_to_end(out)?;
+        }
+        Compression::Zstd | Compression::ZstdHigh => match ctx {
+            // A single frame that states its size within the cap (what one-shot encoders such as
+            // DV's write) is decoded in one call into an exactly sized buffer: no streaming
+            // window copies, no buffer regrowth. Anything else (no stated size, several frames,
+            // a size over the cap) goes through the streaming decoder, which enforces the cap.
+            // Both reset the session first, so a failed packet leaves nothing behind.
+            Some(ctx) => {
+                let stated = zstd::zstd_safe::get_frame_content_size(raw).ok().flatten();
+                let one_shot = match stated {
+                    // The claim is trusted only within the cap and a plausible compression
+                    // ratio, so a small packet cannot make us reserve a huge buffer.
+                    Some(n) if n < cap && n <= ONE_SHOT_MAX_RATIO * raw.len() as u64 + 4096 => {
+                        out.reserve_exact(n as usize);
+                        ctx.decompress(out, raw).is_ok() && out.len() as u64 == n
+                    }
+                    _ => false,
+                };
+                if !one_shot {
+                    out.clear();
+                    zstd::stream::read::Decoder::with_context(raw, ctx)
+                        .take(cap)
+                        .read_to_end(out)?;
+                }
+            }
+            None => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::OutOfMemory,
+                    "cannot create a zstd decompression context",
+                ))
+            }
+        },
+    }
+    Ok(())
+}
+
+/// Decompresses a batch of packets in parallel, in order (each with an output cap of
+/// `MAX_PACKET / READ_AHEAD`; a packet that needs more is marked [`Ahead::TooLarge`] and
+/// decompressed again alone, with the full cap, when its turn comes).
+fn decompress_batch(compression: Compression, raws: Vec<Vec<u8>>) -> Vec<Ahead> {
+    if compression == Compression::None {
+        return raws.into_iter().map(Ahead::Decoded).collect();
+    }
+    let cap = MAX_PACKET / READ_AHEAD as u64;
+    raws.into_par_iter()
+        .map(|raw| {
+            let mut out = Vec::new();
+            // One zstd context per worker thread, kept across packets and batches (creating one
+            // allocates its window, which costs more than decoding a packet).
+            let res = ZSTD_CONTEXT.with(|cell| {
+                let mut ctx = cell.borrow_mut();
+                let zstd = matches!(compression, Compression::Zstd | Compression::ZstdHigh);
+                if ctx.is_none() && zstd {
+                    *ctx = zstd::zstd_safe::DCtx::try_create();
+                }
+                decompress(compression, &raw, ctx.as_mut(), cap + 1, &mut out)
+            });
+            match res {
+                Ok(()) if (out.len() as u64) <= cap => Ahead::Decoded(out),
+                Ok(()) => Ahead::TooLarge(raw),
+                Err(e) => Ahead::Failed(e.to_string()),
+            }
+        })
+        .collect()
+}
+
 impl<R: Read> EventReader for Aedat4Reader<R> {
     fn format(&self) -> &'static str {
         "aedat4"
@@ -536,26 +607,38 @@ impl<R: Read> EventReader for Aedat4Reader<R> {
                 break;
             }
             let take = self.count.min(max - n);
-            // `take` events are present in the decoded packet (checked against its length).
-            out.t.reserve(take);
-            out.x.reserve(take);
-            out.y.reserve(take);
-            out.p.reserve(take);
-            for k in 0..take {
-                let b = &self.packet[self.cursor + 16 * k..self.cursor + 16 * k + 16];
-                let t = i64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);
-                let x = i16::from_le_bytes([b[8], b[9]]);
-                let y = i16::from_le_bytes([b[10], b[11]]);
-                if x < 0 || y < 0 {
-                    return Err(EventsError::format(
-                        &self.path,
-                        format!("event at t={t} us has negative coordinate ({x}, {y})"),
-                    ));
-                }
-                out.t.push(t);
-                out.x.push(x as u16);
-                out.y.push(y as u16);
-                out.p.push(if b[12] != 0 { 1 } else { -1 });
+            // `take` events are present in the decoded packet (checked against its length). The
+            // outputs are grown once and filled in one pass over exact 16-byte records.
+            let records = &self.packet[self.cursor..self.cursor + 16 * take];
+            let base = out.t.len();
+            out.t.resize(base + take, 0);
+            out.x.resize(base + take, 0);
+            out.y.resize(base + take, 0);
+            out.p.resize(base + take, 0);
+            let mut negative = false;
+            let fields = out.t[base..]
+                .iter_mut()
+                .zip(&mut out.x[base..])
+                .zip(out.y[base..].iter_mut().zip(&mut out.p[base..]));
+            for (b, ((t, x), (y, p))) in records.chunks_exact(16).zip(fields) {
+                *t = i64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);
+                let xs = i16::from_le_bytes([b[8], b[9]]);
+                let ys = i16::from_le_bytes([b[10], b[11]]);
+                negative |= (xs | ys) < 0;
+                *x = xs as u16;
+                *y = ys as u16;
+                *p = if b[12] != 0 { 1 } else { -1 };
+            }
+            if negative {
+                let k = (base..base + take)
+                    .find(|&i| out.x[i] > i16::MAX as u16 || out.y[i] > i16::MAX as u16)
+                    .unwrap_or(base);
+                let (t, x, y) = (out.t[k], out.x[k] as i16, out.y[k] as i16);
+                out.truncate(base);
+                return Err(EventsError::format(
+                    &self.path,
+                    format!("event at t={t} us has negative coordinate ({x}, {y})"),
+                ));
             }
             self.cursor += 16 * take;
             self.count -= take;
@@ -685,7 +768,9 @@ pub fn write_aedat4(
                 } else {
                     3
                 };
-                zstd::stream::encode_all(&raw[..], level).map_err(io)?
+                // One-shot compression: the frame header states the decompressed size, which lets
+                // readers decode it in one call.
+                zstd::bulk::compress(&raw, level).map_err(io)?
             }
         };
         w.write_all(&0u32.to_le_bytes()).map_err(io)?;
@@ -695,4 +780,42 @@ pub fn write_aedat4(
         start = end;
     }
     w.flush().map_err(io)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn payload() -> Vec<u8> {
+        (0..100_000u32)
+            .flat_map(|i| (i / 7).to_le_bytes())
+            .collect()
+    }
+
+    #[test]
+    fn zstd_frames_with_and_without_a_stated_size_decompress_alike() {
+        let raw = payload();
+        let sized = zstd::bulk::compress(&raw, 3).expect("bulk");
+        let streamed = zstd::stream::encode_all(&raw[..], 3).expect("stream");
+        assert!(zstd::zstd_safe::get_frame_content_size(&sized)
+            .ok()
+            .flatten()
+            .is_some());
+        assert_eq!(
+            zstd::zstd_safe::get_frame_content_size(&streamed)
+                .ok()
+                .flatten(),
+            None
+        );
+        let mut ctx = zstd::zstd_safe::DCtx::try_create();
+        for frame in [&sized, &streamed] {
+            let mut out = Vec::new();
+            decompress(Compression::Zstd, frame, ctx.as_mut(), 1 << 24, &mut out).expect("zstd");
+            assert_eq!(out, raw);
+        }
+        // Over the cap: the streaming path stops at the cap, whatever the header says.
+        let mut out = Vec::new();
+        decompress(Compression::Zstd, &sized, ctx.as_mut(), 1000, &mut out).expect("capped");
+        assert_eq!(out.len(), 1000);
+    }
 }
