@@ -483,8 +483,9 @@ const AFFINE_CENTRES: [(f64, f64); 4] =
 /// The 2×2 tile velocities `[vx_0, vy_0, …]` (pixels per window) of the affine field
 /// `v(p) = a + B·((p_x − c_x)/(W/2), (p_y − c_y)/(H/2))` with
 /// `theta = [a_x, a_y, B_xx, B_xy, B_yx, B_yy]` (pixels per window); bilinear interpolation of these
-/// tiles reproduces the field between the tile centres.
-fn affine_tiles(theta: &[f64]) -> Vec<f64> {
+/// tiles reproduces the field between the tile centres. Level 0 of [`flow_from_events`] optimises
+/// `theta` through this map on a 2×2 [`CmaxProblem`].
+pub fn affine_tiles(theta: &[f64]) -> Vec<f64> {
     let mut v = vec![0.0; 8];
     for (k, &(dx, dy)) in AFFINE_CENTRES.iter().enumerate() {
         let (ux, uy) = (2.0 * dx, 2.0 * dy);
@@ -496,7 +497,7 @@ fn affine_tiles(theta: &[f64]) -> Vec<f64> {
 
 /// The gradient with respect to `theta` of a function of [`affine_tiles`]`(theta)`, given its
 /// gradient `g` with respect to the 8 tile velocities (the transpose of the linear map).
-fn affine_pullback(g: &[f64]) -> Vec<f64> {
+pub fn affine_pullback(g: &[f64]) -> Vec<f64> {
     let mut gt = vec![0.0; 6];
     for (k, &(dx, dy)) in AFFINE_CENTRES.iter().enumerate() {
         let (ux, uy) = (2.0 * dx, 2.0 * dy);

@@ -1,11 +1,12 @@
 //! f64 finite-difference check of the contrast-maximisation objective's analytic gradient
 //! (`events::CmaxProblem`): IWE bilinear voting, Gaussian blur, variance, tile interpolation, and the
-//! smoothness, curvature and divergence penalties.
+//! smoothness, curvature and divergence penalties; and the affine level 0 through its 6 parameters.
 //!
 //! The bilinear vote has kinks where a warped event crosses a pixel boundary; events are generated
 //! with dithering (non-integer positions) and times away from the reference so that a ±h probe
 //! (h = 1e-6 px) crosses a boundary with negligible probability.
 
+use events::cmax::{affine_pullback, affine_tiles};
 use events::{CmaxConfig, CmaxProblem, Event, EventStream, SensorSize};
 use gradient_checks::{central_differences, GradientChecker, Tolerance};
 
@@ -74,6 +75,47 @@ fn cmax_objective_gradient_matches_finite_differences() {
         // O(ε·f/h) ~ 1e-10. abs 1e-7 / rel 1e-5 leaves room for both and nothing more.
         checker.check(
             &format!("cmax {tx}x{ty} tiles"),
+            &num,
+            &ana,
+            Tolerance::new(1e-7, 1e-5),
+        );
+    }
+    checker.finish();
+}
+
+/// Level 0 of `flow_from_events`: the objective as a function of the 6 affine parameters through
+/// `affine_tiles` on a 2×2 problem, with the gradient pulled back by `affine_pullback`, with the
+/// curvature penalty of the default configuration on.
+#[test]
+fn cmax_affine_objective_gradient_matches_finite_differences() {
+    let mut checker = GradientChecker::new();
+    let (w, h) = (24u16, 20u16);
+    for case in 0..4u64 {
+        let ev = stream(600, w, h, 40 + case);
+        let t_b = ev.t[ev.len() - 1] + 1;
+        let cfg = CmaxConfig::default();
+        assert!(
+            cfg.curvature > 0.0,
+            "the default level 0 uses the curvature penalty"
+        );
+        let p = CmaxProblem::new(
+            &ev.as_slice(),
+            SensorSize::new(w as u32, h as u32),
+            0,
+            t_b,
+            2,
+            2,
+            &cfg,
+        )
+        .expect("problem");
+        let mut st = 7 + case;
+        let theta: Vec<f64> = (0..6).map(|_| 3.0 * lcg(&mut st) - 1.5).collect();
+        let (_, g_tiles) = p.objective_and_gradient(&affine_tiles(&theta));
+        let ana = affine_pullback(&g_tiles);
+        let num = central_differences(|th| p.objective(&affine_tiles(th)), &theta, 1e-6);
+        // Same scale and tolerance argument as the tile test above.
+        checker.check(
+            &format!("cmax affine case {case}"),
             &num,
             &ana,
             Tolerance::new(1e-7, 1e-5),
