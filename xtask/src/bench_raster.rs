@@ -18,17 +18,36 @@ pub struct Args {
     /// Scene seed.
     #[arg(long, default_value_t = 42)]
     pub seed: u64,
+    /// Run only these cases (comma-separated: 50k_256, 100k_256, 1m_1080p); all by default (the
+    /// 1M case is skipped by `--quick` unless named here).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
 }
+
+/// The cases: name, Gaussians, width, height, repeats.
+const CASES: [(&str, usize, u32, u32, usize); 3] = [
+    ("50k_256", 50_000, 256, 256, 15),
+    ("100k_256", 100_000, 256, 256, 11),
+    ("1m_1080p", 1_000_000, 1920, 1080, 5),
+];
 
 /// Runs the benchmark cases.
 pub fn run(args: Args) -> Result<()> {
-    let mut cases = vec![
-        ("50k_256", 50_000usize, 256u32, 256u32, 15usize),
-        ("100k_256", 100_000, 256, 256, 11),
-    ];
-    if !args.quick {
-        cases.push(("1m_1080p", 1_000_000, 1920, 1080, 5));
+    if let Some(bad) = args
+        .only
+        .iter()
+        .find(|c| !CASES.iter().any(|(name, ..)| name == c))
+    {
+        let names: Vec<&str> = CASES.iter().map(|(name, ..)| *name).collect();
+        anyhow::bail!("--only: unknown case `{bad}` (cases: {})", names.join(", "));
     }
+    let cases = CASES.into_iter().filter(|(name, ..)| {
+        if args.only.is_empty() {
+            !(args.quick && *name == "1m_1080p")
+        } else {
+            args.only.iter().any(|c| c == name)
+        }
+    });
     let threads = if args.threads.is_empty() {
         let all = std::thread::available_parallelism().map_or(1, |n| n.get());
         if all > 1 {

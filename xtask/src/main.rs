@@ -70,7 +70,7 @@ enum Command {
 /// `cargo xtask bench <what>`.
 #[derive(Subcommand, Debug)]
 enum BenchCommand {
-    /// Event voxelising and reading throughput (text, npz).
+    /// Event voxelising and reading throughput of every format the `events` crate writes.
     Events(bench_events::Args),
     /// SPyNet forward and forward + input-gradient times.
     Flow(bench_flow::Args),
