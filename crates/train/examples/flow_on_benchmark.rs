@@ -1,0 +1,105 @@
+//! Diagnostic: how well does the frozen flow network of the flow loss predict the benchmark's
+//! motion? `flow_on_benchmark DIR [WEIGHTS] [TAU]` (defaults: the shipped weights, τ = 0.25 px):
+//! for every frame with ground-truth flow to the next frame, the sharp and the blurred frames k and
+//! k+1 are resized to 1/4 exactly as in the training step, the network predicts the flow, and the
+//! end-point error against the resized ground truth is compared with the zero-flow baseline — over
+//! the loss's mask M (|F| > τ, valid) and over every valid pixel. A ratio near 1 means the loss's
+//! gradient carries little information about the true motion.
+#![allow(clippy::unwrap_used)]
+
+use nn::resize_bilinear_forward;
+use std::path::{Path, PathBuf};
+use train::flow_loss::prepare_target;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let dir = PathBuf::from(
+        args.first()
+            .ok_or("usage: flow_on_benchmark DIR [WEIGHTS] [TAU]")?,
+    );
+    let weights = args.get(1).map_or_else(
+        || {
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../data-fixtures/flow/spynet-synthetic.safetensors")
+        },
+        PathBuf::from,
+    );
+    let tau: f32 = args.get(2).map_or(Ok(0.25), |s| s.parse())?;
+    let net = flow::load_safetensors(&weights)?;
+    let data = train::data::load_dataset(&dir)?;
+    let (w, h) = (data.camera.width as usize, data.camera.height as usize);
+    let (wo, ho) = (w / 4, h / 4);
+    // [masked net, masked zero, all net, all zero] EPE sums and counts, for sharp and blurred input.
+    let mut sums = [[0.0f64; 4]; 2];
+    let mut counts = [0usize; 2];
+    let mut pairs = 0;
+    for (k, sf) in data.scene.frames.iter().enumerate() {
+        let Some(fr) = sf.flow(scene::FlowKind::GroundTruth) else {
+            continue;
+        };
+        if k + 1 >= data.frames.len() {
+            continue;
+        }
+        let flow = events::read_flow(scene::Scene::resolve(&dir, &fr.path))?;
+        let valid = match &fr.valid_mask {
+            Some(rel) => Some(scene::read_mask(&scene::Scene::resolve(&dir, rel))?.2),
+            None => None,
+        };
+        let target = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, tau)?;
+        let all = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, -1.0)?;
+        let (a, b) = (&data.frames[k], &data.frames[k + 1]);
+        for (which, (ia, ib)) in [
+            (a.sharp.as_ref().unwrap(), b.sharp.as_ref().unwrap()),
+            (&a.image, &b.image),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut small = [vec![0.0f32; 3 * ho * wo], vec![0.0f32; 3 * ho * wo]];
+            for (img, out) in [ia, ib].into_iter().zip(small.iter_mut()) {
+                resize_bilinear_forward(3, h, w, img, ho, wo, true, out)?;
+            }
+            let pred = net.forward(&small[0], &small[1], ho, wo)?.flow;
+            let plane = ho * wo;
+            for p in 0..plane {
+                let (gx, gy) = (target.flow[p] as f64, target.flow[plane + p] as f64);
+                let (px, py) = (pred[p] as f64, pred[plane + p] as f64);
+                let e_net = ((px - gx).powi(2) + (py - gy).powi(2)).sqrt();
+                let e_zero = (gx * gx + gy * gy).sqrt();
+                if target.mask[p] {
+                    sums[which][0] += e_net;
+                    sums[which][1] += e_zero;
+                    if which == 0 {
+                        counts[0] += 1;
+                    }
+                }
+                if all.mask[p] {
+                    sums[which][2] += e_net;
+                    sums[which][3] += e_zero;
+                    if which == 0 {
+                        counts[1] += 1;
+                    }
+                }
+            }
+        }
+        pairs += 1;
+    }
+    println!(
+        "{pairs} pairs at {wo}x{ho}, tau {tau} px: {} masked pixels, {} valid pixels",
+        counts[0], counts[1]
+    );
+    for (which, name) in ["sharp", "blurred"].iter().enumerate() {
+        let s = sums[which];
+        let (m, v) = (counts[0].max(1) as f64, counts[1].max(1) as f64);
+        println!(
+            "{name:>7} frames: EPE over M net {:.3} px vs zero {:.3} (ratio {:.3}); over all valid net {:.3} vs zero {:.3} (ratio {:.3})",
+            s[0] / m,
+            s[1] / m,
+            s[0] / s[1].max(1e-12),
+            s[2] / v,
+            s[3] / v,
+            s[2] / s[3].max(1e-12)
+        );
+    }
+    Ok(())
+}
