@@ -5,7 +5,6 @@
 //! end-point error against the resized ground truth is compared with the zero-flow baseline — over
 //! the loss's mask M (|F| > τ, valid) and over every valid pixel. A ratio near 1 means the loss's
 //! gradient carries little information about the true motion.
-#![allow(clippy::unwrap_used)]
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
@@ -48,12 +47,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let target = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, tau)?;
         let all = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, -1.0)?;
         let (a, b) = (&data.frames[k], &data.frames[k + 1]);
-        for (which, (ia, ib)) in [
-            (a.sharp.as_ref().unwrap(), b.sharp.as_ref().unwrap()),
-            (&a.image, &b.image),
-        ]
-        .into_iter()
-        .enumerate()
+        let (Some(sharp_a), Some(sharp_b)) = (&a.sharp, &b.sharp) else {
+            return Err(format!("frame {} or {} has no sharp reference", a.index, b.index).into());
+        };
+        for (which, (ia, ib)) in [(sharp_a, sharp_b), (&a.image, &b.image)]
+            .into_iter()
+            .enumerate()
         {
             let mut small = [vec![0.0f32; 3 * ho * wo], vec![0.0f32; 3 * ho * wo]];
             for (img, out) in [ia, ib].into_iter().zip(small.iter_mut()) {
