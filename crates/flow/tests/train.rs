@@ -27,6 +27,14 @@ fn config(levels: usize, size: usize) -> TrainConfig {
 }
 
 /// Zero-flow EPE at `level` averaged over the fixed set, in level pixels.
+/// Runs `steps` training steps of `level` and returns the mean EPE of the last `last` of them.
+fn mean_of_last(trainer: &mut Trainer, level: usize, steps: usize, last: usize) -> f64 {
+    let errors: Vec<f64> = (0..steps)
+        .map(|_| trainer.step(level).expect("step"))
+        .collect();
+    errors[steps - last..].iter().sum::<f64>() / last as f64
+}
+
 fn zero_baseline(cfg: &TrainConfig, level: usize) -> f64 {
     let n = cfg.pairs.size;
     let d = cfg.distinct_pairs.unwrap_or(1);
@@ -48,14 +56,7 @@ fn adam_steps_reduce_the_loss_on_a_small_fixed_set() {
     let zero = zero_baseline(&cfg, 0);
     let mut trainer = Trainer::new(cfg);
     let first = trainer.step(0).expect("step");
-    let mut last = Vec::new();
-    for k in 0..150 {
-        let e = trainer.step(0).expect("step");
-        if k >= 140 {
-            last.push(e);
-        }
-    }
-    let end = last.iter().sum::<f64>() / last.len() as f64;
+    let end = mean_of_last(&mut trainer, 0, 150, 10);
     assert!(zero > 0.3, "degenerate data set: zero-flow EPE {zero}");
     assert!(
         (first - zero).abs() < 0.25 * zero,
@@ -78,14 +79,7 @@ fn coarse_to_fine_second_level_learns_on_top_of_a_frozen_first() {
     }
     let frozen = trainer.net.levels[0].clone();
     let first = trainer.step(1).expect("step");
-    let mut last = Vec::new();
-    for k in 0..80 {
-        let e = trainer.step(1).expect("step");
-        if k >= 70 {
-            last.push(e);
-        }
-    }
-    let end = last.iter().sum::<f64>() / last.len() as f64;
+    let end = mean_of_last(&mut trainer, 1, 80, 10);
     assert_eq!(
         trainer.net.levels[0], frozen,
         "training level 1 changed level 0"
@@ -189,14 +183,7 @@ fn sgd_with_squared_error_reduces_the_loss_on_a_small_fixed_set() {
     };
     let zero = zero_baseline(&cfg, 0);
     let mut trainer = Trainer::new(cfg);
-    let mut last = Vec::new();
-    for k in 0..150 {
-        let e = trainer.step(0).expect("step");
-        if k >= 140 {
-            last.push(e);
-        }
-    }
-    let end = last.iter().sum::<f64>() / last.len() as f64;
+    let end = mean_of_last(&mut trainer, 0, 150, 10);
     assert!(
         end < 0.6 * zero,
         "150 SGD steps left the training EPE at {end} px (zero-flow baseline {zero} px)"
