@@ -23,6 +23,13 @@ mod render_pose;
 mod synth;
 mod train_flow;
 
+/// mimalloc instead of glibc malloc: the training step, the deformation networks and the flow
+/// network allocate and free many multi-megabyte buffers per call; with glibc, page faults and
+/// kernel page clearing were ≈ 16% of the `bench deform` profile, and mimalloc's reuse of freed
+/// pages makes that benchmark ≈ 15% faster (docs/BENCHMARKS.md, deformation section).
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// E-Sem3DGS driver: reconstruct people and scenes from blurred video + events, on the CPU.
 #[derive(Parser, Debug)]
 #[command(name = "cargo xtask", bin_name = "cargo xtask", version, long_about = None)]
