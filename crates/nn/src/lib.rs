@@ -20,6 +20,7 @@ mod adam;
 mod conv;
 mod dense;
 mod gemm;
+mod gemm_avx512;
 pub mod mlp;
 mod pool;
 mod resize;
