@@ -109,11 +109,29 @@ fn layer_offset(sizes: &[usize], l: usize) -> usize {
     (0..l).map(|k| sizes[k + 1] * (sizes[k] + 1)).sum()
 }
 
-/// Forward of one chunk of `rows` rows: `x` is `(rows, in)`; the hidden post-activations are
-/// written to `act` (`rows · hidden_total` values, layer by layer, each `(rows, h_l)`), the output
-/// to `out` (`(rows, out)`).
+/// Every layer's weight transposed to `(in, out)` row-major, layer after layer: the forward
+/// products read it in place instead of transposing the weights for every chunk. Made once per
+/// pass by the caller of [`forward_chunk`].
+pub(crate) fn transposed_weights<T: Real>(mlp: &Mlp<T>) -> Vec<T> {
+    let sizes = &mlp.sizes;
+    let mut wt = Vec::with_capacity((0..sizes.len() - 1).map(|l| sizes[l] * sizes[l + 1]).sum());
+    for l in 0..sizes.len() - 1 {
+        let (i_dim, o_dim) = (sizes[l], sizes[l + 1]);
+        let o = layer_offset(sizes, l);
+        let w = &mlp.params[o..o + o_dim * i_dim];
+        for i in 0..i_dim {
+            wt.extend((0..o_dim).map(|j| w[j * i_dim + i]));
+        }
+    }
+    wt
+}
+
+/// Forward of one chunk of `rows` rows: `x` is `(rows, in)`, `wt` the network's
+/// [`transposed_weights`]; the hidden post-activations are written to `act` (`rows · hidden_total`
+/// values, layer by layer, each `(rows, h_l)`), the output to `out` (`(rows, out)`).
 pub(crate) fn forward_chunk<T: Real>(
     mlp: &Mlp<T>,
+    wt: &[T],
     x: &[T],
     rows: usize,
     act: &mut [T],
@@ -124,10 +142,12 @@ pub(crate) fn forward_chunk<T: Real>(
     let neg = slopes::<T>(mlp.activation);
     let mut prev: Option<usize> = None; // offset in `act` of the current layer's input
     let mut off = 0;
+    let mut wt_off = 0;
     for l in 0..layers {
         let (i_dim, o_dim) = (sizes[l], sizes[l + 1]);
         let o = layer_offset(sizes, l);
-        let w = &mlp.params[o..o + o_dim * i_dim];
+        let w_t = &wt[wt_off..wt_off + i_dim * o_dim];
+        wt_off += i_dim * o_dim;
         let bias = &mlp.params[o + o_dim * i_dim..o + o_dim * (i_dim + 1)];
         let last = l + 1 == layers;
         // Split `act` so the input (an earlier layer) and the output (this layer) can be borrowed
@@ -142,9 +162,8 @@ pub(crate) fn forward_chunk<T: Real>(
         } else {
             &mut rest[..rows * o_dim]
         };
-        for row in y.chunks_exact_mut(o_dim) {
-            row.copy_from_slice(bias);
-        }
+        // y = x·Wᵀ, then the bias and the activation in one pass over y (the same sums as a GEMM
+        // into bias-initialised rows: `acc + b` either way).
         gemm(
             rows,
             i_dim,
@@ -152,14 +171,23 @@ pub(crate) fn forward_chunk<T: Real>(
             T::one(),
             input,
             false,
-            w,
-            true,
-            T::one(),
+            w_t,
+            false,
+            T::zero(),
             y,
         );
-        if !last {
-            for v in y.iter_mut() {
-                *v = if *v > T::zero() { *v } else { *v * neg };
+        if last {
+            for row in y.chunks_exact_mut(o_dim) {
+                for (v, &b) in row.iter_mut().zip(bias) {
+                    *v = *v + b;
+                }
+            }
+        } else {
+            for row in y.chunks_exact_mut(o_dim) {
+                for (v, &b) in row.iter_mut().zip(bias) {
+                    let z = *v + b;
+                    *v = if z > T::zero() { z } else { z * neg };
+                }
             }
             prev = Some(off);
             off += rows * o_dim;
