@@ -277,6 +277,27 @@ mod imp {
         beta_one: bool,
     ) {
         let mut i = 0;
+        // Full blocks, then the remainder in blocks of 4, 2 and 1 rows (a lone row streams its B
+        // rows for only NV multiply-adds per load).
+        macro_rules! rows_of {
+            ($r:literal) => {
+                while i + $r <= m {
+                    block::<$r, NV>(
+                        k,
+                        a.add(i * rsa),
+                        rsa,
+                        csa,
+                        b,
+                        rsb,
+                        c.add(i * rsc),
+                        rsc,
+                        w,
+                        beta_one,
+                    );
+                    i += $r;
+                }
+            };
+        }
         while i + MR <= m {
             block::<MR, NV>(
                 k,
@@ -292,21 +313,9 @@ mod imp {
             );
             i += MR;
         }
-        while i < m {
-            block::<1, NV>(
-                k,
-                a.add(i * rsa),
-                rsa,
-                csa,
-                b,
-                rsb,
-                c.add(i * rsc),
-                rsc,
-                w,
-                beta_one,
-            );
-            i += 1;
-        }
+        rows_of!(4);
+        rows_of!(2);
+        rows_of!(1);
     }
 
     /// `C (m × n) = A·B (+ C)`, in panels of up to 64 columns.
