@@ -281,7 +281,7 @@ mod imp {
         // rows for only NV multiply-adds per load).
         macro_rules! rows_of {
             ($r:literal) => {
-                while i + $r <= m {
+                while m - i >= $r {
                     block::<$r, NV>(
                         k,
                         a.add(i * rsa),
