@@ -257,7 +257,7 @@ mod imp {
         }
     }
 
-    /// All rows of one column panel: blocks of `MR` rows, then single rows.
+    /// All rows of one column panel: blocks of `MR` rows, then of 4, 2 and 1.
     ///
     /// # Safety
     /// As [`block`], for every row of the panel.
@@ -280,9 +280,9 @@ mod imp {
         // Full blocks, then the remainder in blocks of 4, 2 and 1 rows (a lone row streams its B
         // rows for only NV multiply-adds per load).
         macro_rules! rows_of {
-            ($r:literal) => {
+            ($r:expr) => {
                 while m - i >= $r {
-                    block::<$r, NV>(
+                    block::<{ $r }, NV>(
                         k,
                         a.add(i * rsa),
                         rsa,
@@ -298,21 +298,7 @@ mod imp {
                 }
             };
         }
-        while i + MR <= m {
-            block::<MR, NV>(
-                k,
-                a.add(i * rsa),
-                rsa,
-                csa,
-                b,
-                rsb,
-                c.add(i * rsc),
-                rsc,
-                w,
-                beta_one,
-            );
-            i += MR;
-        }
+        rows_of!(MR);
         rows_of!(4);
         rows_of!(2);
         rows_of!(1);
