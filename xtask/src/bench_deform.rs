@@ -5,8 +5,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use smpl_deform::deform_net::{
-    deform_gaussians_backward, deform_gaussians_reusing, pose_code, CanonicalGaussians,
-    NonRigidNet, SkinningField, NR_FEATURE_DIM,
+    deform_gaussians, deform_gaussians_backward, pose_code, CanonicalGaussians, NonRigidNet,
+    SkinningField, NR_FEATURE_DIM,
 };
 use smpl_deform::{sample_surface, BodyModel, CanonicalBody, SmplParams};
 
@@ -56,13 +56,10 @@ pub fn run(args: Args) -> Result<()> {
         quats: &quats,
     };
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "default".into());
-    // Each forward reuses the previous repetition's cache buffers, as a training loop does.
-    let mut spare = None;
     for rep in 0..=args.reps {
         let cpu0 = process_cpu_seconds();
         let t0 = Instant::now();
-        let (out, cache) =
-            deform_gaussians_reusing(&nonrigid, &field, &g, &code, &bones, spare.take())?;
+        let (out, cache) = deform_gaussians(&nonrigid, &field, &g, &code, &bones)?;
         let t_fwd = t0.elapsed();
         let d_pos = vec![[1.0f32; 3]; n];
         let d_s = vec![[1.0f32; 3]; n];
@@ -89,7 +86,6 @@ pub fn run(args: Args) -> Result<()> {
             _ => None,
         };
         std::hint::black_box((&out, &grad));
-        spare = Some(cache);
         if rep > 0 {
             println!(
                 "{}",

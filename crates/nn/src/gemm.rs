@@ -2,8 +2,8 @@
 //! the crate that need `unsafe`): every strided view is bounds-checked against its slice before the
 //! raw call.
 //!
-//! Small f32 products on AVX-512 machines go to the packing-free kernel of `gemm_avx512`, which
-//! gives the same bits as `matrixmultiply` (see there).
+//! On AVX-512 machines, f32 products with `alpha = 1`, `beta ∈ {0, 1}` and a row-major C go to the
+//! packing-free kernel of `gemm_avx512`, which gives the same bits as `matrixmultiply` (see there).
 //!
 //! `matrixmultiply` splits work over output blocks only (never over the inner dimension), so a GEMM
 //! result does not depend on how many threads run it.
@@ -47,29 +47,9 @@ fn check_views(
     assert!(distinct, "gemm: C view aliases itself");
 }
 
-/// The f64 products have no faster path than `matrixmultiply`.
-#[allow(clippy::too_many_arguments)]
-fn no_fast_path(
-    _m: usize,
-    _k: usize,
-    _n: usize,
-    _alpha: f64,
-    _a: &[f64],
-    _rsa: isize,
-    _csa: isize,
-    _b: &[f64],
-    _rsb: isize,
-    _csb: isize,
-    _beta: f64,
-    _c: &mut [f64],
-    _rsc: isize,
-    _csc: isize,
-) -> bool {
-    false
-}
-
 macro_rules! impl_real {
-    ($t:ty, $f:ident, $fast:path) => {
+    // `$fast`: an optional faster path tried first (it returns whether it ran the product).
+    ($t:ty, $f:ident $(, $fast:path)?) => {
         impl Real for $t {
             #[inline]
             fn of(x: f64) -> Self {
@@ -123,9 +103,11 @@ macro_rules! impl_real {
                     rsc,
                     csc,
                 );
-                if $fast(m, k, n, alpha, a, rsa, csa, b, rsb, csb, beta, c, rsc, csc) {
-                    return;
-                }
+                $(
+                    if $fast(m, k, n, alpha, a, rsa, csa, b, rsb, csb, beta, c, rsc, csc) {
+                        return;
+                    }
+                )?
                 // SAFETY: check_views proved every index the kernel touches lies inside its slice
                 // (non-negative strides, max index < len) and that C's view does not alias itself;
                 // A and B are shared borrows and C an exclusive one, so they cannot overlap.
@@ -153,7 +135,7 @@ macro_rules! impl_real {
 }
 
 impl_real!(f32, sgemm, crate::gemm_avx512::try_sgemm);
-impl_real!(f64, dgemm, no_fast_path);
+impl_real!(f64, dgemm);
 
 /// General matrix product `C = alpha·op(A)·op(B) + beta·C` on dense row-major matrices.
 ///

@@ -247,24 +247,13 @@ impl<T: Real> SkinningField<T> {
         check_mlp(&self.mlp, "skinning field", ENC_DIM, NUM_JOINTS)
     }
 
-    /// Forward of one chunk of points; `reuse` lends the buffers of an earlier chunk (every value
-    /// is overwritten).
-    fn chunk_forward(
-        &self,
-        wt: &[T],
-        points: &[[T; 3]],
-        rows: Range<usize>,
-        reuse: Option<SkinChunk<T>>,
-    ) -> SkinChunk<T> {
+    /// Forward of one chunk of points (`wt`: the field's transposed weights).
+    fn chunk_forward(&self, wt: &[T], points: &[[T; 3]], rows: Range<usize>) -> SkinChunk<T> {
         let r = rows.len();
-        let (enc, pre, weights) = match reuse {
-            Some(c) => (Some(c.enc), Some(c.pre), Some(c.weights)),
-            None => (None, None, None),
-        };
-        let mut enc = sized(enc, r * ENC_DIM);
+        let mut enc = vec![T::zero(); r * ENC_DIM];
         encode_rows(&self.norm, points, &mut enc);
-        let mut pre = sized(pre, r * batch_mlp::hidden_total(&self.mlp));
-        let mut weights = sized(weights, r * NUM_JOINTS);
+        let mut pre = vec![T::zero(); r * batch_mlp::hidden_total(&self.mlp)];
+        let mut weights = vec![T::zero(); r * NUM_JOINTS];
         batch_mlp::forward_chunk(&self.mlp, wt, &enc, r, &mut pre, &mut weights);
         softmax_rows(&mut weights);
         SkinChunk {
@@ -310,7 +299,7 @@ impl<T: Real> SkinningField<T> {
         let wt = batch_mlp::transposed_weights(&self.mlp);
         let chunks: Vec<SkinChunk<T>> = batch_mlp::chunks(points.len(), rows)
             .into_par_iter()
-            .map(|range| self.chunk_forward(&wt, &points[range.clone()], range, None))
+            .map(|range| self.chunk_forward(&wt, &points[range.clone()], range))
             .collect();
         let cache = SkinningCache {
             n: points.len(),
@@ -375,18 +364,6 @@ fn grow<T: Clone + Default>(v: &mut Vec<T>, len: usize) -> &mut [T] {
         v.resize(len, T::default());
     }
     &mut v[..len]
-}
-
-/// A buffer of `len` values: `reuse` resized (no writes when it already has `len` values: the
-/// caller overwrites every value), or a new zeroed one.
-fn sized<T: Clone + Default>(reuse: Option<Vec<T>>, len: usize) -> Vec<T> {
-    match reuse {
-        Some(mut v) => {
-            v.resize(len, T::default());
-            v
-        }
-        None => vec![T::default(); len],
-    }
 }
 
 fn check_len(name: &'static str, expected: usize, actual: usize) -> Result<(), nn::NnError> {
@@ -515,21 +492,19 @@ impl<T: Real> NonRigidNet<T> {
         check_len("non-rigid pose code", NUM_POSE_FEATURES, pose_code.len())
     }
 
-    /// Forward of one chunk with the folded network; writes the outputs to `out`. `reuse` lends the
-    /// buffers of an earlier chunk (every value is overwritten).
+    /// Forward of one chunk with the folded network (`wt`: its transposed weights); writes the
+    /// outputs to `out`.
     fn chunk_forward(
         &self,
         folded: &Mlp<T>,
         wt: &[T],
         points: &[[T; 3]],
         out: &mut [T],
-        reuse: Option<NrChunk<T>>,
     ) -> NrChunk<T> {
         let r = points.len();
-        let (enc, pre) = reuse.map_or((None, None), |c| (Some(c.enc), Some(c.pre)));
-        let mut enc = sized(enc, r * ENC_DIM);
+        let mut enc = vec![T::zero(); r * ENC_DIM];
         encode_rows(&self.norm, points, &mut enc);
-        let mut pre = sized(pre, r * batch_mlp::hidden_total(folded));
+        let mut pre = vec![T::zero(); r * batch_mlp::hidden_total(folded)];
         batch_mlp::forward_chunk(folded, wt, &enc, r, &mut pre, out);
         NrChunk { enc, pre }
     }
@@ -579,7 +554,7 @@ impl<T: Real> NonRigidNet<T> {
         let chunks: Vec<NrChunk<T>> = out
             .par_chunks_mut(per * NR_OUT_DIM)
             .zip(rows.par_iter())
-            .map(|(o, range)| self.chunk_forward(&folded, &wt, &points[range.clone()], o, None))
+            .map(|(o, range)| self.chunk_forward(&folded, &wt, &points[range.clone()], o))
             .collect();
         Ok((
             out,
@@ -798,21 +773,6 @@ pub fn deform_gaussians<T: Real>(
     pose_code: &[T],
     bones: &[Affine<T>],
 ) -> Result<(PosedGaussians<T>, DeformCache<T>), nn::NnError> {
-    deform_gaussians_reusing(nonrigid, field, g, pose_code, bones, None)
-}
-
-/// [`deform_gaussians`] that reuses the buffers of an earlier pass's cache (typically the previous
-/// training step's, once its backward pass is done) instead of allocating and zeroing ≈ 2 kB per
-/// Gaussian afresh. The results are the same bit for bit; buffers whose size no longer fits (other
-/// Gaussian count or network widths) are resized.
-pub fn deform_gaussians_reusing<T: Real>(
-    nonrigid: &NonRigidNet<T>,
-    field: &SkinningField<T>,
-    g: &CanonicalGaussians<'_, T>,
-    pose_code: &[T],
-    bones: &[Affine<T>],
-    reuse: Option<DeformCache<T>>,
-) -> Result<(PosedGaussians<T>, DeformCache<T>), nn::NnError> {
     let n = g.positions.len();
     nonrigid.check(pose_code)?;
     field.check()?;
@@ -831,43 +791,19 @@ pub fn deform_gaussians_reusing<T: Real>(
     let mut mats = vec![[T::zero(); 9]; n];
     let mut features = vec![T::zero(); n * NR_FEATURE_DIM];
     let ranges = batch_mlp::chunks(n, rows);
-    // One earlier chunk per chunk (any surplus is dropped, any shortfall allocated).
-    let (mut old, mut quats): (Vec<Option<DeformChunk<T>>>, Vec<[T; 4]>) = reuse
-        .map(|c| (c.chunks.into_iter().map(Some).collect(), c.quats))
-        .unwrap_or_default();
-    quats.clear();
-    quats.extend_from_slice(g.quats);
-    old.resize_with(ranges.len(), || None);
-    old.truncate(ranges.len());
     let chunks: Vec<DeformChunk<T>> = positions
         .par_chunks_mut(rows)
         .zip(log_scales.par_chunks_mut(rows))
         .zip(mats.par_chunks_mut(rows))
         .zip(features.par_chunks_mut(rows * NR_FEATURE_DIM))
         .zip(ranges.par_iter())
-        .zip(old.into_par_iter())
-        .map(|(((((pos, ls), ms), feat), range), old)| {
+        .map(|((((pos, ls), ms), feat), range)| {
             let r = range.len();
             let x = &g.positions[range.clone()];
-            let (old_nr, old_nr_out, old_skin, old_x, old_q, old_blended) = match old {
-                Some(c) => (
-                    Some(c.nr),
-                    Some(c.nr_out),
-                    Some(c.skin),
-                    Some(c.x_nr),
-                    Some(c.q_nr),
-                    Some(c.blended),
-                ),
-                None => (None, None, None, None, None, None),
-            };
-            let mut nr_out = sized(old_nr_out, r * NR_OUT_DIM);
-            let nr = nonrigid.chunk_forward(&folded, &nr_wt, x, &mut nr_out, old_nr);
-            let mut x_nr = old_x.unwrap_or_default();
-            x_nr.clear();
-            x_nr.reserve(r);
-            let mut q_nr = old_q.unwrap_or_default();
-            q_nr.clear();
-            q_nr.reserve(r);
+            let mut nr_out = vec![T::zero(); r * NR_OUT_DIM];
+            let nr = nonrigid.chunk_forward(&folded, &nr_wt, x, &mut nr_out);
+            let mut x_nr = Vec::with_capacity(r);
+            let mut q_nr = Vec::with_capacity(r);
             for (k, o) in nr_out.chunks_exact(NR_OUT_DIM).enumerate() {
                 let i = range.start + k;
                 x_nr.push([0, 1, 2].map(|a| x[k][a] + o[a]));
@@ -875,9 +811,9 @@ pub fn deform_gaussians_reusing<T: Real>(
                 q_nr.push(quat_mul(g.quats[i], [T::one(), o[6], o[7], o[8]]));
                 feat[k * NR_FEATURE_DIM..(k + 1) * NR_FEATURE_DIM].copy_from_slice(&o[9..]);
             }
-            let skin = field.chunk_forward(&field_wt, &x_nr, range.clone(), old_skin);
+            let skin = field.chunk_forward(&field_wt, &x_nr, range.clone());
             // Blended transforms (rows × 12) = weights (rows × 24) · bones (24 × 12).
-            let mut blended = sized(old_blended, r * 12);
+            let mut blended = vec![T::zero(); r * 12];
             gemm(
                 r,
                 NUM_JOINTS,
@@ -919,7 +855,7 @@ pub fn deform_gaussians_reusing<T: Real>(
             n,
             folded,
             pose_code: pose_code.to_vec(),
-            quats,
+            quats: g.quats.to_vec(),
             chunks,
         },
     ))
@@ -1428,9 +1364,7 @@ mod tests {
         close("field d points", &d_x2.concat(), &gx);
     }
 
-    /// Bits of a forward + backward on 5000 points with `threads` threads; with `warm = Some(m)`,
-    /// the forward reuses the cache of an earlier forward on the first `m` points.
-    fn run_f32(threads: usize, warm: Option<usize>) -> (Vec<u32>, Vec<u32>, Vec<u32>) {
+    fn run_f32(threads: usize) -> (Vec<u32>, Vec<u32>, Vec<u32>) {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -1459,18 +1393,7 @@ mod tests {
                 log_scales: &s,
                 quats: &q,
             };
-            let reuse = warm.map(|m| {
-                let g = CanonicalGaussians {
-                    positions: &x[..m],
-                    log_scales: &s[..m],
-                    quats: &q[..m],
-                };
-                deform_gaussians(&nonrigid, &field, &g, &code, &bones)
-                    .expect("warm fwd")
-                    .1
-            });
-            let (out, cache) =
-                deform_gaussians_reusing(&nonrigid, &field, &g, &code, &bones, reuse).expect("fwd");
+            let (out, cache) = deform_gaussians(&nonrigid, &field, &g, &code, &bones).expect("fwd");
             let n = x.len();
             let mut d_nr = vec![0.0f32; nonrigid.mlp.params.len()];
             let mut d_sf = vec![0.0f32; field.mlp.params.len()];
@@ -1501,18 +1424,9 @@ mod tests {
 
     #[test]
     fn results_are_bit_identical_for_any_thread_count() {
-        let one = run_f32(1, None);
-        assert_eq!(one, run_f32(2, None));
-        assert_eq!(one, run_f32(3, None));
-    }
-
-    #[test]
-    fn reusing_a_cache_gives_the_same_bits() {
-        let fresh = run_f32(2, None);
-        // Same size (every buffer reused as is), fewer chunks, and a ragged last chunk.
-        assert_eq!(fresh, run_f32(2, Some(5000)));
-        assert_eq!(fresh, run_f32(2, Some(700)));
-        assert_eq!(fresh, run_f32(1, Some(4999)));
+        let one = run_f32(1);
+        assert_eq!(one, run_f32(2));
+        assert_eq!(one, run_f32(3));
     }
 
     #[test]
