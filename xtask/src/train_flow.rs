@@ -7,6 +7,9 @@
 //!    zero-flow plateau every earlier recipe stayed on (`docs/BENCHMARKS.md`, flow).
 //! 2. The pre-trained level copied into every level ([`flow::train::replicate_level`]) and each level
 //!    fine-tuned coarse to fine on the full generator at `--size` (lower levels frozen).
+//! 3. `--joint-steps`: all levels trained together on a multi-scale loss
+//!    ([`flow::train::Trainer::step_joint`]), gradients flowing through the whole pyramid; the
+//!    weights are validated every `--report-every` steps and the best ones kept.
 //!
 //! Reports the held-out EPE against the zero-flow baseline; the weights are written after every
 //! phase and level, so a stopped run leaves its latest weights behind.
@@ -105,6 +108,20 @@ pub struct Args {
     /// Continue from existing weights instead of a fresh initialisation (skips the pre-training).
     #[arg(long)]
     pub init: Option<PathBuf>,
+    /// Steps of joint multi-scale training of all levels after the per-level fine-tuning.
+    #[arg(long, default_value_t = 0)]
+    pub joint_steps: usize,
+    /// Pairs per joint step (run in parallel over the threads).
+    #[arg(long, default_value_t = 8)]
+    pub joint_batch: usize,
+    /// Peak learning rate of the joint phase.
+    #[arg(long, default_value_t = 5e-5)]
+    pub joint_lr: f64,
+    /// Probability that a fine-tuning or joint training pair has a static background (only the
+    /// foreground layers move, as with the synthetic benchmark's fixed camera). The held-out
+    /// figures are reported on the default generator (moving background) and with this setting.
+    #[arg(long, default_value_t = 0.0)]
+    pub static_background: f32,
 }
 
 fn save(net: &flow::SpyNet<f32>, out: &Path) -> Result<()> {
@@ -116,7 +133,7 @@ fn save(net: &flow::SpyNet<f32>, out: &Path) -> Result<()> {
     flow::save_safetensors(net, out).with_context(|| format!("writing {}", out.display()))
 }
 
-fn bar(total: usize) -> Result<ProgressBar> {
+fn progress_bar(total: usize) -> Result<ProgressBar> {
     let bar = ProgressBar::new(total as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta} {msg}")
@@ -133,9 +150,13 @@ pub fn run(args: Args) -> Result<()> {
             momentum: args.momentum,
         },
     };
-    let pairs = PairConfig {
+    let held_out = PairConfig {
         size: args.size,
         ..PairConfig::default()
+    };
+    let pairs = PairConfig {
+        static_background: args.static_background,
+        ..held_out
     };
     let config = |levels: usize, pairs: PairConfig, batch: usize, lr: f64| TrainConfig {
         levels,
@@ -165,7 +186,7 @@ pub fn run(args: Args) -> Result<()> {
                 ..PairConfig::default()
             };
             let mut t = Trainer::new(config(1, pre, args.pretrain_batch, args.pretrain_lr));
-            let bar = bar(args.pretrain_steps)?;
+            let bar = progress_bar(args.pretrain_steps)?;
             let mut recent = Vec::new();
             for s in 0..args.pretrain_steps {
                 let r = t.step_report(0)?;
@@ -209,7 +230,7 @@ pub fn run(args: Args) -> Result<()> {
     let steps: Vec<usize> = (0..args.levels)
         .map(|l| *args.steps.get(l).or(args.steps.last()).unwrap_or(&0))
         .collect();
-    let bar = bar(steps.iter().sum())?;
+    let bar = progress_bar(steps.iter().sum())?;
     let validation = |net: &flow::SpyNet<f32>| -> Result<f64> {
         Ok(evaluate(net, args.eval_seed + 1, args.validation_pairs, &pairs)?.0)
     };
@@ -255,12 +276,56 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     bar.finish();
+    if args.joint_steps > 0 {
+        let mut joint = Trainer::from_net(
+            trainer.net.clone(),
+            config(args.levels, pairs, args.joint_batch, args.joint_lr),
+        );
+        let bar = progress_bar(args.joint_steps)?;
+        let mut best = validation(&joint.net)?;
+        log(
+            &bar,
+            format!("joint phase: validation EPE {best:.3} px at the start"),
+        );
+        let mut recent = Vec::new();
+        for s in 0..args.joint_steps {
+            let r = joint.step_joint()?;
+            recent.push(r.epe);
+            if recent.len() > 50 {
+                recent.remove(0);
+            }
+            let mean = recent.iter().sum::<f64>() / recent.len() as f64;
+            bar.set_message(format!("joint epe {mean:.3}"));
+            bar.inc(1);
+            let last = s + 1 == args.joint_steps;
+            if (args.report_every > 0 && (s + 1) % args.report_every == 0) || last {
+                let v = validation(&joint.net)?;
+                let kept = v < best;
+                if kept {
+                    best = v;
+                    trainer.net = joint.net.clone();
+                    save(&trainer.net, &args.out)?;
+                }
+                log(
+                    &bar,
+                    format!(
+                        "joint step {}: last-50 EPE {mean:.3}, validation {v:.3} px{}, {:.0} s",
+                        s + 1,
+                        if kept { " (best, saved)" } else { "" },
+                        start.elapsed().as_secs_f64()
+                    ),
+                );
+            }
+        }
+        bar.finish();
+    }
     let train_s = start.elapsed().as_secs_f64();
     save(&trainer.net, &args.out)?;
-    let (epe, zero) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &pairs)?;
+    let (epe, zero) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &held_out)?;
+    let (epe_st, zero_st) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &pairs)?;
     let still = PairConfig {
         brightness_jitter: 0.0,
-        ..pairs
+        ..held_out
     };
     let (epe_nj, zero_nj) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &still)?;
     println!(
@@ -275,6 +340,10 @@ pub fn run(args: Args) -> Result<()> {
             "epe": epe, "zero_flow_epe": zero, "ratio": epe / zero,
             "no_jitter_epe": epe_nj, "no_jitter_zero_flow_epe": zero_nj,
             "no_jitter_ratio": epe_nj / zero_nj,
+            "joint_steps": args.joint_steps, "joint_batch": args.joint_batch,
+            "joint_lr": args.joint_lr, "static_background": args.static_background,
+            "training_distribution_epe": epe_st, "training_distribution_zero_flow_epe": zero_st,
+            "training_distribution_ratio": epe_st / zero_st,
         })
     );
     Ok(())

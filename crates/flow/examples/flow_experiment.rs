@@ -67,6 +67,7 @@ fn main() {
         max_cycles_per_pixel: f("cyc", "0.25") as f32,
         supersampling: u("ss", "3"),
         brightness_jitter: f("jit", "1") as f32,
+        static_background: f("static", "0") as f32,
     };
     let optimizer = match g("opt", "adam").as_str() {
         "sgd" => Optimizer::Sgd {

@@ -72,6 +72,12 @@ impl<T: Real> Tape<T> {
         })
     }
 
+    /// Output flow `(2, h_l, w_l)` of pyramid level `level` (0 = coarsest), in that level's pixels,
+    /// before any resize back to the input size; `None` if the level was not run.
+    pub fn level_flow(&self, level: usize) -> Option<&[T]> {
+        self.levels.get(level).map(|lt| lt.out.as_slice())
+    }
+
     /// Fingerprint of the piecewise-smooth region the forward pass ran in: the sign pattern of every
     /// ReLU, and for every warp sample its bilinear cell and whether it was clamped at the border.
     /// Two passes with equal signatures are evaluations of the same smooth branch of the network;
@@ -124,6 +130,8 @@ impl<T: Real> Tape<T> {
 struct LevelTape<T> {
     up: Vec<T>,
     acts: Vec<Vec<T>>,
+    /// The level's output flow `(2, h_l, w_l)` (level pixels).
+    out: Vec<T>,
 }
 
 fn conv_shape(i: usize, h: usize, w: usize) -> Conv2dShape {
@@ -467,7 +475,11 @@ impl<T: Real> SpyNet<T> {
                     flow = out;
                 }
             }
-            tapes.push(LevelTape { up, acts });
+            tapes.push(LevelTape {
+                up,
+                acts,
+                out: flow.clone(),
+            });
         }
         let full = last_level + 1 == levels;
         if full && resized {
@@ -525,7 +537,7 @@ impl<T: Real> SpyNet<T> {
             grad_flow.to_vec()
         };
         let (mut g1, mut g2) = self
-            .backward_impl(tape, g_work, weight_grads, true, 0)?
+            .backward_impl(tape, g_work, weight_grads, true, 0, None)?
             .ok_or_else(|| FlowError::Size("internal: no input gradient".into()))?;
         // Pyramids: level l−1 = pool(level l).
         let sizes = &tape.level_sizes;
@@ -573,12 +585,56 @@ impl<T: Real> SpyNet<T> {
                 grad_flow.len()
             )));
         }
-        self.backward_impl(tape, grad_flow.to_vec(), Some(weight_grads), false, last)?;
+        self.backward_impl(
+            tape,
+            grad_flow.to_vec(),
+            Some(weight_grads),
+            false,
+            last,
+            None,
+        )?;
+        Ok(())
+    }
+
+    /// Weight gradients of a multi-scale loss on the per-level outputs of a pass (full or partial):
+    /// `level_grads[l] = ∂L/∂flow_l` (`(2, h_l, w_l)`, see [`Tape::level_flow`]) for every level
+    /// `l` of the tape, gradients flowing through the whole pyramid (warps and upsampling included),
+    /// **accumulated** into `weight_grads`. End-to-end training of all levels at once, as later
+    /// pyramid networks (PWC-Net, LiteFlowNet) are trained; an empty level gradient counts as zero.
+    pub fn backward_multiscale_weights(
+        &self,
+        tape: &Tape<T>,
+        level_grads: &[Vec<T>],
+        weight_grads: &mut SpyNet<T>,
+    ) -> Result<(), FlowError> {
+        let run = tape.levels.len();
+        if level_grads.len() != run {
+            return Err(FlowError::Size(format!(
+                "{} level gradients for a pass of {run} levels",
+                level_grads.len()
+            )));
+        }
+        for (l, g) in level_grads.iter().enumerate() {
+            let (lh, lw) = tape.level_sizes[l];
+            if !g.is_empty() && g.len() != 2 * lh * lw {
+                return Err(FlowError::Size(format!(
+                    "level {l} flow gradient has {} values, expected 2x{lh}x{lw}",
+                    g.len()
+                )));
+            }
+        }
+        let (lh, lw) = tape.level_sizes[run.saturating_sub(1)];
+        let mut top = vec![T::zero(); 2 * lh * lw];
+        if let Some(g) = level_grads.last() {
+            add_into(&mut top, g);
+        }
+        self.backward_impl(tape, top, Some(weight_grads), false, 0, Some(level_grads))?;
         Ok(())
     }
 
     /// Backward through levels `tape.levels.len()−1` down to `min_level`. Returns the per-level
-    /// gradients w.r.t. the normalised pyramids when `inputs` is set.
+    /// gradients w.r.t. the normalised pyramids when `inputs` is set. `extra[l]` (levels below the
+    /// top; the top level's is already in `gflow`) is added to the gradient of level `l`'s output.
     #[allow(clippy::type_complexity)]
     fn backward_impl(
         &self,
@@ -587,6 +643,7 @@ impl<T: Real> SpyNet<T> {
         mut weight_grads: Option<&mut SpyNet<T>>,
         inputs: bool,
         min_level: usize,
+        extra: Option<&[Vec<T>]>,
     ) -> Result<Option<(Vec<Vec<T>>, Vec<Vec<T>>)>, FlowError> {
         if let Some(g) = &weight_grads {
             if g.num_levels() != self.num_levels() {
@@ -605,6 +662,11 @@ impl<T: Real> SpyNet<T> {
             let (lh, lw) = sizes[l];
             let hw = lh * lw;
             let lt = &tape.levels[l];
+            if l + 1 < tape.levels.len() {
+                if let Some(e) = extra.and_then(|e| e.get(l)).filter(|e| !e.is_empty()) {
+                    add_into(&mut gflow, e);
+                }
+            }
             let mut g_up = gflow.clone();
             let mut g = gflow;
             for i in (0..5).rev() {

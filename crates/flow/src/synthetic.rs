@@ -49,6 +49,10 @@ pub struct PairConfig {
     /// Scale of the second frame's brightness jitter (gain `1 ± 0.1·j`, offset `± 0.05·j`); `1` is the
     /// original generator, `0` turns it off (draws the same random numbers either way).
     pub brightness_jitter: f32,
+    /// Probability that the background does not move (a static camera, as in the project's
+    /// synthetic benchmark: only the foreground layers move and the flow is exactly zero elsewhere).
+    /// `0` draws exactly the pairs of the generator before this knob existed.
+    pub static_background: f32,
 }
 
 impl Default for PairConfig {
@@ -62,6 +66,7 @@ impl Default for PairConfig {
             max_cycles_per_pixel: 0.25,
             supersampling: 3,
             brightness_jitter: 1.0,
+            static_background: 0.0,
         }
     }
 }
@@ -322,6 +327,14 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
     }
     let gain = 1.0 + r.sym(0.1) * cfg.brightness_jitter;
     let bias = r.sym(0.05) * cfg.brightness_jitter;
+    // Drawn last and only when enabled, so that `static_background = 0` keeps every earlier pair.
+    if cfg.static_background > 0.0 && r.f() < cfg.static_background {
+        layers[0].motion = Motion {
+            a: [1.0, 0.0, 0.0, 1.0],
+            c: centre,
+            t: [0.0, 0.0],
+        };
+    }
     let ss = cfg.supersampling.max(1);
     let inv_samples = 1.0 / (ss * ss) as f32;
     let hw = n * n;

@@ -222,6 +222,36 @@ impl Trainer {
         }
     }
 
+    /// One optimiser update of level `level`'s parameters with the gradients in `grads`.
+    fn apply(&mut self, level: usize, grads: &SpyNet<f32>, lr: f64) -> Result<(), FlowError> {
+        for (i, conv) in self.net.levels[level].iter_mut().enumerate() {
+            let g = &grads.levels[level][i];
+            match self.cfg.optimizer {
+                Optimizer::Adam => {
+                    let (aw, ab) = &mut self.adams[level][i];
+                    aw.config.lr = lr;
+                    ab.config.lr = lr;
+                    aw.step(&mut conv.weight, &g.weight)?;
+                    ab.step(&mut conv.bias, &g.bias)?;
+                }
+                Optimizer::Sgd { momentum } => {
+                    let v = &mut self.velocity.levels[level][i];
+                    let (mu, lr) = (momentum as f32, lr as f32);
+                    for (p, (vv, gg)) in conv.weight.iter_mut().chain(conv.bias.iter_mut()).zip(
+                        v.weight
+                            .iter_mut()
+                            .chain(v.bias.iter_mut())
+                            .zip(g.weight.iter().chain(&g.bias)),
+                    ) {
+                        *vv = mu * *vv + gg;
+                        *p -= lr * *vv;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The run's settings.
     pub fn config(&self) -> &TrainConfig {
         &self.cfg
@@ -273,30 +303,108 @@ impl Trainer {
         if let Some(c) = self.level_steps.get_mut(level) {
             *c += 1;
         }
-        for (i, conv) in self.net.levels[level].iter_mut().enumerate() {
-            let g = &grads.levels[level][i];
-            match self.cfg.optimizer {
-                Optimizer::Adam => {
-                    let (aw, ab) = &mut self.adams[level][i];
-                    aw.config.lr = lr;
-                    ab.config.lr = lr;
-                    aw.step(&mut conv.weight, &g.weight)?;
-                    ab.step(&mut conv.bias, &g.bias)?;
+        self.apply(level, &grads, lr)?;
+        Ok(StepReport {
+            epe: epe * scale,
+            loss: loss * scale,
+            live_relu,
+        })
+    }
+}
+
+impl Trainer {
+    /// One optimiser step on **all levels at once** over a batch of fresh pairs: the loss is the sum
+    /// over levels of each level's mean per-pixel loss ([`Loss`], in that level's pixels, against the
+    /// ground truth reduced by [`flow_at_level`]), and its gradient reaches every level through the
+    /// pyramid's warps and upsampling ([`SpyNet::backward_multiscale_weights`]). Counting every level
+    /// in its own pixels weights a coarser level's errors ½ per level relative to full-resolution
+    /// pixels. The pairs of a batch run in parallel; their gradients are summed in batch order, so
+    /// the result does not depend on the number of threads. Returns the batch's mean EPE of the
+    /// finest level (full-resolution pixels).
+    pub fn step_joint(&mut self) -> Result<StepReport, FlowError> {
+        use rayon::prelude::*;
+        let levels = self.net.num_levels();
+        let n = self.cfg.pairs.size;
+        let batch = self.cfg.batch.max(1);
+        let scale = 1.0 / batch as f64;
+        let t = self.level_steps.first().copied().unwrap_or(0);
+        let kind = if t < self.cfg.mse_steps {
+            Loss::Mse
+        } else {
+            Loss::Epe
+        };
+        let indices: Vec<u64> = (0..batch as u64)
+            .map(|b| {
+                let k = self.next_pair + b;
+                self.cfg.distinct_pairs.map_or(k, |d| k % d.max(1))
+            })
+            .collect();
+        self.next_pair += batch as u64;
+        let net = &self.net;
+        let cfg = &self.cfg;
+        let per_pair: Vec<Result<PairGradient, FlowError>> = indices
+            .par_iter()
+            .map(|&index| {
+                let pair = generate_pair(cfg.seed, index, &cfg.pairs);
+                let tape = net.forward_to_level(&pair.img1, &pair.img2, n, n, levels - 1)?;
+                let mut level_grads = Vec::with_capacity(levels);
+                let (mut loss, mut epe) = (0.0, 0.0);
+                for l in 0..levels {
+                    let truth = flow_at_level(&pair.flow, n, n, levels, l);
+                    let out = tape.level_flow(l).unwrap_or(&[]);
+                    let (lo, e, g) = pixel_loss(out, &truth, kind, scale)?;
+                    loss += lo;
+                    if l + 1 == levels {
+                        epe = e;
+                    }
+                    level_grads.push(g);
                 }
-                Optimizer::Sgd { momentum } => {
-                    let v = &mut self.velocity.levels[level][i];
-                    let (mu, lr) = (momentum as f32, lr as f32);
-                    for (p, (vv, gg)) in conv.weight.iter_mut().chain(conv.bias.iter_mut()).zip(
-                        v.weight
-                            .iter_mut()
-                            .chain(v.bias.iter_mut())
-                            .zip(g.weight.iter().chain(&g.bias)),
-                    ) {
-                        *vv = mu * *vv + gg;
-                        *p -= lr * *vv;
+                let mut grads = net.zeros_like();
+                net.backward_multiscale_weights(&tape, &level_grads, &mut grads)?;
+                Ok(PairGradient {
+                    grads,
+                    loss,
+                    epe,
+                    live_relu: tape.live_relu_fractions(levels - 1),
+                })
+            })
+            .collect();
+        let mut grads = self.net.zeros_like();
+        let (mut loss, mut epe) = (0.0, 0.0);
+        let mut live_relu = Vec::new();
+        for (b, r) in per_pair.into_iter().enumerate() {
+            let PairGradient {
+                grads: g,
+                loss: l,
+                epe: e,
+                live_relu: live,
+            } = r?;
+            for (acc, add) in grads.levels.iter_mut().zip(&g.levels) {
+                for (ca, cb) in acc.iter_mut().zip(add) {
+                    for (x, y) in ca.weight.iter_mut().zip(&cb.weight) {
+                        *x += y;
+                    }
+                    for (x, y) in ca.bias.iter_mut().zip(&cb.bias) {
+                        *x += y;
                     }
                 }
             }
+            loss += l;
+            epe += e;
+            if b == 0 {
+                live_relu = live;
+            }
+        }
+        let lr = if self.cfg.warmup_steps > 0 {
+            self.cfg.lr * ((t + 1) as f64 / self.cfg.warmup_steps as f64).min(1.0)
+        } else {
+            self.cfg.lr
+        };
+        for c in &mut self.level_steps {
+            *c += 1;
+        }
+        for level in 0..levels {
+            self.apply(level, &grads, lr)?;
         }
         Ok(StepReport {
             epe: epe * scale,
@@ -304,6 +412,48 @@ impl Trainer {
             live_relu,
         })
     }
+}
+
+/// One pair's contribution to a [`Trainer::step_joint`] batch.
+struct PairGradient {
+    grads: SpyNet<f32>,
+    loss: f64,
+    epe: f64,
+    live_relu: Vec<f64>,
+}
+
+/// Mean per-pixel loss of a `(2, h, w)` flow against its truth: `(loss, mean EPE, scale·∂loss/∂flow)`.
+fn pixel_loss(
+    flow: &[f32],
+    truth: &[f32],
+    kind: Loss,
+    scale: f64,
+) -> Result<(f64, f64, Vec<f32>), FlowError> {
+    if truth.len() != flow.len() {
+        return Err(FlowError::Size(format!(
+            "level ground truth has {} values, expected {}",
+            truth.len(),
+            flow.len()
+        )));
+    }
+    let hw = truth.len() / 2;
+    let inv = 1.0 / hw.max(1) as f64;
+    let (mut loss, mut epe) = (0.0f64, 0.0f64);
+    let mut g = vec![0.0f32; 2 * hw];
+    for i in 0..hw {
+        let du = f64::from(flow[i] - truth[i]);
+        let dv = f64::from(flow[hw + i] - truth[hw + i]);
+        let e = (du * du + dv * dv + EPE_EPS).sqrt();
+        epe += e;
+        let (l, gu, gv) = match kind {
+            Loss::Epe => (e, du / e, dv / e),
+            Loss::Mse => (0.5 * (du * du + dv * dv), du, dv),
+        };
+        loss += l;
+        g[i] = (gu * inv * scale) as f32;
+        g[hw + i] = (gv * inv * scale) as f32;
+    }
+    Ok((loss * inv, epe * inv, g))
 }
 
 /// Mean EPE (full resolution, pixels) of `net` and of the zero-flow baseline over `count` pairs of

@@ -189,3 +189,39 @@ fn sgd_with_squared_error_reduces_the_loss_on_a_small_fixed_set() {
         "150 SGD steps left the training EPE at {end} px (zero-flow baseline {zero} px)"
     );
 }
+
+#[test]
+fn joint_steps_learn_every_level_and_are_bit_identical_for_one_and_two_threads() {
+    // Two levels at 16x16 trained together on 2 fixed pairs (batch 2): the pairs of a batch run in
+    // parallel, their gradients summed in batch order. Measured: finest-level EPE 1.86 px at the
+    // first step, 0.23 px over steps 71–80; both levels change.
+    let run = |threads: usize, steps: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            let mut trainer = Trainer::new(config(2, 16));
+            let start = trainer.net.clone();
+            let epes: Vec<f64> = (0..steps)
+                .map(|_| trainer.step_joint().expect("joint step").epe)
+                .collect();
+            (epes, start, trainer.net)
+        })
+    };
+    let (e1, _, n1) = run(1, 3);
+    let (e2, _, n2) = run(2, 3);
+    assert_eq!(e1, e2, "joint losses differ between 1 and 2 threads");
+    assert!(n1 == n2, "joint weights differ between 1 and 2 threads");
+    let (epes, start, end) = run(2, 80);
+    let last = epes[70..].iter().sum::<f64>() / 10.0;
+    eprintln!("joint EPE first {} last-10 {last}", epes[0]);
+    assert!(
+        last < 0.5 * epes[0],
+        "80 joint steps left the EPE at {last} px (first step {})",
+        epes[0]
+    );
+    for l in 0..2 {
+        assert_ne!(start.levels[l], end.levels[l], "level {l} did not change");
+    }
+}
