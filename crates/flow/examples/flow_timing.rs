@@ -14,6 +14,19 @@ fn main() {
     let n = 3 * size * size;
     let a: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 / 16.0).collect();
     let b: Vec<f32> = (0..n).map(|i| ((i * 37) % 19) as f32 / 18.0).collect();
+    // FNV-1a over the bits of the flow and both input gradients: a build that changes any bit of the
+    // results prints a different fingerprint.
+    let tape = net.forward(&a, &b, size, size).expect("forward");
+    let g = vec![1.0f32; tape.flow.len()];
+    let (g1, g2) = net.backward(&tape, &g, None).expect("backward");
+    let fingerprint = tape
+        .flow
+        .iter()
+        .chain(&g1)
+        .chain(&g2)
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, v| {
+            (h ^ u64::from(v.to_bits())).wrapping_mul(0x0000_0100_0000_01B3)
+        });
     let mut fwd = Vec::new();
     let mut both = Vec::new();
     for _ in 0..7 {
@@ -29,7 +42,7 @@ fn main() {
     fwd.sort_by(f64::total_cmp);
     both.sort_by(f64::total_cmp);
     println!(
-        "levels {levels} size {size}: fwd {:.1} ms, fwd+bwd {:.1} ms",
+        "levels {levels} size {size}: fwd {:.1} ms, fwd+bwd {:.1} ms, fingerprint {fingerprint:016x}",
         fwd[3], both[3]
     );
 }

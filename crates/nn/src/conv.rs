@@ -6,7 +6,7 @@
 //! together with the flow network's speed targets in docs/BENCHMARKS.md, section "flow"). Chunks of
 //! output rows (a fixed number of rows, independent of the thread count) keep the im2col buffer in
 //! cache and give parallelism even for a batch of one; each chunk writes its own part of one scratch
-//! buffer, so there is one allocation per call, not per chunk.
+//! buffer; im2col blocks and that scratch are recycled per thread (see `BUFFERS`).
 //!
 //! The input gradient is itself a convolution of the output gradient with the flipped, transposed
 //! kernel (padding `k − 1 − pad`), so it reuses the same fast path. Weight gradients are reduced over
@@ -154,17 +154,19 @@ fn conv_core<T: Real>(
     let max_n = s.rows_per_chunk(CHUNK_PIXELS).min(ho) * wo;
     // One chunk-major scratch buffer per call (no allocation per chunk): chunk j owns
     // `c_out × n_j` values, split off in order so that the chunks can be filled in parallel.
-    let mut scratch = vec![T::zero(); s.batch * out_img];
+    // Every element of the scratch is overwritten (bias fill or a β = 0 GEMM), so a recycled buffer
+    // is as good as a zeroed one.
+    let mut scratch = take_buffer::<T>(s.batch * out_img);
     let mut parts: Vec<&mut [T]> = Vec::with_capacity(chunks.len());
-    let mut rest = &mut scratch[..];
+    let mut rest = &mut scratch[..s.batch * out_img];
     for &(_, r0, r1) in &chunks {
         let (part, tail) = rest.split_at_mut(s.c_out * (r1 - r0) * wo);
         parts.push(part);
         rest = tail;
     }
     parts.into_par_iter().zip(chunks.par_iter()).for_each_init(
-        || vec![T::zero(); ckk * max_n],
-        |col, (out, &(b, r0, r1))| {
+        || ReusedBuffer(take_buffer::<T>(ckk * max_n)),
+        |ReusedBuffer(col), (out, &(b, r0, r1))| {
             let n = (r1 - r0) * wo;
             let col = &mut col[..ckk * n];
             im2col(s, &input[b * in_img..(b + 1) * in_img], r0, r1, col);
@@ -198,6 +200,46 @@ fn conv_core<T: Real>(
             output[dst..dst + n].copy_from_slice(&scratch[offset + co * n..offset + (co + 1) * n]);
         }
         offset += s.c_out * n;
+    }
+    give_back(scratch);
+}
+
+thread_local! {
+    /// Per-thread recycled scratch buffers (`Vec<T>` boxed as `Any`, any `T`): im2col blocks and
+    /// GEMM outputs whose every element is written before it is read. Zero-filling a fresh 1.6 MB
+    /// im2col block per rayon job and a fresh output scratch per call was ≈ 10 % of the flow
+    /// network's forward + input gradient (perf, 64² pair); a thread keeps at most a few buffers
+    /// (one per nesting level of rayon work it is running).
+    static BUFFERS: std::cell::RefCell<Vec<Box<dyn std::any::Any>>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A buffer of at least `len` elements from this thread's pool (contents unspecified: callers
+/// overwrite what they read), or a fresh zeroed one.
+fn take_buffer<T: Real>(len: usize) -> Vec<T> {
+    let found = BUFFERS.with(|pool| {
+        let mut pool = pool.borrow_mut();
+        let i = pool.iter().position(|b| b.is::<Vec<T>>())?;
+        pool.swap_remove(i).downcast::<Vec<T>>().ok()
+    });
+    let mut v = found.map_or_else(Vec::new, |b| *b);
+    if v.len() < len {
+        v.resize(len, T::zero());
+    }
+    v
+}
+
+/// Returns a buffer from [`take_buffer`] to this thread's pool.
+fn give_back<T: Real>(v: Vec<T>) {
+    BUFFERS.with(|pool| pool.borrow_mut().push(Box::new(v)));
+}
+
+/// An im2col block that goes back to the pool of the thread that drops it.
+struct ReusedBuffer<T: Real>(Vec<T>);
+
+impl<T: Real> Drop for ReusedBuffer<T> {
+    fn drop(&mut self) {
+        give_back(std::mem::take(&mut self.0));
     }
 }
 
@@ -293,11 +335,11 @@ pub fn conv2d_backward_weight<T: Real>(
     let partials: Vec<Vec<T>> = chunks
         .par_chunks(per_group.max(1))
         .map(|group| {
-            let mut col = vec![T::zero(); ckk * max_n];
+            let mut col = ReusedBuffer(take_buffer::<T>(ckk * max_n));
             let mut dw = vec![T::zero(); s.c_out * ckk];
             for &(b, r0, r1) in group {
                 let n = (r1 - r0) * wo;
-                let col = &mut col[..ckk * n];
+                let col = &mut col.0[..ckk * n];
                 im2col(&s, &input[b * in_img..(b + 1) * in_img], r0, r1, col);
                 let dy = &grad_output[b * out_img + r0 * wo..];
                 // dw (C_out × ckk) += dy_chunk (C_out × n, row stride H_out·W_out) · colᵀ.
