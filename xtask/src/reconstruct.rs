@@ -141,9 +141,9 @@ fn enable_flow(
     );
     if config.flow_network.is_none() {
         eprintln!(
-            "note: the shipped flow weights are weak (held-out EPE ratio 0.84, 0.60 on the \
+            "note: the shipped flow weights are weak (held-out EPE ratio 0.76, 0.63 on the \
              benchmark's moving pixels, no sharp/blurred distinction); with them the flow loss made \
-             the quick preset 6.2 dB worse in the human box (docs/BENCHMARKS.md, event \
+             the quick preset 6.6 dB worse in the human box (docs/BENCHMARKS.md, event \
              supervision). Pass --flow-network with better weights for a meaningful run."
         );
     }
