@@ -143,7 +143,7 @@ fn enable_flow(
         eprintln!(
             "note: the shipped flow weights are weak (held-out EPE ratio 0.76, 0.63 on the \
              benchmark's moving pixels, no sharp/blurred distinction); with them the flow loss made \
-             the quick preset 6.6 dB worse in the human box (docs/BENCHMARKS.md, event \
+             the quick preset 6.5 dB worse in the human box (docs/BENCHMARKS.md, event \
              supervision). Pass --flow-network with better weights for a meaningful run."
         );
     }

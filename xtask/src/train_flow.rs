@@ -102,7 +102,8 @@ pub struct Args {
     #[arg(long, default_value_t = 250)]
     pub report_every: usize,
     /// Validation pairs (seed `--eval-seed + 1`, disjoint from the held-out set) on which each
-    /// fine-tuned level must beat its pre-fine-tuning weights to be kept (0 = always keep).
+    /// fine-tuned level must beat its pre-fine-tuning weights to be kept, and each joint-phase report
+    /// the best weights so far (0 = always keep the latest).
     #[arg(long, default_value_t = 10)]
     pub validation_pairs: u64,
     /// Continue from existing weights instead of a fresh initialisation (skips the pre-training).
@@ -174,7 +175,19 @@ pub fn run(args: Args) -> Result<()> {
     let start = std::time::Instant::now();
     let log = |bar: &ProgressBar, line: String| bar.suspend(|| eprintln!("{line}"));
     let net = match &args.init {
-        Some(p) => flow::load_safetensors(p).with_context(|| format!("loading {}", p.display()))?,
+        Some(p) => {
+            let net =
+                flow::load_safetensors(p).with_context(|| format!("loading {}", p.display()))?;
+            if net.num_levels() != args.levels {
+                anyhow::bail!(
+                    "--init {} has {} pyramid levels but --levels is {}",
+                    p.display(),
+                    net.num_levels(),
+                    args.levels
+                );
+            }
+            net
+        }
         None if args.pretrain_steps > 0 => {
             let pre = PairConfig {
                 size: args.pretrain_size,
@@ -299,8 +312,9 @@ pub fn run(args: Args) -> Result<()> {
             bar.inc(1);
             let last = s + 1 == args.joint_steps;
             if (args.report_every > 0 && (s + 1) % args.report_every == 0) || last {
+                // Without validation pairs every report keeps the latest weights.
                 let v = validation(&joint.net)?;
-                let kept = v < best;
+                let kept = args.validation_pairs == 0 || v < best;
                 if kept {
                     best = v;
                     trainer.net = joint.net.clone();

@@ -317,8 +317,8 @@ impl Trainer {
     /// over levels of each level's mean per-pixel loss ([`Loss`], in that level's pixels, against the
     /// ground truth reduced by [`flow_at_level`]), and its gradient reaches every level through the
     /// pyramid's warps and upsampling ([`SpyNet::backward_multiscale_weights`]). Counting every level
-    /// in its own pixels weights a coarser level's errors ½ per level relative to full-resolution
-    /// pixels. The pairs of a batch run in parallel; their gradients are summed in batch order, so
+    /// in its own pixels weights a coarser level's errors, relative to full-resolution pixels, ½ per
+    /// level with [`Loss::Epe`] and ¼ per level with [`Loss::Mse`]. The pairs of a batch run in parallel; their gradients are summed in batch order, so
     /// the result does not depend on the number of threads. Returns the batch's mean EPE of the
     /// finest level (full-resolution pixels).
     pub fn step_joint(&mut self) -> Result<StepReport, FlowError> {

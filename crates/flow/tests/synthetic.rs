@@ -123,3 +123,51 @@ fn band_limited_area_sampled_pairs_show_sub_pixel_motion_at_16_pixels() {
         "Lucas-Kanade EPE ratio {new} (default) vs {old} (original)"
     );
 }
+
+#[test]
+fn a_static_background_stops_only_the_background() {
+    // The static-background draw comes after everything else, so frame 1 is the same pair for pair
+    // with and without it; with no foreground layers and no jitter a static pair has zero flow and
+    // two equal frames (to rounding), while the same pair with the knob at 0 moves.
+    let moving = PairConfig {
+        size: 32,
+        max_foreground_layers: 0,
+        brightness_jitter: 0.0,
+        ..PairConfig::default()
+    };
+    let still = PairConfig {
+        static_background: 1.0,
+        ..moving
+    };
+    for k in 0..3 {
+        let (a, b) = (generate_pair(5, k, &moving), generate_pair(5, k, &still));
+        assert_eq!(a.img1, b.img1, "pair {k}: frame 1 changed");
+        assert!(b.flow.iter().all(|&v| v == 0.0), "pair {k}: static flow");
+        // Equal up to the rounding of the identity motion's inverse (a few ulps), as above.
+        let max = b
+            .img1
+            .iter()
+            .zip(&b.img2)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        assert!(max < 1e-5, "pair {k}: static frames differ by up to {max}");
+        assert!(
+            average_epe(&vec![0.0; a.flow.len()], &a.flow) > 0.05,
+            "pair {k}: the moving background should move"
+        );
+    }
+    // With foreground layers, a static pair keeps the layers' motion.
+    let layered = PairConfig {
+        static_background: 1.0,
+        brightness_jitter: 0.0,
+        ..PairConfig::default()
+    };
+    let p = generate_pair(5, 0, &layered);
+    let moving_px = (0..p.flow.len() / 2)
+        .filter(|&i| p.flow[i] != 0.0 || p.flow[p.flow.len() / 2 + i] != 0.0)
+        .count();
+    assert!(
+        moving_px > 0 && moving_px < p.flow.len() / 2,
+        "{moving_px} moving pixels"
+    );
+}

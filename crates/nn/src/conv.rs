@@ -208,19 +208,39 @@ thread_local! {
     /// Per-thread recycled scratch buffers (`Vec<T>` boxed as `Any`, any `T`): im2col blocks and
     /// GEMM outputs whose every element is written before it is read. Zero-filling a fresh 1.6 MB
     /// im2col block per rayon job and a fresh output scratch per call was ≈ 10 % of the flow
-    /// network's forward + input gradient (perf, 64² pair); a thread keeps at most a few buffers
-    /// (one per nesting level of rayon work it is running).
+    /// network's forward + input gradient (perf, 64² pair). A thread holds one buffer per
+    /// convolution it is inside of — more than one when, waiting in a convolution, it runs another
+    /// convolution's rayon work — and keeps at most [`POOLED_BUFFERS`] of them, none above
+    /// [`POOLED_MAX_BYTES`].
     static BUFFERS: std::cell::RefCell<Vec<Box<dyn std::any::Any>>> =
         const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// A buffer of at least `len` elements from this thread's pool (contents unspecified: callers
-/// overwrite what they read), or a fresh zeroed one.
+/// Most buffers a thread keeps for reuse.
+const POOLED_BUFFERS: usize = 8;
+/// Largest buffer (bytes of capacity) a thread keeps for reuse; larger ones are freed.
+const POOLED_MAX_BYTES: usize = 64 << 20;
+
+/// A buffer of at least `len` elements from this thread's pool — the smallest that is large
+/// enough, else the largest grown to `len` — or a fresh zeroed one. Contents are unspecified:
+/// callers overwrite what they read.
 fn take_buffer<T: Real>(len: usize) -> Vec<T> {
     let found = BUFFERS.with(|pool| {
         let mut pool = pool.borrow_mut();
-        let i = pool.iter().position(|b| b.is::<Vec<T>>())?;
-        pool.swap_remove(i).downcast::<Vec<T>>().ok()
+        let capacity = |b: &Box<dyn std::any::Any>| b.downcast_ref::<Vec<T>>().map(Vec::len);
+        let fits = pool
+            .iter()
+            .enumerate()
+            .filter_map(|(i, b)| capacity(b).map(|c| (i, c)))
+            .filter(|&(_, c)| c >= len)
+            .min_by_key(|&(_, c)| c);
+        let pick = fits.or_else(|| {
+            pool.iter()
+                .enumerate()
+                .filter_map(|(i, b)| capacity(b).map(|c| (i, c)))
+                .max_by_key(|&(_, c)| c)
+        })?;
+        pool.swap_remove(pick.0).downcast::<Vec<T>>().ok()
     });
     let mut v = found.map_or_else(Vec::new, |b| *b);
     if v.len() < len {
@@ -231,7 +251,15 @@ fn take_buffer<T: Real>(len: usize) -> Vec<T> {
 
 /// Returns a buffer from [`take_buffer`] to this thread's pool.
 fn give_back<T: Real>(v: Vec<T>) {
-    BUFFERS.with(|pool| pool.borrow_mut().push(Box::new(v)));
+    if v.capacity() * std::mem::size_of::<T>() > POOLED_MAX_BYTES {
+        return;
+    }
+    BUFFERS.with(|pool| {
+        let mut pool = pool.borrow_mut();
+        if pool.len() < POOLED_BUFFERS {
+            pool.push(Box::new(v));
+        }
+    });
 }
 
 /// An im2col block that goes back to the pool of the thread that drops it.
