@@ -143,6 +143,15 @@ fn progress_bar(total: usize) -> Result<ProgressBar> {
     Ok(bar)
 }
 
+/// Appends `value` to the window `recent`, keeps its last `len` values and returns their mean.
+fn running_mean(recent: &mut Vec<f64>, value: f64, len: usize) -> f64 {
+    recent.push(value);
+    if recent.len() > len {
+        recent.remove(0);
+    }
+    recent.iter().sum::<f64>() / recent.len() as f64
+}
+
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let optimizer = match args.optimizer {
@@ -203,11 +212,7 @@ pub fn run(args: Args) -> Result<()> {
             let mut recent = Vec::new();
             for s in 0..args.pretrain_steps {
                 let r = t.step_report(0)?;
-                recent.push(r.epe);
-                if recent.len() > 50 {
-                    recent.remove(0);
-                }
-                let mean = recent.iter().sum::<f64>() / recent.len() as f64;
+                let mean = running_mean(&mut recent, r.epe, 50);
                 bar.set_message(format!("pre-training epe {mean:.3}"));
                 bar.inc(1);
                 if args.report_every > 0 && (s + 1) % args.report_every == 0 {
@@ -259,11 +264,7 @@ pub fn run(args: Args) -> Result<()> {
         let mut recent = Vec::new();
         for _ in 0..n {
             let epe = trainer.step(level)?;
-            recent.push(epe);
-            if recent.len() > 20 {
-                recent.remove(0);
-            }
-            let mean = recent.iter().sum::<f64>() / recent.len() as f64;
+            let mean = running_mean(&mut recent, epe, 20);
             bar.set_message(format!("level {level} epe {mean:.3}"));
             bar.inc(1);
         }
@@ -303,11 +304,7 @@ pub fn run(args: Args) -> Result<()> {
         let mut recent = Vec::new();
         for s in 0..args.joint_steps {
             let r = joint.step_joint()?;
-            recent.push(r.epe);
-            if recent.len() > 50 {
-                recent.remove(0);
-            }
-            let mean = recent.iter().sum::<f64>() / recent.len() as f64;
+            let mean = running_mean(&mut recent, r.epe, 50);
             bar.set_message(format!("joint epe {mean:.3}"));
             bar.inc(1);
             let last = s + 1 == args.joint_steps;

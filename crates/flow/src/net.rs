@@ -292,6 +292,17 @@ impl<T: Real> SpyNet<T> {
         self.levels.len()
     }
 
+    /// Adds `other`'s parameters to these, element by element (summing gradient containers).
+    /// Both must have the same structure (extra levels or convolutions of either are ignored).
+    pub fn accumulate(&mut self, other: &SpyNet<T>) {
+        for (acc, add) in self.levels.iter_mut().zip(&other.levels) {
+            for (ca, cb) in acc.iter_mut().zip(add) {
+                add_into(&mut ca.weight, &cb.weight);
+                add_into(&mut ca.bias, &cb.bias);
+            }
+        }
+    }
+
     /// The same network with all parameters zero (a gradient accumulator).
     pub fn zeros_like(&self) -> Self {
         Self::zeros(self.num_levels())

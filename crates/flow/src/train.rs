@@ -142,40 +142,11 @@ pub fn level_loss_on_tape<T: Real>(
     weight_grads: Option<&mut SpyNet<T>>,
     scale: f64,
 ) -> Result<(f64, f64), FlowError> {
-    if truth.len() != tape.flow.len() {
-        return Err(FlowError::Size(format!(
-            "level ground truth has {} values, expected {}",
-            truth.len(),
-            tape.flow.len()
-        )));
-    }
-    let hw = truth.len() / 2;
-    let inv = T::of(1.0 / hw.max(1) as f64);
-    let (eps, scale, half) = (T::of(EPE_EPS), T::of(scale), T::of(0.5));
-    let (mut loss, mut epe) = (T::zero(), T::zero());
-    let mut g = vec![T::zero(); 2 * hw];
-    for i in 0..hw {
-        let du = tape.flow[i] - truth[i];
-        let dv = tape.flow[hw + i] - truth[hw + i];
-        let e = (du * du + dv * dv + eps).sqrt();
-        epe = epe + e;
-        match kind {
-            Loss::Epe => {
-                loss = loss + e;
-                g[i] = du / e * inv * scale;
-                g[hw + i] = dv / e * inv * scale;
-            }
-            Loss::Mse => {
-                loss = loss + half * (du * du + dv * dv);
-                g[i] = du * inv * scale;
-                g[hw + i] = dv * inv * scale;
-            }
-        }
-    }
+    let (loss, epe, g) = pixel_loss(&tape.flow, truth, kind, scale)?;
     if let Some(grads) = weight_grads {
         net.backward_last_level_weights(tape, &g, grads)?;
     }
-    Ok(((loss * inv).as_f64(), (epe * inv).as_f64()))
+    Ok((loss, epe))
 }
 
 impl Trainer {
@@ -220,6 +191,27 @@ impl Trainer {
             level_steps,
             next_pair: 0,
         }
+    }
+
+    /// Loss and learning rate of a level's step `t` (counted from 0): [`Loss::Mse`] for the first
+    /// `mse_steps`, then [`Loss::Epe`]; the rate ramps linearly over `warmup_steps`.
+    fn schedule(&self, t: usize) -> (Loss, f64) {
+        let kind = if t < self.cfg.mse_steps {
+            Loss::Mse
+        } else {
+            Loss::Epe
+        };
+        let lr = if self.cfg.warmup_steps > 0 {
+            self.cfg.lr * ((t + 1) as f64 / self.cfg.warmup_steps as f64).min(1.0)
+        } else {
+            self.cfg.lr
+        };
+        (kind, lr)
+    }
+
+    /// Index in the data set of the run's `k`-th pair (cycling over `distinct_pairs` if set).
+    fn pair_index(&self, k: u64) -> u64 {
+        self.cfg.distinct_pairs.map_or(k, |d| k % d.max(1))
     }
 
     /// One optimiser update of level `level`'s parameters with the gradients in `grads`.
@@ -271,16 +263,9 @@ impl Trainer {
         let n = self.cfg.pairs.size;
         let scale = 1.0 / self.cfg.batch.max(1) as f64;
         let t = self.level_steps.get(level).copied().unwrap_or(0);
-        let kind = if t < self.cfg.mse_steps {
-            Loss::Mse
-        } else {
-            Loss::Epe
-        };
+        let (kind, lr) = self.schedule(t);
         for b in 0..self.cfg.batch {
-            let index = match self.cfg.distinct_pairs {
-                Some(d) => self.next_pair % d.max(1),
-                None => self.next_pair,
-            };
+            let index = self.pair_index(self.next_pair);
             let pair = generate_pair(self.cfg.seed, index, &self.cfg.pairs);
             self.next_pair += 1;
             let truth = flow_at_level(&pair.flow, n, n, self.cfg.levels, level);
@@ -295,11 +280,6 @@ impl Trainer {
             loss += l;
             epe += e;
         }
-        let lr = if self.cfg.warmup_steps > 0 {
-            self.cfg.lr * ((t + 1) as f64 / self.cfg.warmup_steps as f64).min(1.0)
-        } else {
-            self.cfg.lr
-        };
         if let Some(c) = self.level_steps.get_mut(level) {
             *c += 1;
         }
@@ -328,16 +308,9 @@ impl Trainer {
         let batch = self.cfg.batch.max(1);
         let scale = 1.0 / batch as f64;
         let t = self.level_steps.first().copied().unwrap_or(0);
-        let kind = if t < self.cfg.mse_steps {
-            Loss::Mse
-        } else {
-            Loss::Epe
-        };
+        let (kind, lr) = self.schedule(t);
         let indices: Vec<u64> = (0..batch as u64)
-            .map(|b| {
-                let k = self.next_pair + b;
-                self.cfg.distinct_pairs.map_or(k, |d| k % d.max(1))
-            })
+            .map(|b| self.pair_index(self.next_pair + b))
             .collect();
         self.next_pair += batch as u64;
         let net = &self.net;
@@ -379,27 +352,13 @@ impl Trainer {
                 epe: e,
                 live_relu: live,
             } = r?;
-            for (acc, add) in grads.levels.iter_mut().zip(&g.levels) {
-                for (ca, cb) in acc.iter_mut().zip(add) {
-                    for (x, y) in ca.weight.iter_mut().zip(&cb.weight) {
-                        *x += y;
-                    }
-                    for (x, y) in ca.bias.iter_mut().zip(&cb.bias) {
-                        *x += y;
-                    }
-                }
-            }
+            grads.accumulate(&g);
             loss += l;
             epe += e;
             if b == 0 {
                 live_relu = live;
             }
         }
-        let lr = if self.cfg.warmup_steps > 0 {
-            self.cfg.lr * ((t + 1) as f64 / self.cfg.warmup_steps as f64).min(1.0)
-        } else {
-            self.cfg.lr
-        };
         for c in &mut self.level_steps {
             *c += 1;
         }
@@ -422,13 +381,14 @@ struct PairGradient {
     live_relu: Vec<f64>,
 }
 
-/// Mean per-pixel loss of a `(2, h, w)` flow against its truth: `(loss, mean EPE, scale·∂loss/∂flow)`.
-fn pixel_loss(
-    flow: &[f32],
-    truth: &[f32],
+/// Mean per-pixel loss of a `(2, h, w)` flow against its truth, accumulated in f64:
+/// `(loss, mean EPE, scale·∂loss/∂flow)`, in the flow's pixels.
+fn pixel_loss<T: Real>(
+    flow: &[T],
+    truth: &[T],
     kind: Loss,
     scale: f64,
-) -> Result<(f64, f64, Vec<f32>), FlowError> {
+) -> Result<(f64, f64, Vec<T>), FlowError> {
     if truth.len() != flow.len() {
         return Err(FlowError::Size(format!(
             "level ground truth has {} values, expected {}",
@@ -439,10 +399,10 @@ fn pixel_loss(
     let hw = truth.len() / 2;
     let inv = 1.0 / hw.max(1) as f64;
     let (mut loss, mut epe) = (0.0f64, 0.0f64);
-    let mut g = vec![0.0f32; 2 * hw];
+    let mut g = vec![T::zero(); 2 * hw];
     for i in 0..hw {
-        let du = f64::from(flow[i] - truth[i]);
-        let dv = f64::from(flow[hw + i] - truth[hw + i]);
+        let du = (flow[i] - truth[i]).as_f64();
+        let dv = (flow[hw + i] - truth[hw + i]).as_f64();
         let e = (du * du + dv * dv + EPE_EPS).sqrt();
         epe += e;
         let (l, gu, gv) = match kind {
@@ -450,8 +410,8 @@ fn pixel_loss(
             Loss::Mse => (0.5 * (du * du + dv * dv), du, dv),
         };
         loss += l;
-        g[i] = (gu * inv * scale) as f32;
-        g[hw + i] = (gv * inv * scale) as f32;
+        g[i] = T::of(gu * inv * scale);
+        g[hw + i] = T::of(gv * inv * scale);
     }
     Ok((loss * inv, epe * inv, g))
 }

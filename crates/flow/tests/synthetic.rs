@@ -2,6 +2,14 @@
 
 use flow::synthetic::{average_epe, generate_pair, PairConfig};
 
+/// Largest absolute difference between two images.
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max)
+}
+
 #[test]
 fn pairs_are_deterministic_and_distinct() {
     let cfg = PairConfig::default();
@@ -60,12 +68,7 @@ fn without_motion_and_jitter_both_frames_are_equal() {
     };
     let p = generate_pair(3, 1, &cfg);
     // Equal up to the rounding of the identity motion's inverse (a few ulps).
-    let max = p
-        .img1
-        .iter()
-        .zip(&p.img2)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let max = max_abs_diff(&p.img1, &p.img2);
     assert!(max < 1e-5, "frames differ by up to {max}");
     assert!(p.flow.iter().all(|&v| v == 0.0));
 }
@@ -144,12 +147,7 @@ fn a_static_background_stops_only_the_background() {
         assert_eq!(a.img1, b.img1, "pair {k}: frame 1 changed");
         assert!(b.flow.iter().all(|&v| v == 0.0), "pair {k}: static flow");
         // Equal up to the rounding of the identity motion's inverse (a few ulps), as above.
-        let max = b
-            .img1
-            .iter()
-            .zip(&b.img2)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0f32, f32::max);
+        let max = max_abs_diff(&b.img1, &b.img2);
         assert!(max < 1e-5, "pair {k}: static frames differ by up to {max}");
         assert!(
             average_epe(&vec![0.0; a.flow.len()], &a.flow) > 0.05,

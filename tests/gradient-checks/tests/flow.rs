@@ -80,6 +80,46 @@ fn probe_numeric(
     (kept, num, dropped)
 }
 
+/// Weights (`bias = false`) or bias of convolution `i` of level `level`.
+fn conv_param(n: &SpyNet<f64>, level: usize, i: usize, bias: bool) -> Vec<f64> {
+    let c = &n.levels[level][i];
+    if bias {
+        c.bias.clone()
+    } else {
+        c.weight.clone()
+    }
+}
+
+/// `n` with the weights (or bias) of convolution `i` of level `level` replaced by `p`.
+fn with_conv_param(n: &SpyNet<f64>, level: usize, i: usize, bias: bool, p: &[f64]) -> SpyNet<f64> {
+    let mut m = n.clone();
+    let c = &mut m.levels[level][i];
+    if bias {
+        c.bias.copy_from_slice(p);
+    } else {
+        c.weight.copy_from_slice(p);
+    }
+    m
+}
+
+/// [`probe_numeric`] at `count` random coordinates of one convolution's weights or bias, `eval`
+/// giving `(L, region signature)` of a whole network.
+fn probe_conv(
+    net: &SpyNet<f64>,
+    (level, i, bias): (usize, usize, bool),
+    count: usize,
+    rng: &mut Rng,
+    eval: impl Fn(&SpyNet<f64>) -> (f64, u64),
+) -> (Vec<usize>, Vec<f64>, usize) {
+    let x = conv_param(net, level, i, bias);
+    let probe: Vec<usize> = (0..count)
+        .map(|_| (rng.next() * x.len() as f64) as usize % x.len())
+        .collect();
+    probe_numeric(&x, &probe, |p| {
+        eval(&with_conv_param(net, level, i, bias, p))
+    })
+}
+
 fn check_case(levels: usize, h: usize, w: usize, seed: u64, probes: Option<usize>) {
     let net = network(levels, seed);
     let mut rng = Rng(seed ^ 0xF10);
@@ -174,22 +214,9 @@ fn weight_gradients_of_selected_convolutions() {
         let probe: Vec<usize> = (0..24.min(len))
             .map(|_| (rng.next() * len as f64) as usize % len)
             .collect();
-        let get = |m: &SpyNet<f64>| {
-            let c = &m.levels[l][i];
-            if bias {
-                c.bias.clone()
-            } else {
-                c.weight.clone()
-            }
-        };
-        let params = get(&net);
+        let params = conv_param(&net, l, i, bias);
         let eval = |p: &[f64]| {
-            let mut m = net.clone();
-            if bias {
-                m.levels[l][i].bias = p.to_vec()
-            } else {
-                m.levels[l][i].weight = p.to_vec()
-            }
+            let m = with_conv_param(&net, l, i, bias, p);
             let t = m.forward(&img1, &img2, h, w).expect("forward");
             (
                 t.flow.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>(),
@@ -201,7 +228,7 @@ fn weight_gradients_of_selected_convolutions() {
             dropped * 10 <= probe.len(),
             "level {l} conv {i}: {dropped} probes on kinks"
         );
-        let all = get(&grads);
+        let all = conv_param(&grads, l, i, bias);
         let ana: Vec<f64> = kept.iter().map(|&k| all[k]).collect();
         checker.check(
             &format!("level{l}.conv{i} {}", if bias { "bias" } else { "weight" }),
@@ -263,30 +290,9 @@ fn check_trainer_loss(seed: u64) {
     let mut checker = GradientChecker::new();
     for i in 0..5 {
         for bias in [false, true] {
-            let param = |n: &SpyNet<f64>| {
-                let c = &n.levels[1][i];
-                if bias {
-                    c.bias.clone()
-                } else {
-                    c.weight.clone()
-                }
-            };
-            let x = param(&net);
-            let probe: Vec<usize> = (0..12)
-                .map(|_| (rng.next() * x.len() as f64) as usize % x.len())
-                .collect();
-            let (kept, numeric, dropped) = probe_numeric(&x, &probe, |p| {
-                let mut n = net.clone();
-                let c = &mut n.levels[1][i];
-                if bias {
-                    c.bias.copy_from_slice(p);
-                } else {
-                    c.weight.copy_from_slice(p);
-                }
-                eval(&n)
-            });
+            let (kept, numeric, dropped) = probe_conv(&net, (1, i, bias), 12, &mut rng, eval);
             assert!(dropped <= 3, "conv{i}: {dropped} of 12 probes on a kink");
-            let g = param(&grads);
+            let g = conv_param(&grads, 1, i, bias);
             let ana: Vec<f64> = kept.iter().map(|&k| g[k]).collect();
             let name = format!("trainer loss seed {seed} level1.conv{i} bias={bias}");
             checker.check(&name, &numeric, &ana, TOL);
@@ -357,33 +363,13 @@ fn check_multiscale(seed: u64) {
     for level in 0..levels {
         for i in 0..5 {
             for bias in [false, true] {
-                let param = |n: &SpyNet<f64>| {
-                    let c = &n.levels[level][i];
-                    if bias {
-                        c.bias.clone()
-                    } else {
-                        c.weight.clone()
-                    }
-                };
-                let x = param(&net);
-                let probe: Vec<usize> = (0..6)
-                    .map(|_| (rng.next() * x.len() as f64) as usize % x.len())
-                    .collect();
-                let (kept, numeric, dropped) = probe_numeric(&x, &probe, |p| {
-                    let mut n = net.clone();
-                    let c = &mut n.levels[level][i];
-                    if bias {
-                        c.bias.copy_from_slice(p);
-                    } else {
-                        c.weight.copy_from_slice(p);
-                    }
-                    eval(&n)
-                });
+                let (kept, numeric, dropped) =
+                    probe_conv(&net, (level, i, bias), 6, &mut rng, eval);
                 assert!(
                     dropped <= 2,
                     "level{level}.conv{i}: {dropped} of 6 probes on a kink"
                 );
-                let g = param(&grads);
+                let g = conv_param(&grads, level, i, bias);
                 let ana: Vec<f64> = kept.iter().map(|&k| g[k]).collect();
                 let name = format!("multiscale seed {seed} level{level}.conv{i} bias={bias}");
                 checker.check(&name, &numeric, &ana, TOL);
