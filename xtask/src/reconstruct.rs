@@ -9,7 +9,7 @@
 
 use crate::eval_cmd::{write_evaluation, EvalSummary};
 use anyhow::{bail, Context, Result};
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::blend::SemanticMode;
@@ -260,24 +260,50 @@ fn resolve_config(args: &Args) -> Result<TrainConfig> {
 }
 
 /// Keeps the log lines of steps before `step` and returns their summed wall time.
+///
+/// An unterminated last line that does not parse is the torn write of an interrupted run
+/// and is dropped; a malformed line anywhere else is an error naming its line number.
 fn truncate_log(path: &Path, step: usize) -> Result<f64> {
-    let Ok(file) = std::fs::File::open(path) else {
-        return Ok(0.0);
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0.0),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
     };
+    let (kept, seconds) = kept_log_lines(&text, step)
+        .with_context(|| format!("{}: cannot resume its log", path.display()))?;
+    std::fs::write(path, kept).with_context(|| format!("rewriting {}", path.display()))?;
+    Ok(seconds)
+}
+
+/// The lines of a JSON-lines training log whose `step` is below `step`, and their summed
+/// `seconds`; see [`truncate_log`] for the handling of a torn last line.
+fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
     let mut kept = String::new();
     let mut seconds = 0.0;
-    for line in std::io::BufReader::new(file).lines() {
-        let line = line.with_context(|| format!("reading {}", path.display()))?;
-        let v: serde_json::Value =
-            serde_json::from_str(&line).with_context(|| format!("{}: bad line", path.display()))?;
+    for (index, piece) in text.split_inclusive('\n').enumerate() {
+        let terminated = piece.ends_with('\n');
+        let line = piece.trim_end_matches(['\n', '\r']);
+        if line.trim().is_empty() {
+            continue;
+        }
+        let v: serde_json::Value = match serde_json::from_str(line) {
+            Ok(v) => v,
+            Err(_) if !terminated => {
+                eprintln!(
+                    "note: dropping the unfinished last log line {} (interrupted run)",
+                    index + 1
+                );
+                continue;
+            }
+            Err(e) => return Err(e).with_context(|| format!("bad line {}", index + 1)),
+        };
         if v["step"].as_u64().is_some_and(|s| (s as usize) < step) {
             seconds += v["seconds"].as_f64().unwrap_or(0.0);
-            kept.push_str(&line);
+            kept.push_str(line);
             kept.push('\n');
         }
     }
-    std::fs::write(path, kept).with_context(|| format!("rewriting {}", path.display()))?;
-    Ok(seconds)
+    Ok((kept, seconds))
 }
 
 /// Runs `reconstruct`.
@@ -482,4 +508,32 @@ fn mean_times(recent: &[StepReport]) -> serde_json::Value {
         "total": sum(|r| r.times.pose + r.times.render + r.times.loss + r.times.render_backward
             + r.times.model_backward + r.times.adam + r.times.density + r.times.flow),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::kept_log_lines;
+
+    const LOG: &str = "{\"step\":0,\"seconds\":1.5}\n{\"step\":1,\"seconds\":2.0}\n{\"step\":2,\"seconds\":4.0}\n";
+
+    #[test]
+    fn keeps_the_steps_before_the_checkpoint_and_sums_their_time() {
+        let (kept, seconds) = kept_log_lines(LOG, 2).unwrap();
+        assert_eq!(
+            kept,
+            "{\"step\":0,\"seconds\":1.5}\n{\"step\":1,\"seconds\":2.0}\n"
+        );
+        assert_eq!(seconds, 3.5);
+    }
+
+    #[test]
+    fn a_torn_last_line_is_dropped_but_a_torn_middle_line_is_an_error() {
+        let torn = format!("{LOG}{{\"step\":3,\"sec");
+        let (kept, seconds) = kept_log_lines(&torn, 10).unwrap();
+        assert_eq!(kept, LOG);
+        assert_eq!(seconds, 7.5);
+        let broken = format!("{{\"step\":0,\"sec\n{LOG}");
+        let err = kept_log_lines(&broken, 10).unwrap_err();
+        assert!(format!("{err:#}").contains("bad line 1"), "{err:#}");
+    }
 }
