@@ -185,6 +185,16 @@ impl EventStream {
         self.p.extend_from_slice(other.p);
     }
 
+    /// Tries to reserve room for `additional` more events in every column; false if the allocator
+    /// refuses (columns reserved before the refusal keep their room). For size estimates, which
+    /// must not abort the process.
+    pub fn try_reserve(&mut self, additional: usize) -> bool {
+        self.t.try_reserve_exact(additional).is_ok()
+            && self.x.try_reserve_exact(additional).is_ok()
+            && self.y.try_reserve_exact(additional).is_ok()
+            && self.p.try_reserve_exact(additional).is_ok()
+    }
+
     /// Keeps the first `len` events (no effect when there are fewer).
     pub fn truncate(&mut self, len: usize) {
         self.t.truncate(len);

@@ -96,6 +96,30 @@ fn aedat4_reads_many_batches_in_order_and_raises_a_late_error_after_the_packets_
     }
 }
 
+/// `bytes_read` counts the packets handed out, not the ones read ahead (a progress bar, and
+/// `read_all`'s size estimate, would otherwise run ahead of the events).
+#[test]
+fn aedat4_bytes_read_follows_the_decoded_packets_not_the_read_ahead() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = sample(40 * 8192);
+    let p = dir.path().join("progress.aedat4");
+    write_aedat4(&p, &s, Compression::Zstd).expect("write");
+    let mut r = Aedat4Reader::open(&p).expect("open");
+    let total = r.total_bytes().expect("total");
+    let mut got = EventStream::new();
+    assert_eq!(r.read_chunk(&mut got, 2 * 8192).expect("chunk"), 2 * 8192);
+    let early = r.bytes_read();
+    // Two of forty packets handed out (the read-ahead has read most of the file by now).
+    assert!(
+        early > 0 && early < total / 10,
+        "{early} of {total} bytes after 2 of 40 packets"
+    );
+    while r.read_chunk(&mut got, 8192).expect("chunk") > 0 {}
+    let end = r.bytes_read();
+    assert!(end > 9 * total / 10 && end <= total, "{end} of {total}");
+    assert!(got.t == s.t && got.x == s.x && got.y == s.y && got.p == s.p);
+}
+
 #[test]
 fn aedat4_bad_input_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -27,6 +27,9 @@ const MAX_PACKET: u64 = 512 << 20;
 const READ_AHEAD: usize = 16;
 /// Compressed bytes read ahead at most (besides the one packet that crosses it).
 const READ_AHEAD_BYTES: usize = 16 << 20;
+/// Batches decompressing on the rayon pool at once: two, so that the pool always has a queued
+/// batch while the reading thread reads the next one from the file and decodes the current one.
+const BATCHES_IN_FLIGHT: usize = 2;
 
 /// Largest decompressed/compressed size ratio for which a zstd frame's stated content size is used
 /// to size the output buffer up front (event packets compress 3–10×); larger claims are decoded by
@@ -234,10 +237,15 @@ pub struct Aedat4Reader<R: Read> {
     zstd: Option<zstd::zstd_safe::DCtx<'static>>,
     /// Packets of our stream read ahead and decompressed in parallel, in file order.
     ahead: std::collections::VecDeque<Ahead>,
+    /// File bytes (header included) of each packet in `ahead` and in flight, in file order, and
+    /// their sum: read from the file but not yet handed out, so not counted by `bytes_read`.
+    unconsumed: std::collections::VecDeque<u64>,
+    unconsumed_bytes: u64,
     /// An error met while reading ahead, raised once the packets before it are consumed.
     deferred: Option<EventsError>,
-    /// The next batch of packets, decompressing on the rayon pool while this one is decoded.
-    in_flight: Option<std::sync::mpsc::Receiver<Vec<Ahead>>>,
+    /// The next batches of packets, in file order, decompressing on the rayon pool while this
+    /// one is decoded (at most [`BATCHES_IN_FLIGHT`]).
+    in_flight: std::collections::VecDeque<std::sync::mpsc::Receiver<Vec<Ahead>>>,
     cursor: usize,
     count: usize,
     done: bool,
@@ -303,7 +311,9 @@ impl<R: Read> Aedat4Reader<R> {
             zstd: None,
             ahead: std::collections::VecDeque::new(),
             deferred: None,
-            in_flight: None,
+            in_flight: std::collections::VecDeque::new(),
+            unconsumed: std::collections::VecDeque::new(),
+            unconsumed_bytes: 0,
             cursor: 0,
             count: 0,
             done: false,
@@ -368,6 +378,9 @@ impl<R: Read> Aedat4Reader<R> {
             match self.next_raw() {
                 Ok(true) => {
                     compressed += self.raw.len();
+                    let bytes = 8 + self.raw.len() as u64;
+                    self.unconsumed.push_back(bytes);
+                    self.unconsumed_bytes += bytes;
                     raws.push(std::mem::take(&mut self.raw));
                 }
                 Ok(false) => break,
@@ -381,31 +394,33 @@ impl<R: Read> Aedat4Reader<R> {
     }
 
     /// Reads the next batch and starts decompressing it on the rayon pool, so that it runs while
-    /// the caller decodes the batch before it. Inside the pool (where blocking on the result could
-    /// starve it) or without compression, the batch is decompressed here instead.
-    fn start_next_batch(&mut self) {
+    /// the caller decodes the batch before it; false if there was nothing (more) to read. Inside
+    /// the pool (where blocking on the result could starve it) or without compression, the batch
+    /// is decompressed here instead.
+    fn start_next_batch(&mut self) -> bool {
         let raws = self.read_batch();
         if raws.is_empty() {
-            return;
+            return false;
         }
         let compression = self.compression;
         if compression == Compression::None || rayon::current_thread_index().is_some() {
             self.ahead.extend(decompress_batch(compression, raws));
-            return;
+            return false;
         }
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         rayon::spawn(move || {
             // The reader may have been dropped meanwhile; then nobody wants the packets.
             let _ = tx.send(decompress_batch(compression, raws));
         });
-        self.in_flight = Some(rx);
+        self.in_flight.push_back(rx);
+        true
     }
 
     /// Refills `ahead` with the next batch of decompressed packets, in file order: the batch that
     /// was decompressing in the background if any, else one read and decompressed now; then starts
-    /// the batch after it. False if no packet was left (a pending read error is returned instead).
+    /// the batches after it, up to [`BATCHES_IN_FLIGHT`]. False if no packet was left (a pending read error is returned instead).
     fn fill_ahead(&mut self) -> Result<bool> {
-        if let Some(rx) = self.in_flight.take() {
+        if let Some(rx) = self.in_flight.pop_front() {
             let batch = rx.recv().map_err(|_| {
                 EventsError::format(&self.path, "the packet decompression task stopped")
             })?;
@@ -420,9 +435,10 @@ impl<R: Read> Aedat4Reader<R> {
             }
             self.ahead.extend(decompress_batch(self.compression, raws));
         }
-        if self.deferred.is_none() {
-            self.start_next_batch();
-        }
+        while self.deferred.is_none()
+            && self.in_flight.len() < BATCHES_IN_FLIGHT
+            && self.start_next_batch()
+        {}
         Ok(true)
     }
 
@@ -431,7 +447,7 @@ impl<R: Read> Aedat4Reader<R> {
         loop {
             if self.ahead.is_empty() {
                 // A read error comes after every packet read before it (some may be in flight).
-                if self.in_flight.is_none() {
+                if self.in_flight.is_empty() {
                     if let Some(e) = self.deferred.take() {
                         return Err(e);
                     }
@@ -443,6 +459,9 @@ impl<R: Read> Aedat4Reader<R> {
             let Some(next) = self.ahead.pop_front() else {
                 return Ok(false);
             };
+            if let Some(bytes) = self.unconsumed.pop_front() {
+                self.unconsumed_bytes -= bytes;
+            }
             match next {
                 Ahead::Decoded(p) => self.packet = p,
                 Ahead::Failed(e) => {
@@ -607,28 +626,30 @@ impl<R: Read> EventReader for Aedat4Reader<R> {
                 break;
             }
             let take = self.count.min(max - n);
-            // `take` events are present in the decoded packet (checked against its length). The
-            // outputs are grown once and filled in one pass over exact 16-byte records.
+            // `take` events are present in the decoded packet (checked against its length). Each
+            // column is appended in one pass over the exact 16-byte records (no zero-fill first).
             let records = &self.packet[self.cursor..self.cursor + 16 * take];
             let base = out.t.len();
-            out.t.resize(base + take, 0);
-            out.x.resize(base + take, 0);
-            out.y.resize(base + take, 0);
-            out.p.resize(base + take, 0);
-            let mut negative = false;
-            let fields = out.t[base..]
-                .iter_mut()
-                .zip(&mut out.x[base..])
-                .zip(out.y[base..].iter_mut().zip(&mut out.p[base..]));
-            for (b, ((t, x), (y, p))) in records.chunks_exact(16).zip(fields) {
-                *t = i64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);
-                let xs = i16::from_le_bytes([b[8], b[9]]);
-                let ys = i16::from_le_bytes([b[10], b[11]]);
-                negative |= (xs | ys) < 0;
-                *x = xs as u16;
-                *y = ys as u16;
-                *p = if b[12] != 0 { 1 } else { -1 };
-            }
+            let field = |b: &[u8], at: usize| i16::from_le_bytes([b[at], b[at + 1]]);
+            out.t.extend(
+                records
+                    .chunks_exact(16)
+                    .map(|b| i64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])),
+            );
+            out.x
+                .extend(records.chunks_exact(16).map(|b| field(b, 8) as u16));
+            out.y
+                .extend(records.chunks_exact(16).map(|b| field(b, 10) as u16));
+            out.p.extend(
+                records
+                    .chunks_exact(16)
+                    .map(|b| if b[12] != 0 { 1 } else { -1 }),
+            );
+            let negative = out.x[base..]
+                .iter()
+                .zip(&out.y[base..])
+                .fold(0u16, |bits, (&x, &y)| bits | x | y)
+                > i16::MAX as u16;
             if negative {
                 let k = (base..base + take)
                     .find(|&i| out.x[i] > i16::MAX as u16 || out.y[i] > i16::MAX as u16)
@@ -648,7 +669,8 @@ impl<R: Read> EventReader for Aedat4Reader<R> {
     }
 
     fn bytes_read(&self) -> u64 {
-        self.position
+        // Packets read ahead count once they are handed out (their events decoded).
+        self.position - self.unconsumed_bytes
     }
 
     fn total_bytes(&self) -> Option<u64> {

@@ -90,8 +90,23 @@ pub fn read_events(path: impl AsRef<Path>) -> Result<EventStream> {
 }
 
 /// Drains a reader into one stream.
+///
+/// After the first chunk the columns are reserved for the whole source, extrapolated from the
+/// events per byte read so far and the source's size (never from a header claim; a refused or
+/// wrong estimate only means the columns grow as they go), which saves the copies and page faults
+/// of repeated doubling on large files.
 pub fn read_all(r: &mut dyn EventReader) -> Result<EventStream> {
     let mut s = EventStream::new();
+    if r.read_chunk(&mut s, DEFAULT_CHUNK)? == 0 {
+        s.sensor = r.sensor();
+        return Ok(s);
+    }
+    if let (Some(total), read) = (r.total_bytes(), r.bytes_read()) {
+        if read > 0 && total > read {
+            let estimate = (s.len() as f64 * total as f64 / read as f64 * 1.02) as usize;
+            let _ = s.try_reserve(estimate.saturating_sub(s.len()));
+        }
+    }
     while r.read_chunk(&mut s, DEFAULT_CHUNK)? > 0 {}
     s.sensor = r.sensor();
     Ok(s)
