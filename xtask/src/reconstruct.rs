@@ -70,7 +70,7 @@ pub struct Args {
     /// consecutive frames vs C × the events in between; the paper's Table 6 alternative): on or off.
     #[arg(long, value_parser = parse_on_off)]
     pub event_loss: Option<bool>,
-    /// Weight of the event-generation loss.
+    /// Weight of the event-generation loss (default: the preset's, 3).
     #[arg(long)]
     pub event_weight: Option<f32>,
     /// Contrast threshold C of the event camera (log-intensity units).

@@ -147,7 +147,9 @@ pub struct TrainConfig {
     /// loss, see `train::event_loss`), on the same pairs of consecutive training frames, from each
     /// frame's `events` file.
     pub event_loss: bool,
-    /// Weight of the event-generation loss. Provisional: not yet chosen by a sweep.
+    /// Weight of the event-generation loss: 3, from a sweep over 0.3 / 1 / 3 on the default
+    /// benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 dB, still rising at 3;
+    /// `docs/BENCHMARKS.md`, event supervision).
     pub event_weight: f32,
     /// Contrast threshold C of the camera (log-intensity units; the benchmark's simulator: 0.2).
     pub event_threshold: f32,
@@ -252,7 +254,7 @@ impl TrainConfig {
             flow_scale: 0.25,
             flow_network: None,
             event_loss: false,
-            event_weight: 1.0,
+            event_weight: 3.0,
             event_threshold: 0.2,
             event_log_eps: 1e-3,
         };
