@@ -147,8 +147,8 @@ pub struct TrainConfig {
     /// loss, see `train::event_loss`), on the same pairs of consecutive training frames, from each
     /// frame's `events` file.
     pub event_loss: bool,
-    /// Weight of the event-generation loss: 3, from a sweep over 0.3 / 1 / 3 on the default
-    /// benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 dB, still rising at 3;
+    /// Weight of the event-generation loss: 3, the best of a sweep over 0.3 / 1 / 3 / 10 on the
+    /// default benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 / 25.27 dB;
     /// `docs/BENCHMARKS.md`, event supervision).
     pub event_weight: f32,
     /// Contrast threshold C of the camera (log-intensity units; the benchmark's simulator: 0.2).
