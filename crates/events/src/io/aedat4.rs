@@ -418,7 +418,8 @@ impl<R: Read> Aedat4Reader<R> {
 
     /// Refills `ahead` with the next batch of decompressed packets, in file order: the batch that
     /// was decompressing in the background if any, else one read and decompressed now; then starts
-    /// the batches after it, up to [`BATCHES_IN_FLIGHT`]. False if no packet was left (a pending read error is returned instead).
+    /// the batches after it, up to [`BATCHES_IN_FLIGHT`]. False if no packet was left (a pending
+    /// read error is returned instead).
     fn fill_ahead(&mut self) -> Result<bool> {
         if let Some(rx) = self.in_flight.pop_front() {
             let batch = rx.recv().map_err(|_| {
