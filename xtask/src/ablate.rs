@@ -4,9 +4,10 @@
 //! (a Markdown table), `OUT/ablation.json` and `OUT/ablation_grid.png` (the strip of the first test
 //! frame of every run, one row per run, numbered as in the table). A run that fails (e.g. no flow
 //! network weights, or a scene without event-only flow) is recorded with its error and the others go
-//! on. With `--blur-levels` it runs the paper's Figure 5 study instead: one-hot without events and
-//! with the flow loss (ground-truth and event-only flow) on the `slow`, `medium` and `fast` variants
-//! of the default benchmark (each generated once under `target/benchmark/default-<speed>`).
+//! on. With `--blur-levels` it runs the paper's Figure 5 study instead: one-hot without events, with
+//! the event-generation loss and with the flow loss (ground-truth and event-only flow) on the `slow`,
+//! `medium` and `fast` variants of the default benchmark (each generated once under
+//! `target/benchmark/default-<speed>`); `--only` picks among those four.
 
 use anyhow::{Context, Result};
 use image::{Rgb, RgbImage};
@@ -43,8 +44,9 @@ pub struct Args {
     /// one-hot, event-loss, flow-gt, flow-events).
     #[arg(long, value_delimiter = ',')]
     pub only: Option<Vec<String>>,
-    /// Run the blur-level study (paper Figure 5) instead of the ablation set: one-hot, flow-gt and
-    /// flow-events on the slow, medium and fast variants of the default benchmark (ignores --data).
+    /// Run the blur-level study (paper Figure 5) instead of the ablation set: one-hot, event-loss,
+    /// flow-gt and flow-events on the slow, medium and fast variants of the default benchmark
+    /// (ignores --data).
     #[arg(long)]
     pub blur_levels: bool,
 }
@@ -155,7 +157,7 @@ pub fn run(args: Args) -> Result<()> {
                 ..::synth::SynthConfig::preset(::synth::Preset::Default)
             };
             let data = crate::reconstruct::benchmark(&cfg, &format!("default-{label}"))?;
-            for r in selected(&["one-hot", "flow-gt", "flow-events"]) {
+            for r in selected(&["one-hot", "event-loss", "flow-gt", "flow-events"]) {
                 jobs.push((format!("{label}/{}", r.name), data.clone(), r));
             }
         }
