@@ -221,18 +221,21 @@ impl<R: BufRead> PropheseeReader<R> {
         out.x.reserve(words);
         out.y.reserve(words);
         out.p.reserve(words);
+        // Events are gathered in a fixed local block and appended to the columns a block at a time.
+        let mut block = Block::new();
         match self.format {
             PropheseeFormat::Evt2 => {
                 for c in self.buf.chunks_exact(4) {
+                    block.make_room(out);
                     let w = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
                     match w >> 28 {
-                        0x0 | 0x1 => {
-                            out.t
-                                .push((self.time_high2 << 6) | ((w >> 22) & 0x3F) as i64);
-                            out.x.push(((w >> 11) & 0x7FF) as u16);
-                            out.y.push((w & 0x7FF) as u16);
-                            out.p.push(if w >> 28 == 1 { 1 } else { -1 });
-                        }
+                        0x0 | 0x1 => block.put(
+                            (self.time_high2 << 6) | ((w >> 22) & 0x3F) as i64,
+                            ((w >> 11) & 0x7FF) as u16,
+                            (w & 0x7FF) as u16,
+                            if w >> 28 == 1 { 1 } else { -1 },
+                            true,
+                        ),
                         0x8 => self.time_high2 = (w & 0x0FFF_FFFF) as i64,
                         _ => {}
                     }
@@ -246,16 +249,18 @@ impl<R: BufRead> PropheseeReader<R> {
                 let (mut seen, mut wraps) = (self.time_high_seen, self.wraps);
                 let mut t = (wraps << 24) | (time_high << 12) | time_low;
                 for c in self.buf.chunks_exact(2) {
+                    block.make_room(out);
                     let w = u16::from_le_bytes([c[0], c[1]]);
                     let payload = w & 0x0FFF;
                     match w >> 12 {
                         0x0 => y = payload & 0x7FF,
-                        0x2 => {
-                            out.t.push(t);
-                            out.x.push(payload & 0x7FF);
-                            out.y.push(y);
-                            out.p.push(if payload & 0x800 != 0 { 1 } else { -1 });
-                        }
+                        0x2 => block.put(
+                            t,
+                            payload & 0x7FF,
+                            y,
+                            if payload & 0x800 != 0 { 1 } else { -1 },
+                            true,
+                        ),
                         0x3 => {
                             base_x = payload & 0x7FF;
                             pol = if payload & 0x800 != 0 { 1 } else { -1 };
@@ -263,12 +268,8 @@ impl<R: BufRead> PropheseeReader<R> {
                         0x4 | 0x5 => {
                             let n = if w >> 12 == 0x4 { 12 } else { 8 };
                             for i in 0..n {
-                                if payload & (1 << i) != 0 {
-                                    out.t.push(t);
-                                    out.x.push(base_x.wrapping_add(i));
-                                    out.y.push(y);
-                                    out.p.push(pol);
-                                }
+                                let valid = payload & (1 << i) != 0;
+                                block.put(t, base_x.wrapping_add(i), y, pol, valid);
                             }
                             base_x = base_x.wrapping_add(n);
                         }
@@ -294,16 +295,77 @@ impl<R: BufRead> PropheseeReader<R> {
             }
             PropheseeFormat::Dat => {
                 for c in self.buf.chunks_exact(8) {
+                    block.make_room(out);
                     let t = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
                     let d = u32::from_le_bytes([c[4], c[5], c[6], c[7]]);
-                    out.t.push(t as i64);
-                    out.x.push((d & 0x3FFF) as u16);
-                    out.y.push(((d >> 14) & 0x3FFF) as u16);
-                    out.p.push(if (d >> 28) & 0xF != 0 { 1 } else { -1 });
+                    block.put(
+                        t as i64,
+                        (d & 0x3FFF) as u16,
+                        ((d >> 14) & 0x3FFF) as u16,
+                        if (d >> 28) & 0xF != 0 { 1 } else { -1 },
+                        true,
+                    );
                 }
             }
         }
+        block.flush(out);
         out.len() - before
+    }
+}
+
+/// Events per [`Block`].
+const BLOCK: usize = 1024;
+/// Most events one word can add (an EVT 3.0 VECT_12 word).
+const MAX_EVENTS_PER_WORD: usize = 12;
+
+/// A fixed block of decoded events on the stack, appended to the output columns when full: the
+/// decoders' inner loops then store into plain arrays instead of growing four `Vec`s per event.
+struct Block {
+    t: [i64; BLOCK],
+    x: [u16; BLOCK],
+    y: [u16; BLOCK],
+    p: [i8; BLOCK],
+    len: usize,
+}
+
+impl Block {
+    fn new() -> Self {
+        Self {
+            t: [0; BLOCK],
+            x: [0; BLOCK],
+            y: [0; BLOCK],
+            p: [0; BLOCK],
+            len: 0,
+        }
+    }
+
+    /// Flushes the block if the next word could overflow it.
+    #[inline(always)]
+    fn make_room(&mut self, out: &mut EventStream) {
+        if self.len > BLOCK - MAX_EVENTS_PER_WORD {
+            self.flush(out);
+        }
+    }
+
+    /// Writes an event at the end of the block and keeps it iff `valid` (branch-free, so that
+    /// vector words with random masks cost no mispredictions). Needs room (see [`Self::make_room`]).
+    #[inline(always)]
+    fn put(&mut self, t: i64, x: u16, y: u16, p: i8, valid: bool) {
+        let k = self.len.min(BLOCK - 1);
+        self.t[k] = t;
+        self.x[k] = x;
+        self.y[k] = y;
+        self.p[k] = p;
+        self.len = k + usize::from(valid);
+    }
+
+    /// Appends the block's events to `out` and empties it.
+    fn flush(&mut self, out: &mut EventStream) {
+        out.t.extend_from_slice(&self.t[..self.len]);
+        out.x.extend_from_slice(&self.x[..self.len]);
+        out.y.extend_from_slice(&self.y[..self.len]);
+        out.p.extend_from_slice(&self.p[..self.len]);
+        self.len = 0;
     }
 }
 
