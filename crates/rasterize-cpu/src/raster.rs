@@ -1061,7 +1061,8 @@ struct BackwardScratch<T> {
     g_img: Vec<T>,
     g_alpha: Vec<T>,
     g_depth: Vec<T>,
-    /// Per-lane gradient accumulators of the current pair, (7 + C) × 16.
+    /// Per-lane gradient accumulators of the current pair, (7 + C) × [`QUAD`] (lane l of a group
+    /// sums the pair's pixels in column ≡ l mod [`QUAD`]).
     acc: Vec<T>,
 }
 
@@ -1074,7 +1075,7 @@ impl<T: Real> BackwardScratch<T> {
             g_img: vec![T::zero(); c * TILE_PIXELS],
             g_alpha: vec![T::zero(); TILE_PIXELS],
             g_depth: vec![T::zero(); TILE_PIXELS],
-            acc: vec![T::zero(); (7 + c) * TILE_SIZE],
+            acc: vec![T::zero(); (7 + c) * QUAD],
         }
     }
 }
@@ -1197,14 +1198,14 @@ fn backward_tile<T: Real>(
                 let pre = &mut s.pre[base..base + TILE_SIZE];
                 let cf = &c_final[base..base + TILE_SIZE];
                 let gi = &s.g_img[base..base + TILE_SIZE];
-                let acc = &mut s.acc[(7 + j) * TILE_SIZE..(8 + j) * TILE_SIZE];
+                let acc = &mut s.acc[(7 + j) * QUAD..(8 + j) * QUAD];
                 for q in sl.q0..sl.q1.min(QUADS) {
                     for l in 0..QUAD {
                         let x = q * QUAD + l;
                         pre[x] = pre[x] + w[x] * v;
                         let behind = cf[x] - pre[x] + tn[x] * b;
                         d_alpha[x] = d_alpha[x] + gi[x] * (t_old[x] * v - behind * inv[x]);
-                        acc[x] = acc[x] + w[x] * gi[x];
+                        acc[l] = acc[l] + w[x] * gi[x];
                     }
                 }
             }
@@ -1214,23 +1215,23 @@ fn backward_tile<T: Real>(
                 let pre = &mut s.pre[base..base + TILE_SIZE];
                 let df = &d_final[r.clone()];
                 let gd = &s.g_depth[r.clone()];
-                let acc = &mut s.acc[6 * TILE_SIZE..7 * TILE_SIZE];
+                let acc = &mut s.acc[6 * QUAD..7 * QUAD];
                 for q in sl.q0..sl.q1.min(QUADS) {
                     for l in 0..QUAD {
                         let x = q * QUAD + l;
                         pre[x] = pre[x] + w[x] * z;
                         let behind = df[x] - pre[x];
                         d_alpha[x] = d_alpha[x] + gd[x] * (t_old[x] * z - behind * inv[x]);
-                        acc[x] = acc[x] + w[x] * gd[x];
+                        acc[l] = acc[l] + w[x] * gd[x];
                     }
                 }
             }
-            let (acc_geo, _) = s.acc.split_at_mut(6 * TILE_SIZE);
-            let (a_mx, rest) = acc_geo.split_at_mut(TILE_SIZE);
-            let (a_my, rest) = rest.split_at_mut(TILE_SIZE);
-            let (a_ca, rest) = rest.split_at_mut(TILE_SIZE);
-            let (a_cb, rest) = rest.split_at_mut(TILE_SIZE);
-            let (a_cc, a_op) = rest.split_at_mut(TILE_SIZE);
+            let (acc_geo, _) = s.acc.split_at_mut(6 * QUAD);
+            let (a_mx, rest) = acc_geo.split_at_mut(QUAD);
+            let (a_my, rest) = rest.split_at_mut(QUAD);
+            let (a_ca, rest) = rest.split_at_mut(QUAD);
+            let (a_cb, rest) = rest.split_at_mut(QUAD);
+            let (a_cc, a_op) = rest.split_at_mut(QUAD);
             for q in sl.q0..sl.q1.min(QUADS) {
                 for l in 0..QUAD {
                     let x = q * QUAD + l;
@@ -1243,18 +1244,18 @@ fn backward_tile<T: Real>(
                         T::zero()
                     };
                     let d_power = slope[x] * da;
-                    a_mx[x] = a_mx[x] - d_power * (ca * dx + cb * dy);
-                    a_my[x] = a_my[x] - d_power * (cc * dy + cb * dx);
-                    a_ca[x] = a_ca[x] - half * d_power * dx * dx;
-                    a_cb[x] = a_cb[x] - d_power * dx * dy;
-                    a_cc[x] = a_cc[x] - half * d_power * dy * dy;
+                    a_mx[l] = a_mx[l] - d_power * (ca * dx + cb * dy);
+                    a_my[l] = a_my[l] - d_power * (cc * dy + cb * dx);
+                    a_ca[l] = a_ca[l] - half * d_power * dx * dx;
+                    a_cb[l] = a_cb[l] - d_power * dx * dy;
+                    a_cc[l] = a_cc[l] - half * d_power * dy * dy;
                     let unclamped = slope[x] != T::zero();
-                    a_op[x] = a_op[x] + if unclamped { gauss[x] * da } else { T::zero() };
+                    a_op[l] = a_op[l] + if unclamped { gauss[x] * da } else { T::zero() };
                 }
             }
         }
         let dst = &mut out[k * slot..(k + 1) * slot];
-        for (d, lanes) in dst.iter_mut().zip(s.acc.chunks_exact(TILE_SIZE)) {
+        for (d, lanes) in dst.iter_mut().zip(s.acc.chunks_exact(QUAD)) {
             let mut sum = T::zero();
             for &v in lanes {
                 sum = sum + v;
