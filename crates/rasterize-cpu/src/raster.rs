@@ -414,20 +414,33 @@ fn background<T: Real>(settings: &RenderSettings, c: usize) -> Result<Vec<T>, Ra
 }
 
 /// Range of pixel columns (or rows) `[lo, hi)` within a tile side of `len` pixels starting at
-/// `origin` whose centres lie within `half` of `mean`.
+/// `origin` whose centres lie within `half` of `mean`: lo = ⌈mean − half − ½ − origin⌉ and
+/// hi = ⌊mean + half − ½ − origin⌋ + 1, clamped to [0, len] (NaN gives len). Floor and ceiling are
+/// taken by truncation inside the clamp range, where the values are positive, so that the tile
+/// kernels call no libm rounding function (baseline x86-64 has no rounding instruction).
 #[inline]
 fn pixel_span<T: Real>(mean: T, half: T, origin: T, len: usize) -> (usize, usize) {
     let h: T = lit(0.5);
-    let lo = (mean - half - h - origin).ceil();
-    let hi = (mean + half - h - origin).floor() + T::one();
-    let clampi = |v: T| -> usize {
-        if v <= T::zero() {
-            0
-        } else {
-            v.to_usize().unwrap_or(len).min(len)
-        }
+    let len_t: T = lit(len as f64);
+    let lo = mean - half - h - origin;
+    let hi = mean + half - h - origin;
+    let trunc = |v: T| v.to_usize().unwrap_or(len);
+    let lo = if lo <= T::zero() {
+        0
+    } else if !(lo < len_t) {
+        len
+    } else {
+        let t = trunc(lo);
+        t + usize::from(lit::<T>(t as f64) < lo)
     };
-    (clampi(lo), clampi(hi))
+    let hi = if hi < T::zero() {
+        0
+    } else if !(hi < len_t) {
+        len
+    } else {
+        (trunc(hi) + 1).min(len)
+    };
+    (lo, hi)
 }
 
 /// Renders the Gaussians `splats` from `camera` (see the module docs for the rules and outputs).
@@ -1261,6 +1274,63 @@ fn backward_tile<T: Real>(
                 sum = sum + v;
             }
             *d = sum;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The span by the rounding-function definition it replaces.
+    fn span_by_rounding(mean: f32, half: f32, origin: f32, len: usize) -> (usize, usize) {
+        let lo = (mean - half - 0.5 - origin).ceil();
+        let hi = (mean + half - 0.5 - origin).floor() + 1.0;
+        let clamp = |v: f32| {
+            if v <= 0.0 {
+                0
+            } else if v.is_nan() {
+                len
+            } else {
+                (v as usize).min(len)
+            }
+        };
+        (clamp(lo), clamp(hi))
+    }
+
+    #[test]
+    fn pixel_span_equals_the_ceil_floor_definition() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut cases = vec![
+            (f32::NAN, 1.0, 0.0),
+            (8.0, f32::NAN, 0.0),
+            (1e30, 1.0, 0.0),
+            (-1e30, 1.0, 0.0),
+            (16.5, 0.0, 0.0),
+            (0.5, 0.0, 0.0),
+            (-0.5, 0.0, 0.0),
+            (16.0, 0.5, 16.0),
+        ];
+        for _ in 0..200_000 {
+            // Integers and half-integers often, to hit the rounding edges exactly.
+            let snap = |v: f32, k: f32| if k < 0.3 { (v * 2.0).round() / 2.0 } else { v };
+            let mean = snap(next() * 80.0 - 20.0, next());
+            let half = snap(next() * 20.0, next());
+            let origin = 16.0 * (next() * 4.0).floor();
+            cases.push((mean, half, origin));
+        }
+        for (mean, half, origin) in cases {
+            for len in [1, 7, 16] {
+                assert_eq!(
+                    super::pixel_span(mean, half, origin, len),
+                    span_by_rounding(mean, half, origin, len),
+                    "mean {mean}, half {half}, origin {origin}, len {len}"
+                );
+            }
         }
     }
 }
