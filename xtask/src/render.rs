@@ -18,7 +18,8 @@ pub struct Args {
     /// 3DGS PLY (INRIA layout).
     #[arg(long)]
     pub ply: PathBuf,
-    /// Camera: the project's camera JSON, or an INRIA `cameras.json` list (see `--cam-index`).
+    /// Camera: the project's camera JSON (or a scene format v1 `scene.json`, whose camera is used),
+    /// or an INRIA `cameras.json` list (see `--cam-index`).
     #[arg(long)]
     pub camera: PathBuf,
     /// Index into an INRIA `cameras.json` list.

@@ -35,6 +35,8 @@ pub struct Camera {
 }
 
 /// The project's camera JSON: `{"width","height","fx","fy","cx","cy","world_to_camera":[[4×4 row-major]]}`.
+/// When read, `world_to_camera` may also be its top 3×4 rows (as in scene format v1's `camera`);
+/// the bottom row is then `[0, 0, 0, 1]`.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 pub struct CameraJson {
     /// Image width (pixels).
@@ -49,8 +51,23 @@ pub struct CameraJson {
     pub cx: f64,
     /// Principal point y (pixels).
     pub cy: f64,
-    /// World-to-camera, row-major 4×4.
+    /// World-to-camera, row-major 4×4 (3×4 accepted on input).
+    #[serde(deserialize_with = "affine_rows")]
     pub world_to_camera: [[f64; 4]; 4],
+}
+
+/// Deserialises a row-major 4×4 matrix given as 4 rows, or as its top 3 rows of an affine map.
+fn affine_rows<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[[f64; 4]; 4], D::Error> {
+    use serde::de::Error;
+    let rows: Vec<[f64; 4]> = Vec::deserialize(d)?;
+    match rows[..] {
+        [a, b, c] => Ok([a, b, c, [0.0, 0.0, 0.0, 1.0]]),
+        [a, b, c, e] => Ok([a, b, c, e]),
+        _ => Err(D::Error::invalid_length(
+            rows.len(),
+            &"3 or 4 rows of 4 numbers (row-major world-to-camera)",
+        )),
+    }
 }
 
 /// One entry of the INRIA 3DGS `cameras.json` list. `rotation` is camera-to-world (3×3, rows),
@@ -193,12 +210,22 @@ impl Camera {
         )
     }
 
-    /// Parses the project's camera JSON from a string (`source` names it in errors).
+    /// Parses the project's camera JSON from a string (`source` names it in errors). A scene
+    /// format v1 `scene.json` (an object whose `camera` field holds the camera) is accepted too.
     pub fn from_json_str(text: &str, source: &Path) -> Result<Self, RasterError> {
-        let j: CameraJson = serde_json::from_str(text).map_err(|e| RasterError::Json {
+        let json_error = |e| RasterError::Json {
             path: source.to_path_buf(),
             source: e,
-        })?;
+        };
+        let mut value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
+        if let Some(obj) = value.as_object_mut() {
+            if !obj.contains_key("fx") {
+                if let Some(inner) = obj.remove("camera") {
+                    value = inner;
+                }
+            }
+        }
+        let j: CameraJson = serde_json::from_value(value).map_err(json_error)?;
         Self::from_json(&j)
     }
 
@@ -334,5 +361,24 @@ mod tests {
             assert!((c[i] - j.position[i]).abs() < 1e-12, "{c:?}");
         }
         assert_eq!(cam.cx, 32.0);
+    }
+
+    #[test]
+    fn camera_json_takes_3x4_or_4x4_and_a_scene_file() {
+        let cam4 = r#"{"width": 8, "height": 6, "fx": 10, "fy": 11, "cx": 4, "cy": 3,
+            "world_to_camera": [[1,0,0,0.5],[0,1,0,0],[0,0,1,2],[0,0,0,1]]}"#;
+        let cam3 = r#"{"width": 8, "height": 6, "fx": 10, "fy": 11, "cx": 4, "cy": 3,
+            "world_to_camera": [[1,0,0,0.5],[0,1,0,0],[0,0,1,2]]}"#;
+        let scene = format!(r#"{{"format_version": 1, "camera": {cam3}, "frames": []}}"#);
+        let p = Path::new("<test>");
+        let a = Camera::from_json_str(cam4, p).expect("4x4");
+        assert_eq!(Camera::from_json_str(cam3, p).expect("3x4"), a);
+        assert_eq!(Camera::from_json_str(&scene, p).expect("scene.json"), a);
+        let two_rows = r#"{"width": 8, "height": 6, "fx": 10, "fy": 11, "cx": 4, "cy": 3,
+            "world_to_camera": [[1,0,0,0.5],[0,1,0,0]]}"#;
+        let err = Camera::from_json_str(two_rows, p)
+            .expect_err("2 rows")
+            .to_string();
+        assert!(err.contains("3 or 4 rows"), "{err}");
     }
 }
