@@ -418,7 +418,7 @@ fn background<T: Real>(settings: &RenderSettings, c: usize) -> Result<Vec<T>, Ra
 /// hi = ⌊mean + half − ½ − origin⌋ + 1, clamped to [0, len] (NaN gives len). Floor and ceiling are
 /// taken by truncation inside the clamp range, where the values are positive, so that the tile
 /// kernels call no libm rounding function (baseline x86-64 has no rounding instruction).
-#[inline]
+#[inline(always)]
 fn pixel_span<T: Real>(mean: T, half: T, origin: T, len: usize) -> (usize, usize) {
     let h: T = lit(0.5);
     let len_t: T = lit(len as f64);
@@ -706,7 +706,7 @@ fn lane_blend<T: Real>(a: T, t: T, alive: T) -> (T, T, T, bool) {
 }
 
 /// The splat's lane constants and pixel box (rows y0..y1) in a tile, or `None` if the box is empty.
-#[inline]
+#[inline(always)]
 fn splat_lanes<T: Real>(
     p: &PairSplat<T>,
     ox: T,
