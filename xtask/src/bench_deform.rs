@@ -1,5 +1,6 @@
 //! `cargo xtask bench deform`: time posing N human Gaussians (non-rigid net + skinning field + LBS),
-//! forward and forward + backward, on the built-in body; one JSON line per repetition.
+//! forward and forward + backward, on the built-in body; one JSON line per repetition (with
+//! `steal_pct`, the hypervisor's steal time during it; null off Linux).
 
 use std::time::Instant;
 
@@ -58,6 +59,7 @@ pub fn run(args: Args) -> Result<()> {
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "default".into());
     for rep in 0..=args.reps {
         let cpu0 = process_cpu_seconds();
+        let steal = crate::steal::Meter::start();
         let t0 = Instant::now();
         let (out, cache) = deform_gaussians(&nonrigid, &field, &g, &code, &bones)?;
         let t_fwd = t0.elapsed();
@@ -97,6 +99,7 @@ pub fn run(args: Args) -> Result<()> {
                     "forward_ms": t_fwd.as_secs_f64() * 1e3,
                     "backward_ms": t_bwd.as_secs_f64() * 1e3,
                     "forward_backward_ms": (t_fwd + t_bwd).as_secs_f64() * 1e3,
+                    "steal_pct": steal.percent(),
                     // User + system CPU time of the whole process over forward + backward (and the
                     // cotangent set-up), 10 ms resolution; robust to other load on a shared machine.
                     "cpu_ms": cpu,

@@ -2,7 +2,8 @@
 //! streams, one JSON line per case `{"bench":"events","case","events","threads","seconds","mev_per_s",
 //! "target_mev_per_s"}`: voxelising (5 bins, 640x480), then reading every format the crate writes:
 //! text, npz, AEDAT 4 (uncompressed, LZ4, zstd), Prophesee EVT 2.0, EVT 3.0 and `.dat`.
-//! Files go to a temporary directory that is removed afterwards.
+//! Files go to a temporary directory that is removed afterwards. Every line also carries `steal_pct`,
+//! the hypervisor's steal time during the case (see `steal.rs`; null off Linux).
 
 use std::time::Instant;
 
@@ -43,13 +44,14 @@ fn synthetic(n: usize, sensor: SensorSize) -> EventStream {
     s
 }
 
-fn line(case: &str, n: usize, secs: f64, target: f64) {
+fn line(case: &str, n: usize, secs: f64, target: f64, steal: &crate::steal::Meter) {
     let threads = rayon::current_num_threads();
     println!(
         "{}",
         serde_json::json!({
             "bench": "events", "case": case, "events": n, "threads": threads,
             "seconds": secs, "mev_per_s": n as f64 / secs / 1e6, "target_mev_per_s": target,
+            "steal_pct": steal.percent(),
         })
     );
 }
@@ -89,12 +91,13 @@ pub fn run(args: Args) -> Result<()> {
     let wanted = |case: &str| args.only.is_empty() || args.only.iter().any(|c| c == case);
     let (t0, t1) = (s.t[0], s.t[n - 1] + 1);
     if wanted("voxelize_5bins_640x480") {
+        let steal = crate::steal::Meter::start();
         let secs = best_of(repeats, || {
             let g = events::voxel_grid(&s.as_slice(), sensor, 5, t0, t1, false)?;
             std::hint::black_box(g);
             Ok(())
         })?;
-        line("voxelize_5bins_640x480", n, secs, 50.0);
+        line("voxelize_5bins_640x480", n, secs, 50.0, &steal);
     }
 
     let dir = std::env::temp_dir().join(format!("xtask-bench-events-{}", std::process::id()));
@@ -127,12 +130,13 @@ pub fn run(args: Args) -> Result<()> {
             }
             let p = dir.join(file);
             write(&p, &s).with_context(|| format!("writing {}", p.display()))?;
+            let steal = crate::steal::Meter::start();
             let secs = best_of(repeats, || {
                 let r = events::read_events(&p)?;
                 anyhow::ensure!(r.len() == n, "{case}: read {} of {n} events", r.len());
                 Ok(())
             })?;
-            line(case, n, secs, target);
+            line(case, n, secs, target, &steal);
             let _ = std::fs::remove_file(&p);
         }
         Ok(())

@@ -1,7 +1,8 @@
 //! `cargo xtask bench flow [--quick]`: times the SPyNet forward pass and forward + input-gradient pass
 //! on seeded random images and prints one JSON line per case
 //! `{"case","width","height","levels","threads","fwd_ms","fwd_bwd_ms"}` (medians over repeats), for
-//! 1 thread and for the machine's threads.
+//! 1 thread and for the machine's threads; plus `steal_pct`, the hypervisor's steal time during the
+//! case (null off Linux).
 
 use anyhow::{Context, Result};
 use std::time::Instant;
@@ -55,6 +56,7 @@ pub fn run(args: Args) -> Result<()> {
                 .num_threads(t)
                 .build()
                 .context("building thread pool")?;
+            let steal = crate::steal::Meter::start();
             let (fwd, both) = pool.install(|| -> Result<(Vec<f64>, Vec<f64>)> {
                 let (mut fwd, mut both) = (Vec::new(), Vec::new());
                 for _ in 0..repeats {
@@ -74,6 +76,7 @@ pub fn run(args: Args) -> Result<()> {
                 serde_json::json!({
                     "case": name, "width": size, "height": size, "levels": args.levels,
                     "threads": t, "fwd_ms": median(fwd), "fwd_bwd_ms": median(both),
+                    "steal_pct": steal.percent(),
                 })
             );
         }

@@ -1,7 +1,8 @@
 //! `cargo xtask bench raster [--quick]`: times the rasterizer on seeded random scenes and prints one
 //! JSON line per case `{"case","gaussians","width","height","threads","fwd_ms","fwd_bwd_ms"}`
 //! (medians over repeats; plus `pairs`, the number of tile–Gaussian pairs), for 1 thread and for the
-//! machine's threads. Scene generation and timing live in `rasterize_cpu::synthetic`.
+//! machine's threads; plus `steal_pct`, the hypervisor's steal time during the case (null off
+//! Linux). Scene generation and timing live in `rasterize_cpu::synthetic`.
 
 use anyhow::{Context, Result};
 use rasterize_cpu::synthetic::{time_case, SyntheticScene};
@@ -62,6 +63,7 @@ pub fn run(args: Args) -> Result<()> {
         let scene =
             SyntheticScene::new(n, w, h, args.seed).context("building the benchmark scene")?;
         for &t in &threads {
+            let steal = crate::steal::Meter::start();
             let r = time_case(&scene, t, if args.quick { 3 } else { repeats })
                 .with_context(|| format!("timing case {name} with {t} threads"))?;
             let round = |v: f64| (v * 100.0).round() / 100.0;
@@ -76,6 +78,7 @@ pub fn run(args: Args) -> Result<()> {
                     "fwd_ms": round(r.fwd_ms),
                     "fwd_bwd_ms": round(r.fwd_bwd_ms),
                     "pairs": r.pairs,
+                    "steal_pct": steal.percent(),
                 })
             );
         }

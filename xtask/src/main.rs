@@ -20,6 +20,7 @@ mod ply_info;
 mod reconstruct;
 mod render;
 mod render_pose;
+mod steal;
 mod synth;
 mod train_flow;
 
