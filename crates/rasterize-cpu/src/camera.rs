@@ -213,19 +213,27 @@ impl Camera {
     /// Parses the project's camera JSON from a string (`source` names it in errors). A scene
     /// format v1 `scene.json` (an object whose `camera` field holds the camera) is accepted too.
     pub fn from_json_str(text: &str, source: &Path) -> Result<Self, RasterError> {
+        #[derive(Deserialize)]
+        struct SceneCamera {
+            camera: CameraJson,
+        }
         let json_error = |e| RasterError::Json {
             path: source.to_path_buf(),
             source: e,
         };
-        let mut value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
-        if let Some(obj) = value.as_object_mut() {
-            if !obj.contains_key("fx") {
-                if let Some(inner) = obj.remove("camera") {
-                    value = inner;
-                }
-            }
-        }
-        let j: CameraJson = serde_json::from_value(value).map_err(json_error)?;
+        // Decide the shape first, then deserialise from the text so that errors keep their
+        // line and column.
+        let value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
+        let is_scene = value
+            .as_object()
+            .is_some_and(|o| o.contains_key("camera") && !o.contains_key("fx"));
+        let j = if is_scene {
+            serde_json::from_str::<SceneCamera>(text)
+                .map_err(json_error)?
+                .camera
+        } else {
+            serde_json::from_str::<CameraJson>(text).map_err(json_error)?
+        };
         Self::from_json(&j)
     }
 
