@@ -38,6 +38,14 @@ pub trait Real: num_traits::Float + Send + Sync + std::fmt::Debug + Default + 's
     /// correctly rounded-ish libm `exp` (gradient checks); f32 uses a branch-free polynomial
     /// (relative error < 3e-7, i.e. a few ulp) that the compiler can vectorise.
     fn splat_exp(self) -> Self;
+
+    /// Tile-list sort key of a Gaussian: orders by view `depth` (> 0), then by `index`, as one
+    /// integer (the depth's bit pattern above the index; positive floats order like their bits).
+    type DepthKey: Ord + Copy + Send + Sync + Default;
+    /// The key of (`depth`, `index`); see [`Real::DepthKey`].
+    fn depth_key(depth: Self, index: u32) -> Self::DepthKey;
+    /// The index stored in `key`.
+    fn key_index(key: Self::DepthKey) -> u32;
 }
 
 impl Real for f32 {
@@ -45,12 +53,32 @@ impl Real for f32 {
     fn splat_exp(self) -> f32 {
         fast_exp_f32(self)
     }
+
+    type DepthKey = u64;
+    #[inline(always)]
+    fn depth_key(depth: f32, index: u32) -> u64 {
+        (u64::from(depth.to_bits()) << 32) | u64::from(index)
+    }
+    #[inline(always)]
+    fn key_index(key: u64) -> u32 {
+        key as u32
+    }
 }
 
 impl Real for f64 {
     #[inline(always)]
     fn splat_exp(self) -> f64 {
         self.exp()
+    }
+
+    type DepthKey = u128;
+    #[inline(always)]
+    fn depth_key(depth: f64, index: u32) -> u128 {
+        (u128::from(depth.to_bits()) << 32) | u128::from(index)
+    }
+    #[inline(always)]
+    fn key_index(key: u128) -> u32 {
+        key as u32
     }
 }
 

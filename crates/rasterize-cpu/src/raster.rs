@@ -612,17 +612,17 @@ const MAX_BIN_JOBS: usize = 32;
 /// tile), so that huge images get fewer jobs rather than large count arrays.
 const BIN_COUNTER_BUDGET: usize = 1 << 20;
 
-/// One binning job's entries (depth bits, visible index) grouped by tile, and where each tile's
-/// group starts (n_tiles + 1 offsets).
-type BinJob = (Vec<usize>, Vec<(u64, u32)>);
+/// One binning job's entries (depth keys, see [`Real::depth_key`]) grouped by tile, and where each
+/// tile's group starts (n_tiles + 1 offsets).
+type BinJob<K> = (Vec<usize>, Vec<K>);
 
 /// Tile lists: for every tile, the indices of the visible Gaussians overlapping it sorted by
 /// (view depth, index), as offsets into one list. Equals INRIA's stable radix sort on
 /// (tile, depth).
 ///
 /// Parallel: jobs over contiguous chunks of `visible` bin their Gaussians by tile (a local counting
-/// sort); every tile then gathers its entries from the jobs and sorts them. The key (depth bits,
-/// index) is a total order, so the lists are the same for any chunking and thread count.
+/// sort); every tile then gathers its entries from the jobs and sorts them. The key (depth, index)
+/// is a total order, so the lists are the same for any chunking and thread count.
 fn bin_and_sort<T: Real>(
     visible: &[Projected<T>],
     gx: usize,
@@ -631,7 +631,7 @@ fn bin_and_sort<T: Real>(
     let max_jobs = (BIN_COUNTER_BUDGET / (n_tiles + 1)).clamp(1, MAX_BIN_JOBS);
     let chunk = BIN_CHUNK.max(visible.len().div_ceil(max_jobs));
     // 1. Per job: its entries grouped by tile, and where each tile's group starts.
-    let jobs: Vec<BinJob> = visible
+    let jobs: Vec<BinJob<T::DepthKey>> = visible
         .par_chunks(chunk)
         .enumerate()
         .map(|(job, part)| {
@@ -648,16 +648,15 @@ fn bin_and_sort<T: Real>(
                 starts[t + 1] += starts[t];
             }
             let mut cursor = starts.clone();
-            let mut entries = vec![(0u64, 0u32); starts[n_tiles]];
+            let mut entries = vec![T::DepthKey::default(); starts[n_tiles]];
             for (j, p) in part.iter().enumerate() {
-                let ci = (job * chunk + j) as u32;
-                // View depth is > near > 0, so its f64 bit pattern orders like the value.
-                let key = p.depth.to_f64().unwrap_or(0.0).to_bits();
+                // View depth is > near > 0, so its bit pattern orders like the value.
+                let key = T::depth_key(p.depth, (job * chunk + j) as u32);
                 for ty in p.rect[1]..p.rect[3] {
                     let row = ty as usize * gx;
                     for tx in p.rect[0]..p.rect[2] {
                         let t = row + tx as usize;
-                        entries[cursor[t]] = (key, ci);
+                        entries[cursor[t]] = key;
                         cursor[t] += 1;
                     }
                 }
@@ -675,9 +674,9 @@ fn bin_and_sort<T: Real>(
         offsets[t + 1] = offsets[t] + count;
     }
     // 3. Every tile gathers its entries from the jobs and sorts them.
-    let mut entries = vec![(0u64, 0u32); offsets[n_tiles]];
+    let mut entries = vec![T::DepthKey::default(); offsets[n_tiles]];
     let mut slices = Vec::with_capacity(n_tiles);
-    let mut rest: &mut [(u64, u32)] = &mut entries;
+    let mut rest: &mut [T::DepthKey] = &mut entries;
     for t in 0..n_tiles {
         let (head, tail) = rest.split_at_mut(offsets[t + 1] - offsets[t]);
         slices.push(head);
@@ -692,7 +691,7 @@ fn bin_and_sort<T: Real>(
         }
         dst.sort_unstable();
     });
-    let list = entries.par_iter().map(|&(_, ci)| ci).collect();
+    let list = entries.par_iter().map(|&key| T::key_index(key)).collect();
     (offsets, list)
 }
 
