@@ -31,6 +31,11 @@ enum Sub {
         /// Sort by timestamp instead of failing on non-monotonic input.
         #[arg(long)]
         sort: bool,
+        /// Sensor size WxH to record in the output (formats that store it: AEDAT 4, EVT, DAT,
+        /// text header), replacing the input's; every event must lie inside it. Default: the
+        /// input's, else the bounding box of the events.
+        #[arg(long)]
+        sensor: Option<String>,
     },
     /// Write the E-RAFT voxel grid (bins, H, W) of a time window as f32 .npy.
     Voxelize {
@@ -171,8 +176,12 @@ pub fn run(args: Args) -> Result<()> {
             input,
             output,
             sort,
+            sensor,
         } => {
             let (mut s, _) = read_with_progress(&input)?;
+            if let Some(arg) = &sensor {
+                s.sensor = Some(parse_sensor(arg).context("--sensor")?);
+            }
             if let Err(e) = s.validate(None) {
                 if sort && matches!(e, events::EventsError::NonMonotonic { .. }) {
                     s.sort_by_time();

@@ -87,3 +87,68 @@ fn simulate_refuses_a_directory_with_fewer_than_two_frames() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+#[test]
+fn convert_records_the_sensor_size_given_and_refuses_one_the_events_do_not_fit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("events.npz");
+    let mut s = events::EventStream::new();
+    for (k, (x, y)) in [(0u16, 0u16), (5, 2), (9, 3)].into_iter().enumerate() {
+        s.push(events::Event {
+            t: 10 * k as i64,
+            x,
+            y,
+            p: 1,
+        });
+    }
+    events::write_events(&input, &s).unwrap();
+    let info = |path: &std::path::Path| -> serde_json::Value {
+        let o = xtask(&["events", "info", path.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_str(String::from_utf8_lossy(&o.stdout).trim()).unwrap()
+    };
+    // Without --sensor the AEDAT 4 file states the events' bounding box; with it, the given size.
+    let bounding = tmp.path().join("bounding.aedat4");
+    let o = xtask(&[
+        "events",
+        "convert",
+        input.to_str().unwrap(),
+        bounding.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = info(&bounding);
+    assert_eq!(
+        (v["width"].clone(), v["height"].clone()),
+        (10.into(), 4.into())
+    );
+    let given = tmp.path().join("given.aedat4");
+    let o = xtask(&[
+        "events",
+        "convert",
+        input.to_str().unwrap(),
+        given.to_str().unwrap(),
+        "--sensor",
+        "64x48",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = info(&given);
+    assert_eq!(
+        (v["width"].clone(), v["height"].clone()),
+        (64.into(), 48.into())
+    );
+    assert_eq!(v["events"], 3);
+    // An event at x = 9 does not fit an 8-pixel-wide sensor: a clear error, no file.
+    let small = tmp.path().join("small.aedat4");
+    let o = xtask(&[
+        "events",
+        "convert",
+        input.to_str().unwrap(),
+        small.to_str().unwrap(),
+        "--sensor",
+        "8x48",
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("outside the 8x48 sensor"), "{err}");
+    assert!(!small.exists());
+}
