@@ -134,6 +134,7 @@ pub fn run(args: Args) -> Result<()> {
     cfg.validate().context("refusing the settings")?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
+    crate::reconstruct::remove_stamp(&args.out)?;
     let bar = indicatif::ProgressBar::new(u64::from(cfg.frames));
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -148,6 +149,11 @@ pub fn run(args: Args) -> Result<()> {
     })
     .with_context(|| format!("generating the benchmark into {}", args.out.display()))?;
     bar.finish_and_clear();
+    // The same stamp `reconstruct` and `ablate` write, so that a benchmark generated here under
+    // target/benchmark/<preset> with a preset's settings is not generated again by them.
+    let marker = args.out.join(crate::reconstruct::COMPLETE_STAMP);
+    std::fs::write(&marker, crate::reconstruct::benchmark_stamp(&cfg)?)
+        .with_context(|| format!("writing {}", marker.display()))?;
     let secs = start.elapsed().as_secs_f64();
     let p = &stats.psnr_blurred_vs_sharp;
     let f = &stats.flow;

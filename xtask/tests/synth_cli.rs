@@ -84,6 +84,10 @@ fn synth_writes_a_complete_scene_directory() {
     // The preview is a decodable PNG.
     let png = image::open(out.join("preview.png")).unwrap();
     assert!(png.width() > 32 && png.height() > 24);
+    // The completeness stamp `reconstruct` checks: generator version and these settings.
+    let stamp = std::fs::read_to_string(out.join(".complete")).unwrap();
+    assert!(stamp.starts_with("generator "), "{stamp}");
+    assert!(stamp.contains("\"frames\":3"), "{stamp}");
 }
 
 #[test]
