@@ -171,9 +171,7 @@ pub fn default_benchmark() -> Result<PathBuf> {
 /// stamp holds both).
 pub fn benchmark(cfg: &::synth::SynthConfig, name: &str) -> Result<PathBuf> {
     let dir = target_dir().join("benchmark").join(name);
-    let stamp = benchmark_stamp(cfg)?;
-    let marker = dir.join(COMPLETE_STAMP);
-    if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {
+    if crate::synth::is_complete(&dir, cfg)? {
         return Ok(dir);
     }
     eprintln!(
@@ -181,37 +179,13 @@ pub fn benchmark(cfg: &::synth::SynthConfig, name: &str) -> Result<PathBuf> {
         dir.display()
     );
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    remove_stamp(&dir)?;
+    crate::synth::remove_stamp(&dir)?;
     let bar = crate::progress_bar(u64::from(cfg.frames), "synth")?;
     ::synth::generate(cfg, &dir, &mut |done, _| bar.set_position(u64::from(done)))
         .with_context(|| format!("generating the benchmark into {}", dir.display()))?;
     bar.finish_and_clear();
-    std::fs::write(&marker, stamp).with_context(|| format!("writing {}", marker.display()))?;
+    crate::synth::write_stamp(&dir, cfg)?;
     Ok(dir)
-}
-
-/// Name of the stamp file that marks a generated benchmark directory as complete.
-pub const COMPLETE_STAMP: &str = ".complete";
-
-/// The content of the [`COMPLETE_STAMP`] of a benchmark generated with `cfg`: the generator
-/// version and its settings, so that any change regenerates.
-pub fn benchmark_stamp(cfg: &::synth::SynthConfig) -> Result<String> {
-    Ok(format!(
-        "generator {} {}",
-        ::synth::GENERATOR_VERSION,
-        serde_json::to_string(cfg).context("serialising the generator settings")?
-    ))
-}
-
-/// Removes `dir`'s [`COMPLETE_STAMP`] before (re)generating into it, so that an interrupted
-/// generation never leaves a stamp claiming the directory complete.
-pub fn remove_stamp(dir: &std::path::Path) -> Result<()> {
-    let marker = dir.join(COMPLETE_STAMP);
-    match std::fs::remove_file(&marker) {
-        Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e).with_context(|| format!("removing {}", marker.display())),
-    }
 }
 
 /// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).

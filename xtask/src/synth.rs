@@ -134,7 +134,7 @@ pub fn run(args: Args) -> Result<()> {
     cfg.validate().context("refusing the settings")?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    crate::reconstruct::remove_stamp(&args.out)?;
+    remove_stamp(&args.out)?;
     let bar = indicatif::ProgressBar::new(u64::from(cfg.frames));
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -149,11 +149,9 @@ pub fn run(args: Args) -> Result<()> {
     })
     .with_context(|| format!("generating the benchmark into {}", args.out.display()))?;
     bar.finish_and_clear();
-    // The same stamp `reconstruct` and `ablate` write, so that a benchmark generated here under
+    // The stamp `reconstruct` and `ablate` check, so that a benchmark generated here under
     // target/benchmark/<preset> with a preset's settings is not generated again by them.
-    let marker = args.out.join(crate::reconstruct::COMPLETE_STAMP);
-    std::fs::write(&marker, crate::reconstruct::benchmark_stamp(&cfg)?)
-        .with_context(|| format!("writing {}", marker.display()))?;
+    write_stamp(&args.out, &cfg)?;
     let secs = start.elapsed().as_secs_f64();
     let p = &stats.psnr_blurred_vs_sharp;
     let f = &stats.flow;
@@ -208,4 +206,40 @@ fn rayon_threads() -> usize {
         .and_then(|v| v.parse().ok())
         .filter(|&n: &usize| n > 0)
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+/// Name of the stamp file that marks a generated benchmark directory as complete.
+const COMPLETE_STAMP: &str = ".complete";
+
+/// The content of the [`COMPLETE_STAMP`] of a benchmark generated with `cfg`: the generator
+/// version and its settings, so that any change regenerates.
+fn stamp(cfg: &::synth::SynthConfig) -> Result<String> {
+    Ok(format!(
+        "generator {} {}",
+        ::synth::GENERATOR_VERSION,
+        serde_json::to_string(cfg).context("serialising the generator settings")?
+    ))
+}
+
+/// True if `dir` holds a complete benchmark generated with `cfg` by this generator version.
+pub fn is_complete(dir: &std::path::Path, cfg: &::synth::SynthConfig) -> Result<bool> {
+    let want = stamp(cfg)?;
+    Ok(std::fs::read_to_string(dir.join(COMPLETE_STAMP)).is_ok_and(|s| s == want))
+}
+
+/// Marks `dir` as a complete benchmark generated with `cfg` (after a successful generation).
+pub fn write_stamp(dir: &std::path::Path, cfg: &::synth::SynthConfig) -> Result<()> {
+    let marker = dir.join(COMPLETE_STAMP);
+    std::fs::write(&marker, stamp(cfg)?).with_context(|| format!("writing {}", marker.display()))
+}
+
+/// Removes `dir`'s [`COMPLETE_STAMP`] before (re)generating into it, so that an interrupted
+/// generation never leaves a stamp claiming the directory complete.
+pub fn remove_stamp(dir: &std::path::Path) -> Result<()> {
+    let marker = dir.join(COMPLETE_STAMP);
+    match std::fs::remove_file(&marker) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e).with_context(|| format!("removing {}", marker.display())),
+    }
 }
