@@ -1,6 +1,6 @@
 //! Profiling driver: renders (and optionally differentiates) one seeded synthetic scene a few times,
-//! printing per-run timings and an FNV-1a hash of the image/alpha/depth bits (to check that an
-//! optimisation leaves the image unchanged). Meant for `perf record` / `valgrind --tool=callgrind`:
+//! printing per-run timings and FNV-1a hashes of the image/alpha/depth bits and of every gradient's
+//! bits (to check that an optimisation leaves the results unchanged). Meant for `perf record` / `valgrind --tool=callgrind`:
 //!
 //! `cargo build --release -p rasterize-cpu --example profile_raster`, then
 //! `RAYON_NUM_THREADS=1 target/release/examples/profile_raster [N W H [fwd|bwd [REPEATS]]]`
@@ -31,6 +31,7 @@ fn main() -> Result<(), RasterError> {
             hash = (hash ^ u64::from(v.to_bits())).wrapping_mul(0x0100_0000_01b3);
         }
         let mut grad_sum = 0.0f64;
+        let mut grad_hash = 0xcbf2_9ce4_8422_2325u64;
         if bwd {
             let cot = Cotangents {
                 image: &d_image,
@@ -39,10 +40,20 @@ fn main() -> Result<(), RasterError> {
             };
             let g = render_backward(&scene.camera, &scene.splats(), &settings, &out, &cot)?;
             grad_sum = g.means.iter().map(|m| f64::from(m[0])).sum();
+            let all = g
+                .means
+                .iter()
+                .flatten()
+                .chain(g.log_scales.iter().flatten());
+            let all = all.chain(g.quats.iter().flatten()).chain(&g.opacity_logits);
+            let all = all.chain(&g.channels).chain(g.means_2d.iter().flatten());
+            for v in all.chain(&g.background) {
+                grad_hash = (grad_hash ^ u64::from(v.to_bits())).wrapping_mul(0x0100_0000_01b3);
+            }
         }
         let t_all = t0.elapsed().as_secs_f64() * 1e3;
         println!(
-            "fwd {t_fwd:.2} ms, total {t_all:.2} ms, pairs {}, image hash {hash:016x}, sum dL/dx {grad_sum:.9e}",
+            "fwd {t_fwd:.2} ms, total {t_all:.2} ms, pairs {}, image hash {hash:016x}, sum dL/dx {grad_sum:.9e}, gradient hash {grad_hash:016x}",
             out.num_pairs
         );
     }

@@ -14,6 +14,7 @@
 
 pub mod camera;
 pub mod error;
+pub mod lanes;
 pub mod project;
 pub mod raster;
 pub mod sh;
@@ -39,6 +40,9 @@ pub trait Real: num_traits::Float + Send + Sync + std::fmt::Debug + Default + 's
     /// (relative error < 3e-7, i.e. a few ulp) that the compiler can vectorise.
     fn splat_exp(self) -> Self;
 
+    /// Four lanes of this type for the tile kernels (SSE2 registers for f32 on x86-64).
+    type V4: lanes::Lanes<Self>;
+
     /// Tile-list sort key of a Gaussian: orders by view `depth` (> 0), then by `index`, as one
     /// integer (the depth's bit pattern above the index; positive floats order like their bits).
     type DepthKey: Ord + Copy + Send + Sync + Default;
@@ -53,6 +57,11 @@ impl Real for f32 {
     fn splat_exp(self) -> f32 {
         fast_exp_f32(self)
     }
+
+    #[cfg(target_arch = "x86_64")]
+    type V4 = lanes::F32x4;
+    #[cfg(not(target_arch = "x86_64"))]
+    type V4 = lanes::Arr4<f32>;
 
     type DepthKey = u64;
     #[inline(always)]
@@ -70,6 +79,8 @@ impl Real for f64 {
     fn splat_exp(self) -> f64 {
         self.exp()
     }
+
+    type V4 = lanes::Arr4<f64>;
 
     type DepthKey = u128;
     #[inline(always)]

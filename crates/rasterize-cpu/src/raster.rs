@@ -24,6 +24,7 @@ use rayon::prelude::*;
 
 use gaussians::covariance::{covariance_3d_backward, Mat3};
 
+use crate::lanes::Lanes;
 use crate::project::{
     project, project_cov, project_cov_backward, CameraParams, Projected, ProjectedGrad,
 };
@@ -710,18 +711,89 @@ struct SplatLanes<T> {
     q1: usize,
 }
 
-/// Lanes per group in the tile kernels' row loops: `for q in q0..q1 { for l in 0..QUAD { … } }`
-/// visits only the groups overlapping a splat's box, and the compiler turns each group into one
-/// SIMD operation (SSE2 baseline: 4 × f32).
+/// Lanes per group in the tile kernels' row loops: `for q in q0..q1 { … }` visits only the groups
+/// overlapping a splat's box, each as one [`Lanes`] value (an SSE register for f32 on x86-64).
 const QUAD: usize = 4;
 /// Quads per tile row (loops bound their quad index by it so the compiler can drop bounds checks).
 const QUADS: usize = TILE_SIZE / QUAD;
 
-/// Lane values of one splat on one tile row: the power, exp(power), o·exp(power) and the α that
-/// blends (0 outside the box, for power > 0 and for α < 1/255). One function for forward and
-/// backward, so that both make bit-identical decisions.
+/// Per-lane predicate of the working precision's lanes.
+type LaneMask<T> = <<T as Real>::V4 as Lanes<T>>::Mask;
+
+/// Constants of the lane functions, splatted once per tile.
+struct LaneConsts<T: Real> {
+    zero: T::V4,
+    one: T::V4,
+    neg_half: T::V4,
+    max_alpha: T::V4,
+    min_alpha: T::V4,
+    min_t: T::V4,
+}
+
+impl<T: Real> LaneConsts<T> {
+    fn new() -> Self {
+        let v = |x: f64| T::V4::splat(lit(x));
+        Self {
+            zero: v(0.0),
+            one: v(1.0),
+            neg_half: v(-0.5),
+            max_alpha: v(0.99),
+            min_alpha: v(1.0 / 255.0),
+            min_t: v(1e-4),
+        }
+    }
+}
+
+/// Lane values of one splat on one quad of a tile row: (exp(power), o·exp(power), the α that
+/// blends: 0 outside the box, for power > 0 and for α < 1/255). `cx` are the lanes' pixel-centre
+/// x, `dy` = mean y − pixel-centre y and `cc_dy_dy` = (conic c · dy) · dy of the row. One function
+/// for forward and backward, so that both make bit-identical decisions.
 #[inline(always)]
-fn lane_alpha<T: Real>(s: &SplatLanes<T>, cx: T, dy: T) -> (T, T, T, T) {
+fn lane_alpha<T: Real>(
+    s: &SplatLanes<T>,
+    cx: T::V4,
+    dy: T,
+    cc_dy_dy: T,
+    k: &LaneConsts<T>,
+) -> (T::V4, T::V4, T::V4) {
+    let v = T::V4::splat;
+    let [ca, cb, _] = s.conic;
+    let dx = v(s.mx) - cx;
+    let power = k.neg_half * (v(ca) * dx * dx + v(cc_dy_dy)) - v(cb) * dx * v(dy);
+    let gauss = power.exp();
+    let raw = v(s.opacity) * gauss;
+    let a = T::V4::select(raw.lt(k.max_alpha), raw, k.max_alpha);
+    let ok = cx.gt(v(s.lo)) & cx.lt(v(s.hi)) & power.le(k.zero) & a.ge(k.min_alpha);
+    (gauss, raw, T::V4::select(ok, a, k.zero))
+}
+
+/// Lane step of the blend state shared by forward and backward: with `a` the lanes' α (0 = skip)
+/// and `alive` 1/0, returns (weight α·T, new T, new alive, stopped). A stopping splat is excluded.
+#[inline(always)]
+fn lane_blend<T: Real>(
+    a: T::V4,
+    t: T::V4,
+    alive: T::V4,
+    k: &LaneConsts<T>,
+) -> (T::V4, T::V4, T::V4, LaneMask<T>) {
+    let live = alive.gt(k.zero) & a.gt(k.zero);
+    let test_t = t * (k.one - a);
+    let stop = live & test_t.lt(k.min_t);
+    let contrib = live & !stop;
+    (
+        T::V4::select(contrib, a * t, k.zero),
+        T::V4::select(contrib, test_t, t),
+        T::V4::select(stop, k.zero, alive),
+        stop,
+    )
+}
+
+/// Values of one splat at one pixel: the power, exp(power), o·exp(power) and the α that blends (0
+/// outside the box, for power > 0 and for α < 1/255). The scalar definition of [`lane_alpha`], which
+/// the forward kernel uses (its loops over 16-lane rows auto-vectorise); both give the same bits
+/// (unit test), so forward and backward make identical decisions.
+#[inline(always)]
+fn pixel_alpha<T: Real>(s: &SplatLanes<T>, cx: T, dy: T) -> (T, T, T, T) {
     let half: T = lit(0.5);
     let max_alpha: T = lit(0.99);
     let min_alpha: T = lit(1.0 / 255.0);
@@ -735,10 +807,11 @@ fn lane_alpha<T: Real>(s: &SplatLanes<T>, cx: T, dy: T) -> (T, T, T, T) {
     (power, gauss, raw, if ok { a } else { T::zero() })
 }
 
-/// Lane step of the blend state shared by forward and backward: with `a` the lane's α (0 = skip)
-/// and `alive` 1/0, returns (weight α·T, new T, new alive, stopped). A stopping splat is excluded.
+/// Blend step of one pixel: with `a` its α (0 = skip) and `alive` 1/0, returns (weight α·T, new T,
+/// new alive, stopped). A stopping splat is excluded. The scalar definition of [`lane_blend`]
+/// (same bits, unit test).
 #[inline(always)]
-fn lane_blend<T: Real>(a: T, t: T, alive: T) -> (T, T, T, bool) {
+fn pixel_blend<T: Real>(a: T, t: T, alive: T) -> (T, T, T, bool) {
     let min_t: T = lit(1e-4);
     let live = (alive > T::zero()) & (a > T::zero());
     let test_t = t * (T::one() - a);
@@ -774,7 +847,7 @@ fn splat_lanes<T: Real>(
             lo: lit(x0 as f64),
             hi: lit(x1 as f64),
             q0: x0 / QUAD,
-            q1: x1.div_ceil(QUAD),
+            q1: x1.div_ceil(QUAD).min(QUADS),
         },
         y0,
         y1,
@@ -784,6 +857,18 @@ fn splat_lanes<T: Real>(
 /// Pixel-centre offsets 0.5, 1.5, … within a tile.
 fn centres<T: Real>() -> [T; TILE_SIZE] {
     std::array::from_fn(|i| lit(i as f64 + 0.5))
+}
+
+/// Pixel-centre x offsets of each quad's lanes.
+fn quad_centres<T: Real>() -> [T::V4; QUADS] {
+    let c = centres::<T>();
+    std::array::from_fn(|q| T::V4::load(&c[q * QUAD..]))
+}
+
+/// Sum of the lanes in lane order, starting from zero (the fixed order of every per-pair reduction).
+#[inline(always)]
+fn lane_sum<T: Real>(v: T::V4) -> T {
+    v.to_array().iter().fold(T::zero(), |s, &x| s + x)
 }
 
 /// Blends one tile front to back into `buf` ([T | depth | channels] × 256); `used` receives the
@@ -831,7 +916,7 @@ fn forward_tile<T: Real>(
             for q in sl.q0..sl.q1.min(QUADS) {
                 for l in 0..QUAD {
                     let x = q * QUAD + l;
-                    alpha[x] = lane_alpha(&sl, centre[x], dy).3;
+                    alpha[x] = pixel_alpha(&sl, centre[x], dy).3;
                 }
             }
             let t_row = &mut tbuf[row..row + TILE_SIZE];
@@ -840,7 +925,7 @@ fn forward_tile<T: Real>(
             for q in sl.q0..sl.q1.min(QUADS) {
                 for l in 0..QUAD {
                     let x = q * QUAD + l;
-                    let (wx, t, al, stop) = lane_blend(alpha[x], t_row[x], alive_row[x]);
+                    let (wx, t, al, stop) = pixel_blend(alpha[x], t_row[x], alive_row[x]);
                     w[x] = wx;
                     t_row[x] = t;
                     alive_row[x] = al;
@@ -1012,56 +1097,53 @@ fn backward_inputs<T: Real>(
     }
     let zero3 = [T::zero(); 3];
     let zero33 = [zero3; 3];
-    let per_gaussian: Vec<GaussianGrad<T>> = (0..st.n)
-        .into_par_iter()
-        .map(|i| {
-            let ci = compact[i];
-            if ci == u32::MAX {
-                return (zero3, zero33, T::zero(), [T::zero(); 2]);
-            }
-            let ci = ci as usize;
-            let mut acc = [T::zero(); 7];
-            for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
-                let s = &pair_grads[pos as usize * slot..pos as usize * slot + 7];
-                for j in 0..7 {
-                    acc[j] = acc[j] + s[j];
-                }
-            }
-            let g = ProjectedGrad {
-                mean2d: [acc[0], acc[1]],
-                conic: [acc[2], acc[3], acc[4]],
-                opacity: acc[5],
-                depth: acc[6],
-            };
-            let sigma = match splats.shapes {
-                Shapes::ScaleRot { log_scales, quats } => {
-                    gaussians::covariance::covariance_3d(log_scales[i], quats[i])
-                }
-                Shapes::Cov(covs) => covs[i],
-            };
-            let (dm, d_sigma, dl) =
-                project_cov_backward(&cam, splats.means[i], &sigma, splats.opacity_logits[i], &g);
-            (dm, d_sigma, dl, g.mean2d)
-        })
-        .collect();
+    // One pass per Gaussian gathers its pair slots (geometry and channels together) in tile order.
+    let mut per_gaussian: Vec<GaussianGrad<T>> =
+        vec![(zero3, zero33, T::zero(), [T::zero(); 2]); st.n];
     let mut d_channels = vec![T::zero(); st.n * c];
+    let reduce = |i: usize, out: &mut GaussianGrad<T>, d_ch: &mut [T]| {
+        let ci = compact[i];
+        if ci == u32::MAX {
+            return;
+        }
+        let ci = ci as usize;
+        let mut acc = [T::zero(); 7];
+        for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
+            let s = &pair_grads[pos as usize * slot..(pos as usize + 1) * slot];
+            for j in 0..7 {
+                acc[j] = acc[j] + s[j];
+            }
+            for (d, &g) in d_ch.iter_mut().zip(&s[7..]) {
+                *d = *d + g;
+            }
+        }
+        let g = ProjectedGrad {
+            mean2d: [acc[0], acc[1]],
+            conic: [acc[2], acc[3], acc[4]],
+            opacity: acc[5],
+            depth: acc[6],
+        };
+        let sigma = match splats.shapes {
+            Shapes::ScaleRot { log_scales, quats } => {
+                gaussians::covariance::covariance_3d(log_scales[i], quats[i])
+            }
+            Shapes::Cov(covs) => covs[i],
+        };
+        let (dm, d_sigma, dl) =
+            project_cov_backward(&cam, splats.means[i], &sigma, splats.opacity_logits[i], &g);
+        *out = (dm, d_sigma, dl, g.mean2d);
+    };
     if c > 0 {
-        d_channels
-            .par_chunks_mut(c)
+        per_gaussian
+            .par_iter_mut()
+            .zip(d_channels.par_chunks_mut(c))
             .enumerate()
-            .for_each(|(i, out)| {
-                let ci = compact[i];
-                if ci == u32::MAX {
-                    return;
-                }
-                let ci = ci as usize;
-                for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
-                    let s = &pair_grads[pos as usize * slot + 7..(pos as usize + 1) * slot];
-                    for j in 0..c {
-                        out[j] = out[j] + s[j];
-                    }
-                }
-            });
+            .for_each(|(i, (out, d_ch))| reduce(i, out, d_ch));
+    } else {
+        per_gaussian
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, out)| reduce(i, out, &mut []));
     }
     // dL/d background_c = Σ_pixels dL/dimage_c · T_final, rows in order.
     let mut d_bg = vec![T::zero(); c];
@@ -1114,16 +1196,16 @@ fn backward_inputs<T: Real>(
 }
 
 /// Per-thread scratch of the backward tile kernel (allocated once per rayon job split, not per pixel).
-struct BackwardScratch<T> {
+struct BackwardScratch<T: Real> {
     t: Vec<T>,
     alive: Vec<T>,
     pre: Vec<T>,
     g_img: Vec<T>,
     g_alpha: Vec<T>,
     g_depth: Vec<T>,
-    /// Per-lane gradient accumulators of the current pair, (7 + C) × [`QUAD`] (lane l of a group
-    /// sums the pair's pixels in column ≡ l mod [`QUAD`]).
-    acc: Vec<T>,
+    /// Per-lane channel-gradient accumulators of the current pair, one quad per channel (lane l
+    /// sums the pair's pixels in columns ≡ l mod [`QUAD`]).
+    acc_channels: Vec<T::V4>,
 }
 
 impl<T: Real> BackwardScratch<T> {
@@ -1135,7 +1217,7 @@ impl<T: Real> BackwardScratch<T> {
             g_img: vec![T::zero(); c * TILE_PIXELS],
             g_alpha: vec![T::zero(); TILE_PIXELS],
             g_depth: vec![T::zero(); TILE_PIXELS],
-            acc: vec![T::zero(); (7 + c) * QUAD],
+            acc_channels: vec![T::V4::splat(T::zero()); c],
         }
     }
 }
@@ -1144,7 +1226,8 @@ impl<T: Real> BackwardScratch<T> {
 /// α, T and stop decisions) and writes each pair's gradient slot
 /// [mean2d x, y | conic a, b, c | opacity | depth | channels C].
 ///
-/// Like the forward, every row is a few fixed 16-lane passes; each pair's per-lane partial sums are
+/// Like the forward, every row of a pair is a few quads of four lanes, each quad one pass through
+/// α, blend state, dL/dα and the per-lane accumulators; each pair's per-lane partial sums are
 /// reduced in lane order at the end of the pair, so the result does not depend on threads.
 #[allow(clippy::too_many_arguments)]
 fn backward_tile<T: Real>(
@@ -1189,144 +1272,166 @@ fn backward_tile<T: Real>(
     let ox: T = lit(origin[0] as f64);
     let oy: T = lit(origin[1] as f64);
     let centre = centres::<T>();
-    let half: T = lit(0.5);
-    let max_alpha: T = lit(0.99);
-    let mut alpha = [T::zero(); TILE_SIZE];
-    let mut gauss = [T::zero(); TILE_SIZE];
-    // α where the clamp is inactive (else 0): dα/dpower = α there.
-    let mut slope = [T::zero(); TILE_SIZE];
-    let mut w = [T::zero(); TILE_SIZE];
-    let mut t_old = [T::zero(); TILE_SIZE];
-    let mut inv = [T::zero(); TILE_SIZE];
-    let mut d_alpha = [T::zero(); TILE_SIZE];
+    let cx = quad_centres::<T>();
+    let k = LaneConsts::<T>::new();
+    let v = T::V4::splat;
+    let half = v(lit(0.5));
     let has_alpha = cot.alpha.is_some();
     let has_depth = cot.depth.is_some();
-    for (k, p) in list.iter().enumerate().take(used) {
+    for (idx, p) in list.iter().enumerate().take(used) {
         let Some((sl, y0, y1)) = splat_lanes(p, ox, oy, size) else {
             continue;
         };
-        let ch = &channels[k * c..(k + 1) * c];
+        let ch = &channels[idx * c..(idx + 1) * c];
         let [ca, cb, cc] = p.conic;
-        let z = p.depth;
-        s.acc.fill(T::zero());
-        for y in y0..y1 {
-            let dy = sl.my - centre[y];
-            let row = y * TILE_SIZE;
-            let r = row..row + TILE_SIZE;
-            for q in sl.q0..sl.q1.min(QUADS) {
-                for l in 0..QUAD {
-                    let x = q * QUAD + l;
-                    let (_, gs, raw, a) = lane_alpha(&sl, centre[x], dy);
-                    alpha[x] = a;
-                    gauss[x] = gs;
-                    slope[x] = if raw < max_alpha { a } else { T::zero() };
-                }
-            }
+        let (v_ca, v_cb, v_mx) = (v(ca), v(cb), v(sl.mx));
+        let z = v(p.depth);
+        s.acc_channels.fill(k.zero);
+        let [mut a_mx, mut a_my, mut a_ca, mut a_cb, mut a_cc, mut a_op, mut a_z] = [k.zero; 7];
+        // One flat loop over the box's (row, quad) cells, row-major, with the cell's row and quad
+        // advanced without a branch: the per-row loop exits of a nested loop (1–4 quads a row)
+        // are hard to predict and each misprediction discards the quads in flight.
+        let quads = sl.q1 - sl.q0;
+        let (mut y, mut q) = (y0, sl.q0);
+        for _ in 0..(y1 - y0) * quads {
             {
-                let t_row = &mut s.t[r.clone()];
-                let alive_row = &mut s.alive[r.clone()];
-                for q in sl.q0..sl.q1.min(QUADS) {
-                    for l in 0..QUAD {
-                        let x = q * QUAD + l;
-                        let (wx, t, al, _) = lane_blend(alpha[x], t_row[x], alive_row[x]);
-                        // Non-contributing lanes: w = 0 and T unchanged.
-                        let contrib = wx != T::zero();
-                        w[x] = wx;
-                        t_old[x] = t_row[x];
-                        inv[x] = T::one() / (T::one() - if contrib { alpha[x] } else { T::zero() });
-                        t_row[x] = t;
-                        alive_row[x] = al;
-                    }
+                let dy = sl.my - centre[y];
+                let cc_dy_dy = cc * dy * dy;
+                let (v_dy, v_cb_dy, v_cc_dy) = (v(dy), v(cb * dy), v(cc * dy));
+                let cxq = cx[q];
+                let at = y * TILE_SIZE + q * QUAD;
+                let wrap = usize::from(q + 1 == sl.q1);
+                y += wrap;
+                q = q + 1 - wrap * quads;
+                let (gauss, raw, a) = lane_alpha(&sl, cxq, dy, cc_dy_dy, &k);
+                // α where the clamp is inactive (else 0): dα/dpower = α there.
+                let slope = T::V4::select(raw.lt(k.max_alpha), a, k.zero);
+                let t_old = T::V4::load(&s.t[at..]);
+                let alive = T::V4::load(&s.alive[at..]);
+                let (w, t_new, alive, stop) = lane_blend(a, t_old, alive, &k);
+                // Non-contributing lanes: w = 0 and T unchanged.
+                let contrib = w.ne(k.zero);
+                if T::V4::count(contrib | stop) == 0 {
+                    // Nothing changes in this quad and every gradient term below is a zero.
+                    continue;
                 }
-            }
-            // dL/dα per lane, accumulated over channels, depth and alpha.
-            let tn = &t_final[r.clone()];
-            if has_alpha {
-                for q in sl.q0..sl.q1.min(QUADS) {
-                    for l in 0..QUAD {
-                        let x = q * QUAD + l;
-                        d_alpha[x] = s.g_alpha[row + x] * tn[x] * inv[x];
-                    }
+                t_new.store(&mut s.t[at..]);
+                alive.store(&mut s.alive[at..]);
+                let inv = k.one / (k.one - T::V4::select(contrib, a, k.zero));
+                let tn = T::V4::load(&t_final[at..]);
+                // dL/dα per lane, accumulated over alpha, channels and depth.
+                let mut d_alpha = if has_alpha {
+                    T::V4::load(&s.g_alpha[at..]) * tn * inv
+                } else {
+                    k.zero
+                };
+                for (j, acc) in s.acc_channels.iter_mut().enumerate() {
+                    let (value, b) = (v(ch[j]), v(bg[j]));
+                    let o = j * TILE_PIXELS + at;
+                    let pre = T::V4::load(&s.pre[o..]) + w * value;
+                    pre.store(&mut s.pre[o..]);
+                    let behind = T::V4::load(&c_final[o..]) - pre + tn * b;
+                    let gi = T::V4::load(&s.g_img[o..]);
+                    d_alpha = d_alpha + gi * (t_old * value - behind * inv);
+                    *acc = *acc + w * gi;
                 }
-            } else {
-                d_alpha.fill(T::zero());
-            }
-            for j in 0..c {
-                let v = ch[j];
-                let b = bg[j];
-                let base = j * TILE_PIXELS + row;
-                let pre = &mut s.pre[base..base + TILE_SIZE];
-                let cf = &c_final[base..base + TILE_SIZE];
-                let gi = &s.g_img[base..base + TILE_SIZE];
-                let acc = &mut s.acc[(7 + j) * QUAD..(8 + j) * QUAD];
-                for q in sl.q0..sl.q1.min(QUADS) {
-                    for l in 0..QUAD {
-                        let x = q * QUAD + l;
-                        pre[x] = pre[x] + w[x] * v;
-                        let behind = cf[x] - pre[x] + tn[x] * b;
-                        d_alpha[x] = d_alpha[x] + gi[x] * (t_old[x] * v - behind * inv[x]);
-                        acc[l] = acc[l] + w[x] * gi[x];
-                    }
+                // Without a depth cotangent the depth terms are exact zeros: skip them.
+                if has_depth {
+                    let o = c * TILE_PIXELS + at;
+                    let pre = T::V4::load(&s.pre[o..]) + w * z;
+                    pre.store(&mut s.pre[o..]);
+                    let behind = T::V4::load(&d_final[at..]) - pre;
+                    let gd = T::V4::load(&s.g_depth[at..]);
+                    d_alpha = d_alpha + gd * (t_old * z - behind * inv);
+                    a_z = a_z + w * gd;
                 }
-            }
-            // Without a depth cotangent the depth terms are exact zeros: skip them.
-            if has_depth {
-                let base = c * TILE_PIXELS + row;
-                let pre = &mut s.pre[base..base + TILE_SIZE];
-                let df = &d_final[r.clone()];
-                let gd = &s.g_depth[r.clone()];
-                let acc = &mut s.acc[6 * QUAD..7 * QUAD];
-                for q in sl.q0..sl.q1.min(QUADS) {
-                    for l in 0..QUAD {
-                        let x = q * QUAD + l;
-                        pre[x] = pre[x] + w[x] * z;
-                        let behind = df[x] - pre[x];
-                        d_alpha[x] = d_alpha[x] + gd[x] * (t_old[x] * z - behind * inv[x]);
-                        acc[l] = acc[l] + w[x] * gd[x];
-                    }
-                }
-            }
-            let (acc_geo, _) = s.acc.split_at_mut(6 * QUAD);
-            let (a_mx, rest) = acc_geo.split_at_mut(QUAD);
-            let (a_my, rest) = rest.split_at_mut(QUAD);
-            let (a_ca, rest) = rest.split_at_mut(QUAD);
-            let (a_cb, rest) = rest.split_at_mut(QUAD);
-            let (a_cc, a_op) = rest.split_at_mut(QUAD);
-            for q in sl.q0..sl.q1.min(QUADS) {
-                for l in 0..QUAD {
-                    let x = q * QUAD + l;
-                    let dx = sl.mx - centre[x];
-                    // Only contributing lanes carry a gradient; where α is clamped at 0.99 its
-                    // derivative w.r.t. opacity and power is zero.
-                    let da = if w[x] != T::zero() {
-                        d_alpha[x]
-                    } else {
-                        T::zero()
-                    };
-                    let d_power = slope[x] * da;
-                    a_mx[l] = a_mx[l] - d_power * (ca * dx + cb * dy);
-                    a_my[l] = a_my[l] - d_power * (cc * dy + cb * dx);
-                    a_ca[l] = a_ca[l] - half * d_power * dx * dx;
-                    a_cb[l] = a_cb[l] - d_power * dx * dy;
-                    a_cc[l] = a_cc[l] - half * d_power * dy * dy;
-                    let unclamped = slope[x] != T::zero();
-                    a_op[l] = a_op[l] + if unclamped { gauss[x] * da } else { T::zero() };
-                }
+                // Only contributing lanes carry a gradient; where α is clamped at 0.99 its
+                // derivative w.r.t. opacity and power is zero.
+                let dx = v_mx - cxq;
+                let da = T::V4::select(contrib, d_alpha, k.zero);
+                let d_power = slope * da;
+                a_mx = a_mx - d_power * (v_ca * dx + v_cb_dy);
+                a_my = a_my - d_power * (v_cc_dy + v_cb * dx);
+                a_ca = a_ca - half * d_power * dx * dx;
+                a_cb = a_cb - d_power * dx * v_dy;
+                a_cc = a_cc - half * d_power * v_dy * v_dy;
+                a_op = a_op + T::V4::select(slope.ne(k.zero), gauss * da, k.zero);
             }
         }
-        let dst = &mut out[k * slot..(k + 1) * slot];
-        for (d, lanes) in dst.iter_mut().zip(s.acc.chunks_exact(QUAD)) {
-            let mut sum = T::zero();
-            for &v in lanes {
-                sum = sum + v;
-            }
-            *d = sum;
+        let dst = &mut out[idx * slot..(idx + 1) * slot];
+        for (d, lanes) in dst.iter_mut().zip(
+            [a_mx, a_my, a_ca, a_cb, a_cc, a_op, a_z]
+                .iter()
+                .chain(&s.acc_channels),
+        ) {
+            *d = lane_sum::<T>(*lanes);
         }
     }
 }
 
 #[cfg(test)]
 mod tests {
+    /// The forward kernel decides per pixel with the scalar `pixel_alpha` / `pixel_blend`, the
+    /// backward per quad with `lane_alpha` / `lane_blend`: every output must be the same bits, or
+    /// the backward would replay a different blend than the forward rendered.
+    #[test]
+    fn lane_and_pixel_decisions_are_bit_identical() {
+        use super::*;
+        let mut state = 0x0dd5_eed5_u64;
+        let mut uniform = |lo: f32, hi: f32| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            lo + (hi - lo) * ((state >> 40) as f32 / (1u64 << 24) as f32)
+        };
+        let k = LaneConsts::<f32>::new();
+        let centre = centres::<f32>();
+        let cx = quad_centres::<f32>();
+        let mut decisions = [0usize; 3];
+        for _ in 0..20_000 {
+            let (a, b) = (uniform(0.01, 3.0), uniform(0.01, 3.0));
+            let cb = uniform(-0.9, 0.9) * (a * b).sqrt();
+            let lo = uniform(-2.0, 10.0).floor().max(0.0);
+            let sl = SplatLanes {
+                mx: uniform(-4.0, 20.0),
+                my: uniform(-4.0, 20.0),
+                conic: [a, cb, b],
+                opacity: uniform(0.0, 1.0).powi(3).max(uniform(0.95, 1.0) * 1.001),
+                lo,
+                hi: lo + uniform(1.0, 12.0).floor(),
+                q0: 0,
+                q1: QUADS,
+            };
+            let y = (uniform(0.0, 16.0) as usize).min(TILE_SIZE - 1);
+            let dy = sl.my - centre[y];
+            let cc_dy_dy = sl.conic[2] * dy * dy;
+            for (q, &cxq) in cx.iter().enumerate() {
+                let t: [f32; 4] = std::array::from_fn(|_| uniform(0.0, 1.0).powi(4));
+                let alive: [f32; 4] = std::array::from_fn(|_| f32::from(uniform(0.0, 1.0) < 0.8));
+                let (gauss, raw, alpha) = lane_alpha(&sl, cxq, dy, cc_dy_dy, &k);
+                let (w, t_new, alive_new, stop) =
+                    lane_blend(alpha, <f32 as Real>::V4::load(&t), Lanes::load(&alive), &k);
+                let stops = <f32 as Real>::V4::count(stop);
+                let mut pixel_stops = 0;
+                for l in 0..QUAD {
+                    let (_, g, r, al) = pixel_alpha(&sl, centre[q * QUAD + l], dy);
+                    assert_eq!(g.to_bits(), gauss.to_array()[l].to_bits());
+                    assert_eq!(r.to_bits(), raw.to_array()[l].to_bits());
+                    assert_eq!(al.to_bits(), alpha.to_array()[l].to_bits());
+                    let (pw, pt, pa, ps) = pixel_blend(al, t[l], alive[l]);
+                    assert_eq!(pw.to_bits(), w.to_array()[l].to_bits());
+                    assert_eq!(pt.to_bits(), t_new.to_array()[l].to_bits());
+                    assert_eq!(pa.to_bits(), alive_new.to_array()[l].to_bits());
+                    pixel_stops += u32::from(ps);
+                    decisions[usize::from(al > 0.0) + usize::from(ps)] += 1;
+                }
+                assert_eq!(stops, pixel_stops);
+            }
+        }
+        // The random lanes reach all three outcomes: skipped, blended and stopping.
+        assert!(decisions.iter().all(|&d| d > 100), "{decisions:?}");
+    }
+
     /// The span by the rounding-function definition it replaces.
     fn span_by_rounding(mean: f32, half: f32, origin: f32, len: usize) -> (usize, usize) {
         let lo = (mean - half - 0.5 - origin).ceil();
