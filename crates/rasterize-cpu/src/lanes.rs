@@ -1,6 +1,6 @@
 //! Four-lane vectors for the tile kernels: one lane per pixel column of a group of four.
 //!
-//! The kernels in [`crate::raster`] are written once against [`Lanes`] and run on
+//! The portable backward kernel in [`crate::raster`] is written once against [`Lanes`] and runs on
 //! - [`F32x4`] (x86-64, f32): SSE2 registers, baseline on every x86-64 CPU, so no runtime dispatch;
 //! - [`Arr4`] (f64 for the gradient checks, and f32 on other architectures): four scalars, element
 //!   by element.
@@ -8,7 +8,8 @@
 //! Every [`F32x4`] operation is the IEEE operation of its scalar counterpart lane by lane (add, sub,
 //! mul, div and comparisons are exactly rounded in both; `exp` repeats [`crate::fast_exp_f32`]'s
 //! operations), so a kernel gives the same bits on either implementation. The unit tests below
-//! check that lane by lane on random and special values.
+//! check that lane by lane on random and special values. (On CPUs with AVX-512 the f32 kernels
+//! run 16 lanes a row instead, with the same bits: `raster/avx512.rs`.)
 
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Not, Sub};
 

@@ -50,6 +50,11 @@ pub trait Real: num_traits::Float + Send + Sync + std::fmt::Debug + Default + 's
     fn depth_key(depth: Self, index: u32) -> Self::DepthKey;
     /// The index stored in `key`.
     fn key_index(key: Self::DepthKey) -> u32;
+
+    /// `s` as f32 if `Self` is f32, else `None` (lets generic code pick an f32-only kernel).
+    fn as_f32(s: &[Self]) -> Option<&[f32]>;
+    /// `s` as f32 if `Self` is f32, else `None`.
+    fn as_f32_mut(s: &mut [Self]) -> Option<&mut [f32]>;
 }
 
 impl Real for f32 {
@@ -72,6 +77,14 @@ impl Real for f32 {
     fn key_index(key: u64) -> u32 {
         key as u32
     }
+    #[inline(always)]
+    fn as_f32(s: &[f32]) -> Option<&[f32]> {
+        Some(s)
+    }
+    #[inline(always)]
+    fn as_f32_mut(s: &mut [f32]) -> Option<&mut [f32]> {
+        Some(s)
+    }
 }
 
 impl Real for f64 {
@@ -90,6 +103,14 @@ impl Real for f64 {
     #[inline(always)]
     fn key_index(key: u128) -> u32 {
         key as u32
+    }
+    #[inline(always)]
+    fn as_f32(_: &[f64]) -> Option<&[f32]> {
+        None
+    }
+    #[inline(always)]
+    fn as_f32_mut(_: &mut [f64]) -> Option<&mut [f32]> {
+        None
     }
 }
 

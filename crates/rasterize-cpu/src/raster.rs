@@ -25,6 +25,9 @@ use rayon::prelude::*;
 use gaussians::covariance::{covariance_3d_backward, Mat3};
 
 use crate::lanes::Lanes;
+
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 use crate::project::{
     project, project_cov, project_cov_backward, CameraParams, Projected, ProjectedGrad,
 };
@@ -524,6 +527,10 @@ fn render_inputs<T: Real>(
     }
 
     // 3. Blend every tile.
+    #[cfg(target_arch = "x86_64")]
+    let use_avx512 = avx512::available();
+    #[cfg(not(target_arch = "x86_64"))]
+    let use_avx512 = false;
     let stride = (2 + c) * TILE_PIXELS;
     let mut tile_buf = vec![T::zero(); n_tiles * stride];
     let mut used = vec![0u32; n_tiles];
@@ -538,9 +545,11 @@ fn render_inputs<T: Real>(
                 TILE_SIZE.min(width - origin[0]),
                 TILE_SIZE.min(height - origin[1]),
             ];
-            forward_tile(
-                &pair_splats[range.clone()],
-                &pair_channels[range.start * c..range.end * c],
+            forward_tile_dispatch(
+                use_avx512,
+                &pair_splats,
+                &pair_channels,
+                range,
                 c,
                 origin,
                 size,
@@ -865,10 +874,35 @@ fn quad_centres<T: Real>() -> [T::V4; QUADS] {
     std::array::from_fn(|q| T::V4::load(&c[q * QUAD..]))
 }
 
-/// Sum of the lanes in lane order, starting from zero (the fixed order of every per-pair reduction).
-#[inline(always)]
-fn lane_sum<T: Real>(v: T::V4) -> T {
-    v.to_array().iter().fold(T::zero(), |s, &x| s + x)
+/// [`forward_tile`] of the pairs `range`: the AVX-512 kernel when `use_avx512` and `T` is f32
+/// (same bits, faster), else the portable one. `pair_splats` is a `&Vec`, not a slice, so that it
+/// can be downcast to the f32 kernel's type.
+#[allow(clippy::too_many_arguments, clippy::ptr_arg)]
+fn forward_tile_dispatch<T: Real>(
+    use_avx512: bool,
+    pair_splats: &Vec<PairSplat<T>>,
+    pair_channels: &[T],
+    range: std::ops::Range<usize>,
+    c: usize,
+    origin: [usize; 2],
+    size: [usize; 2],
+    buf: &mut [T],
+    used: &mut u32,
+) {
+    let channels = &pair_channels[range.start * c..range.end * c];
+    #[cfg(target_arch = "x86_64")]
+    if use_avx512 {
+        use std::any::Any;
+        let splats32 = (pair_splats as &dyn Any).downcast_ref::<Vec<PairSplat<f32>>>();
+        if let (Some(splats), Some(channels), Some(buf)) =
+            (splats32, T::as_f32(channels), T::as_f32_mut(buf))
+        {
+            avx512::run_forward_tile(&splats[range], channels, c, origin, size, buf, used);
+            return;
+        }
+    }
+    let _ = use_avx512;
+    forward_tile(&pair_splats[range], channels, c, origin, size, buf, used);
 }
 
 /// Blends one tile front to back into `buf` ([T | depth | channels] × 256); `used` receives the
@@ -1044,6 +1078,10 @@ fn backward_inputs<T: Real>(
         slices.push(head);
         rest = tail;
     }
+    #[cfg(target_arch = "x86_64")]
+    let use_avx512 = avx512::available();
+    #[cfg(not(target_arch = "x86_64"))]
+    let use_avx512 = false;
     slices.into_par_iter().enumerate().for_each_init(
         || BackwardScratch::new(c),
         |scratch, (tile, out)| {
@@ -1056,20 +1094,8 @@ fn backward_inputs<T: Real>(
                 TILE_SIZE.min(width - origin[0]),
                 TILE_SIZE.min(height - origin[1]),
             ];
-            backward_tile(
-                &st.pair_splats[range.clone()],
-                &st.pair_channels[range.start * c..range.end * c],
-                &st.background,
-                c,
-                origin,
-                size,
-                width,
-                hw,
-                &st.tile_buf[tile * stride..(tile + 1) * stride],
-                st.used[tile] as usize,
-                cot,
-                scratch,
-                out,
+            backward_tile_dispatch(
+                use_avx512, st, tile, c, origin, size, width, cot, scratch, out,
             );
         },
     );
@@ -1195,7 +1221,8 @@ fn backward_inputs<T: Real>(
     Ok(out)
 }
 
-/// Per-thread scratch of the backward tile kernel (allocated once per rayon job split, not per pixel).
+/// Per-thread scratch of the backward tile kernels (allocated once per rayon job split, not per
+/// pixel).
 struct BackwardScratch<T: Real> {
     t: Vec<T>,
     alive: Vec<T>,
@@ -1203,9 +1230,9 @@ struct BackwardScratch<T: Real> {
     g_img: Vec<T>,
     g_alpha: Vec<T>,
     g_depth: Vec<T>,
-    /// Per-lane channel-gradient accumulators of the current pair, one quad per channel (lane l
-    /// sums the pair's pixels in columns ≡ l mod [`QUAD`]).
-    acc_channels: Vec<T::V4>,
+    /// Per-column channel-gradient accumulators of the current pair, C × [`TILE_SIZE`] (column x
+    /// sums the pair's pixels in tile column x).
+    acc_channels: Vec<T>,
 }
 
 impl<T: Real> BackwardScratch<T> {
@@ -1217,18 +1244,124 @@ impl<T: Real> BackwardScratch<T> {
             g_img: vec![T::zero(); c * TILE_PIXELS],
             g_alpha: vec![T::zero(); TILE_PIXELS],
             g_depth: vec![T::zero(); TILE_PIXELS],
-            acc_channels: vec![T::V4::splat(T::zero()); c],
+            acc_channels: vec![T::zero(); c * TILE_SIZE],
         }
     }
+
+    /// Resets the blend state and copies the tile's cotangents into tile-major rows.
+    fn prepare(
+        &mut self,
+        c: usize,
+        origin: [usize; 2],
+        size: [usize; 2],
+        width: usize,
+        cot: &Cotangents<'_, T>,
+    ) {
+        let hw = cot.image.len() / c.max(1);
+        self.t.fill(T::one());
+        self.alive.fill(T::one());
+        self.pre.fill(T::zero());
+        self.g_img.fill(T::zero());
+        self.g_alpha.fill(T::zero());
+        self.g_depth.fill(T::zero());
+        for y in 0..size[1] {
+            let idx = y * TILE_SIZE;
+            let pix = (origin[1] + y) * width + origin[0];
+            for j in 0..c {
+                self.g_img[j * TILE_PIXELS + idx..j * TILE_PIXELS + idx + size[0]]
+                    .copy_from_slice(&cot.image[j * hw + pix..j * hw + pix + size[0]]);
+            }
+            if let Some(a) = cot.alpha {
+                self.g_alpha[idx..idx + size[0]].copy_from_slice(&a[pix..pix + size[0]]);
+            }
+            if let Some(d) = cot.depth {
+                self.g_depth[idx..idx + size[0]].copy_from_slice(&d[pix..pix + size[0]]);
+            }
+        }
+    }
+}
+
+/// One tile's backward (`tile`'s pairs of `st`, `out` their gradient slots): the AVX-512 kernel
+/// when `use_avx512` and `T` is f32 (same bits, faster), else the portable [`backward_tile`].
+#[allow(clippy::too_many_arguments)]
+fn backward_tile_dispatch<T: Real>(
+    use_avx512: bool,
+    st: &ForwardState<T>,
+    tile: usize,
+    c: usize,
+    origin: [usize; 2],
+    size: [usize; 2],
+    width: usize,
+    cot: &Cotangents<'_, T>,
+    s: &mut BackwardScratch<T>,
+    out: &mut [T],
+) {
+    let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
+    let stride = (2 + c) * TILE_PIXELS;
+    let buf = tile * stride..(tile + 1) * stride;
+    let used = st.used[tile] as usize;
+    #[cfg(target_arch = "x86_64")]
+    if use_avx512 {
+        use std::any::Any;
+        let st32 = (st as &dyn Any).downcast_ref::<ForwardState<f32>>();
+        let s32 = (s as &mut dyn Any).downcast_mut::<BackwardScratch<f32>>();
+        if let (Some(st), Some(s), Some(image), Some(out)) =
+            (st32, s32, T::as_f32(cot.image), T::as_f32_mut(out))
+        {
+            let cot = Cotangents {
+                image,
+                alpha: cot.alpha.and_then(T::as_f32),
+                depth: cot.depth.and_then(T::as_f32),
+            };
+            avx512::run_backward_tile(
+                &st.pair_splats[range.clone()],
+                &st.pair_channels[range.start * c..range.end * c],
+                &st.background,
+                c,
+                origin,
+                size,
+                width,
+                &st.tile_buf[buf],
+                used,
+                &cot,
+                s,
+                out,
+            );
+            return;
+        }
+    }
+    let _ = use_avx512;
+    backward_tile(
+        &st.pair_splats[range.clone()],
+        &st.pair_channels[range.start * c..range.end * c],
+        &st.background,
+        c,
+        origin,
+        size,
+        width,
+        &st.tile_buf[buf],
+        used,
+        cot,
+        s,
+        out,
+    );
+}
+
+/// Sum of a pair's per-column partial sums in column order, starting from zero: the fixed
+/// reduction order of every backward kernel, so that they all give the same bits.
+#[inline(always)]
+fn column_sum<T: Real>(columns: &[T]) -> T {
+    columns.iter().fold(T::zero(), |s, &x| s + x)
 }
 
 /// Replays one tile front to back (the forward's first `used` list entries, with bit-identical
 /// α, T and stop decisions) and writes each pair's gradient slot
 /// [mean2d x, y | conic a, b, c | opacity | depth | channels C].
 ///
-/// Like the forward, every row of a pair is a few quads of four lanes, each quad one pass through
-/// α, blend state, dL/dα and the per-lane accumulators; each pair's per-lane partial sums are
-/// reduced in lane order at the end of the pair, so the result does not depend on threads.
+/// Every row of a pair is a few quads of four lanes, each quad one pass through α, blend state,
+/// dL/dα and per-column accumulators; each pair's per-column partial sums are reduced in column
+/// order at the end of the pair, so the result does not depend on threads — nor on the lane width:
+/// the AVX-512 kernel (16 lanes, one register per row) gives the same bits.
 #[allow(clippy::too_many_arguments)]
 fn backward_tile<T: Real>(
     list: &[PairSplat<T>],
@@ -1238,7 +1371,6 @@ fn backward_tile<T: Real>(
     origin: [usize; 2],
     size: [usize; 2],
     width: usize,
-    hw: usize,
     buf: &[T],
     used: usize,
     cot: &Cotangents<'_, T>,
@@ -1246,26 +1378,7 @@ fn backward_tile<T: Real>(
     out: &mut [T],
 ) {
     let slot = 7 + c;
-    s.t.fill(T::one());
-    s.alive.fill(T::one());
-    s.pre.fill(T::zero());
-    s.g_img.fill(T::zero());
-    s.g_alpha.fill(T::zero());
-    s.g_depth.fill(T::zero());
-    for y in 0..size[1] {
-        let idx = y * TILE_SIZE;
-        let pix = (origin[1] + y) * width + origin[0];
-        for j in 0..c {
-            s.g_img[j * TILE_PIXELS + idx..j * TILE_PIXELS + idx + size[0]]
-                .copy_from_slice(&cot.image[j * hw + pix..j * hw + pix + size[0]]);
-        }
-        if let Some(a) = cot.alpha {
-            s.g_alpha[idx..idx + size[0]].copy_from_slice(&a[pix..pix + size[0]]);
-        }
-        if let Some(d) = cot.depth {
-            s.g_depth[idx..idx + size[0]].copy_from_slice(&d[pix..pix + size[0]]);
-        }
-    }
+    s.prepare(c, origin, size, width, cot);
     let t_final = &buf[BUF_T..BUF_T + TILE_PIXELS];
     let d_final = &buf[BUF_D..BUF_D + TILE_PIXELS];
     let c_final = &buf[BUF_C..];
@@ -1286,23 +1399,17 @@ fn backward_tile<T: Real>(
         let [ca, cb, cc] = p.conic;
         let (v_ca, v_cb, v_mx) = (v(ca), v(cb), v(sl.mx));
         let z = v(p.depth);
-        s.acc_channels.fill(k.zero);
-        let [mut a_mx, mut a_my, mut a_ca, mut a_cb, mut a_cc, mut a_op, mut a_z] = [k.zero; 7];
-        // One flat loop over the box's (row, quad) cells, row-major, with the cell's row and quad
-        // advanced without a branch: the per-row loop exits of a nested loop (1–4 quads a row)
-        // are hard to predict and each misprediction discards the quads in flight.
-        let quads = sl.q1 - sl.q0;
-        let (mut y, mut q) = (y0, sl.q0);
-        for _ in 0..(y1 - y0) * quads {
-            {
-                let dy = sl.my - centre[y];
-                let cc_dy_dy = cc * dy * dy;
-                let (v_dy, v_cb_dy, v_cc_dy) = (v(dy), v(cb * dy), v(cc * dy));
-                let cxq = cx[q];
-                let at = y * TILE_SIZE + q * QUAD;
-                let wrap = usize::from(q + 1 == sl.q1);
-                y += wrap;
-                q = q + 1 - wrap * quads;
+        s.acc_channels.fill(T::zero());
+        // Per-column accumulators: mean x, y, conic a, b, c, opacity, depth; quad q holds columns
+        // 4q..4q+4.
+        let mut geo = [[k.zero; QUADS]; 7];
+        for y in y0..y1 {
+            let dy = sl.my - centre[y];
+            let cc_dy_dy = cc * dy * dy;
+            let (v_dy, v_cb_dy, v_cc_dy) = (v(dy), v(cb * dy), v(cc * dy));
+            let row = y * TILE_SIZE;
+            for (q, &cxq) in cx.iter().enumerate().take(sl.q1).skip(sl.q0) {
+                let at = row + q * QUAD;
                 let (gauss, raw, a) = lane_alpha(&sl, cxq, dy, cc_dy_dy, &k);
                 // α where the clamp is inactive (else 0): dα/dpower = α there.
                 let slope = T::V4::select(raw.lt(k.max_alpha), a, k.zero);
@@ -1312,7 +1419,8 @@ fn backward_tile<T: Real>(
                 // Non-contributing lanes: w = 0 and T unchanged.
                 let contrib = w.ne(k.zero);
                 if T::V4::count(contrib | stop) == 0 {
-                    // Nothing changes in this quad and every gradient term below is a zero.
+                    // Nothing changes in this quad and every gradient term below is a zero (the
+                    // accumulators start at +0 and are never −0, so adding ±0 is a no-op).
                     continue;
                 }
                 t_new.store(&mut s.t[at..]);
@@ -1325,7 +1433,7 @@ fn backward_tile<T: Real>(
                 } else {
                     k.zero
                 };
-                for (j, acc) in s.acc_channels.iter_mut().enumerate() {
+                for (j, acc) in s.acc_channels.chunks_exact_mut(TILE_SIZE).enumerate() {
                     let (value, b) = (v(ch[j]), v(bg[j]));
                     let o = j * TILE_PIXELS + at;
                     let pre = T::V4::load(&s.pre[o..]) + w * value;
@@ -1333,7 +1441,8 @@ fn backward_tile<T: Real>(
                     let behind = T::V4::load(&c_final[o..]) - pre + tn * b;
                     let gi = T::V4::load(&s.g_img[o..]);
                     d_alpha = d_alpha + gi * (t_old * value - behind * inv);
-                    *acc = *acc + w * gi;
+                    let acc = &mut acc[q * QUAD..];
+                    (T::V4::load(acc) + w * gi).store(acc);
                 }
                 // Without a depth cotangent the depth terms are exact zeros: skip them.
                 if has_depth {
@@ -1343,28 +1452,32 @@ fn backward_tile<T: Real>(
                     let behind = T::V4::load(&d_final[at..]) - pre;
                     let gd = T::V4::load(&s.g_depth[at..]);
                     d_alpha = d_alpha + gd * (t_old * z - behind * inv);
-                    a_z = a_z + w * gd;
+                    geo[6][q] = geo[6][q] + w * gd;
                 }
                 // Only contributing lanes carry a gradient; where α is clamped at 0.99 its
                 // derivative w.r.t. opacity and power is zero.
                 let dx = v_mx - cxq;
                 let da = T::V4::select(contrib, d_alpha, k.zero);
                 let d_power = slope * da;
-                a_mx = a_mx - d_power * (v_ca * dx + v_cb_dy);
-                a_my = a_my - d_power * (v_cc_dy + v_cb * dx);
-                a_ca = a_ca - half * d_power * dx * dx;
-                a_cb = a_cb - d_power * dx * v_dy;
-                a_cc = a_cc - half * d_power * v_dy * v_dy;
-                a_op = a_op + T::V4::select(slope.ne(k.zero), gauss * da, k.zero);
+                geo[0][q] = geo[0][q] - d_power * (v_ca * dx + v_cb_dy);
+                geo[1][q] = geo[1][q] - d_power * (v_cc_dy + v_cb * dx);
+                geo[2][q] = geo[2][q] - half * d_power * dx * dx;
+                geo[3][q] = geo[3][q] - d_power * dx * v_dy;
+                geo[4][q] = geo[4][q] - half * d_power * v_dy * v_dy;
+                geo[5][q] = geo[5][q] + T::V4::select(slope.ne(k.zero), gauss * da, k.zero);
             }
         }
         let dst = &mut out[idx * slot..(idx + 1) * slot];
-        for (d, lanes) in dst.iter_mut().zip(
-            [a_mx, a_my, a_ca, a_cb, a_cc, a_op, a_z]
-                .iter()
-                .chain(&s.acc_channels),
-        ) {
-            *d = lane_sum::<T>(*lanes);
+        for (d, quads) in dst.iter_mut().zip(&geo) {
+            let columns: [T; TILE_SIZE] =
+                std::array::from_fn(|x| quads[x / QUAD].to_array()[x % QUAD]);
+            *d = column_sum(&columns);
+        }
+        for (d, columns) in dst[7..]
+            .iter_mut()
+            .zip(s.acc_channels.chunks_exact(TILE_SIZE))
+        {
+            *d = column_sum(columns);
         }
     }
 }
@@ -1430,6 +1543,100 @@ mod tests {
         }
         // The random lanes reach all three outcomes: skipped, blended and stopping.
         assert!(decisions.iter().all(|&d| d > 100), "{decisions:?}");
+    }
+
+    /// The AVX-512 kernels give the portable kernels' bits, tile by tile: the image buffers and
+    /// stop counts of the forward, and every pair's gradient slot of the backward with image,
+    /// alpha and depth cotangents, on scenes whose size leaves partial tiles at the borders.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx512_kernels_equal_the_portable_kernels_bit_for_bit() {
+        use super::*;
+        use crate::synthetic::SyntheticScene;
+        if !avx512::available() {
+            eprintln!("skipped: this CPU has no AVX-512F");
+            return;
+        }
+        for (seed, n, w, h) in [
+            (1u64, 3000usize, 53u32, 37u32),
+            (2, 800, 40, 70),
+            (3, 6000, 64, 48),
+        ] {
+            let scene = SyntheticScene::new(n, w, h, seed).expect("scene");
+            let out =
+                render(&scene.camera, &scene.splats(), &RenderSettings::default()).expect("render");
+            let st = &out.state;
+            let c = 3;
+            let stride = (2 + c) * TILE_PIXELS;
+            let gx = (w as usize).div_ceil(TILE_SIZE);
+            let (width, height) = (w as usize, h as usize);
+            let hw = width * height;
+            let mut state = seed;
+            let mut noise = |len: usize| -> Vec<f32> {
+                (0..len)
+                    .map(|_| {
+                        state = state
+                            .wrapping_mul(6_364_136_223_846_793_005)
+                            .wrapping_add(1_442_695_040_888_963_407);
+                        (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+                    })
+                    .collect()
+            };
+            let (d_image, d_alpha, d_depth) = (noise(c * hw), noise(hw), noise(hw));
+            let cot = Cotangents {
+                image: &d_image,
+                alpha: Some(&d_alpha),
+                depth: Some(&d_depth),
+            };
+            let mut checked_pairs = 0;
+            for tile in 0..st.used.len() {
+                let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
+                let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
+                let size = [
+                    TILE_SIZE.min(width - origin[0]),
+                    TILE_SIZE.min(height - origin[1]),
+                ];
+                let list = &st.pair_splats[range.clone()];
+                let channels = &st.pair_channels[range.start * c..range.end * c];
+                let (mut buf_p, mut buf_v) = (vec![0.0f32; stride], vec![0.0f32; stride]);
+                let (mut used_p, mut used_v) = (0u32, 0u32);
+                forward_tile(list, channels, c, origin, size, &mut buf_p, &mut used_p);
+                avx512::run_forward_tile(list, channels, c, origin, size, &mut buf_v, &mut used_v);
+                assert_eq!(used_p, used_v, "tile {tile}");
+                assert!(buf_p
+                    .iter()
+                    .zip(&buf_v)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()));
+                let slots = range.len() * (7 + c);
+                let (mut out_p, mut out_v) = (vec![0.0f32; slots], vec![0.0f32; slots]);
+                let (mut s_p, mut s_v) = (BackwardScratch::new(c), BackwardScratch::new(c));
+                let args = (&st.background, &buf_p, used_p as usize);
+                backward_tile(
+                    list, channels, args.0, c, origin, size, width, args.1, args.2, &cot, &mut s_p,
+                    &mut out_p,
+                );
+                avx512::run_backward_tile(
+                    list, channels, args.0, c, origin, size, width, args.1, args.2, &cot, &mut s_v,
+                    &mut out_v,
+                );
+                assert!(
+                    out_p
+                        .iter()
+                        .zip(&out_v)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "tile {tile}"
+                );
+                checked_pairs += out_p
+                    .chunks(7 + c)
+                    .filter(|g| g.iter().any(|&v| v != 0.0))
+                    .count();
+            }
+            // The comparison is not vacuous: many pairs carry gradients.
+            assert!(
+                checked_pairs > n / 4,
+                "{checked_pairs} pairs with gradients"
+            );
+        }
     }
 
     /// The span by the rounding-function definition it replaces.
