@@ -527,10 +527,6 @@ fn render_inputs<T: Real>(
     }
 
     // 3. Blend every tile.
-    #[cfg(target_arch = "x86_64")]
-    let use_avx512 = avx512::available();
-    #[cfg(not(target_arch = "x86_64"))]
-    let use_avx512 = false;
     let stride = (2 + c) * TILE_PIXELS;
     let mut tile_buf = vec![T::zero(); n_tiles * stride];
     let mut used = vec![0u32; n_tiles];
@@ -546,7 +542,6 @@ fn render_inputs<T: Real>(
                 TILE_SIZE.min(height - origin[1]),
             ];
             forward_tile_dispatch(
-                use_avx512,
                 &pair_splats,
                 &pair_channels,
                 range,
@@ -874,12 +869,11 @@ fn quad_centres<T: Real>() -> [T::V4; QUADS] {
     std::array::from_fn(|q| T::V4::load(&c[q * QUAD..]))
 }
 
-/// [`forward_tile`] of the pairs `range`: the AVX-512 kernel when `use_avx512` and `T` is f32
-/// (same bits, faster), else the portable one. `pair_splats` is a `&Vec`, not a slice, so that it
+/// [`forward_tile`] of the pairs `range`: the AVX-512 kernel when the CPU has AVX-512F and `T` is
+/// f32 (same bits, faster), else the portable one. `pair_splats` is a `&Vec`, not a slice, so that it
 /// can be downcast to the f32 kernel's type.
 #[allow(clippy::too_many_arguments, clippy::ptr_arg)]
 fn forward_tile_dispatch<T: Real>(
-    use_avx512: bool,
     pair_splats: &Vec<PairSplat<T>>,
     pair_channels: &[T],
     range: std::ops::Range<usize>,
@@ -891,17 +885,18 @@ fn forward_tile_dispatch<T: Real>(
 ) {
     let channels = &pair_channels[range.start * c..range.end * c];
     #[cfg(target_arch = "x86_64")]
-    if use_avx512 {
+    {
         use std::any::Any;
         let splats32 = (pair_splats as &dyn Any).downcast_ref::<Vec<PairSplat<f32>>>();
         if let (Some(splats), Some(channels), Some(buf)) =
-            (splats32, T::as_f32(channels), T::as_f32_mut(buf))
+            (splats32, T::as_f32(channels), T::as_f32_mut(&mut *buf))
         {
-            avx512::run_forward_tile(&splats[range], channels, c, origin, size, buf, used);
-            return;
+            let list = &splats[range.clone()];
+            if avx512::try_forward_tile(list, channels, c, origin, size, buf, used) {
+                return;
+            }
         }
     }
-    let _ = use_avx512;
     forward_tile(&pair_splats[range], channels, c, origin, size, buf, used);
 }
 
@@ -1078,10 +1073,6 @@ fn backward_inputs<T: Real>(
         slices.push(head);
         rest = tail;
     }
-    #[cfg(target_arch = "x86_64")]
-    let use_avx512 = avx512::available();
-    #[cfg(not(target_arch = "x86_64"))]
-    let use_avx512 = false;
     slices.into_par_iter().enumerate().for_each_init(
         || BackwardScratch::new(c),
         |scratch, (tile, out)| {
@@ -1094,9 +1085,7 @@ fn backward_inputs<T: Real>(
                 TILE_SIZE.min(width - origin[0]),
                 TILE_SIZE.min(height - origin[1]),
             ];
-            backward_tile_dispatch(
-                use_avx512, st, tile, c, origin, size, width, cot, scratch, out,
-            );
+            backward_tile_dispatch(st, tile, c, origin, size, width, cot, scratch, out);
         },
     );
 
@@ -1282,10 +1271,10 @@ impl<T: Real> BackwardScratch<T> {
 }
 
 /// One tile's backward (`tile`'s pairs of `st`, `out` their gradient slots): the AVX-512 kernel
-/// when `use_avx512` and `T` is f32 (same bits, faster), else the portable [`backward_tile`].
+/// when the CPU has AVX-512F and `T` is f32 (same bits, faster), else the portable
+/// [`backward_tile`].
 #[allow(clippy::too_many_arguments)]
 fn backward_tile_dispatch<T: Real>(
-    use_avx512: bool,
     st: &ForwardState<T>,
     tile: usize,
     c: usize,
@@ -1301,19 +1290,19 @@ fn backward_tile_dispatch<T: Real>(
     let buf = tile * stride..(tile + 1) * stride;
     let used = st.used[tile] as usize;
     #[cfg(target_arch = "x86_64")]
-    if use_avx512 {
+    {
         use std::any::Any;
         let st32 = (st as &dyn Any).downcast_ref::<ForwardState<f32>>();
-        let s32 = (s as &mut dyn Any).downcast_mut::<BackwardScratch<f32>>();
+        let s32 = (&mut *s as &mut dyn Any).downcast_mut::<BackwardScratch<f32>>();
         if let (Some(st), Some(s), Some(image), Some(out)) =
-            (st32, s32, T::as_f32(cot.image), T::as_f32_mut(out))
+            (st32, s32, T::as_f32(cot.image), T::as_f32_mut(&mut *out))
         {
             let cot = Cotangents {
                 image,
                 alpha: cot.alpha.and_then(T::as_f32),
                 depth: cot.depth.and_then(T::as_f32),
             };
-            avx512::run_backward_tile(
+            if avx512::try_backward_tile(
                 &st.pair_splats[range.clone()],
                 &st.pair_channels[range.start * c..range.end * c],
                 &st.background,
@@ -1321,16 +1310,16 @@ fn backward_tile_dispatch<T: Real>(
                 origin,
                 size,
                 width,
-                &st.tile_buf[buf],
+                &st.tile_buf[buf.clone()],
                 used,
                 &cot,
                 s,
                 out,
-            );
-            return;
+            ) {
+                return;
+            }
         }
     }
-    let _ = use_avx512;
     backward_tile(
         &st.pair_splats[range.clone()],
         &st.pair_channels[range.start * c..range.end * c],
@@ -1601,7 +1590,15 @@ mod tests {
                 let (mut buf_p, mut buf_v) = (vec![0.0f32; stride], vec![0.0f32; stride]);
                 let (mut used_p, mut used_v) = (0u32, 0u32);
                 forward_tile(list, channels, c, origin, size, &mut buf_p, &mut used_p);
-                avx512::run_forward_tile(list, channels, c, origin, size, &mut buf_v, &mut used_v);
+                assert!(avx512::try_forward_tile(
+                    list,
+                    channels,
+                    c,
+                    origin,
+                    size,
+                    &mut buf_v,
+                    &mut used_v
+                ));
                 assert_eq!(used_p, used_v, "tile {tile}");
                 assert!(buf_p
                     .iter()
@@ -1615,10 +1612,10 @@ mod tests {
                     list, channels, args.0, c, origin, size, width, args.1, args.2, &cot, &mut s_p,
                     &mut out_p,
                 );
-                avx512::run_backward_tile(
+                assert!(avx512::try_backward_tile(
                     list, channels, args.0, c, origin, size, width, args.1, args.2, &cot, &mut s_v,
                     &mut out_v,
-                );
+                ));
                 assert!(
                     out_p
                         .iter()

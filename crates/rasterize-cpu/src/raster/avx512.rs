@@ -20,14 +20,15 @@ use super::{
 };
 use crate::lit;
 
-/// Whether this CPU runs [`backward_tile`].
+/// Whether this CPU runs the kernels of this module.
 pub(super) fn available() -> bool {
     std::arch::is_x86_feature_detected!("avx512f")
 }
 
-/// [`backward_tile`], or a panic if this CPU lacks AVX-512F (callers check [`available`] first).
+/// Runs [`backward_tile`] and returns `true`, or returns `false` (doing nothing) if this CPU lacks
+/// AVX-512F.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn run_backward_tile(
+pub(super) fn try_backward_tile(
     list: &[PairSplat<f32>],
     channels: &[f32],
     bg: &[f32],
@@ -40,18 +41,22 @@ pub(super) fn run_backward_tile(
     cot: &Cotangents<'_, f32>,
     s: &mut BackwardScratch<f32>,
     out: &mut [f32],
-) {
-    assert!(available(), "the AVX-512 backward kernel needs AVX-512F");
+) -> bool {
+    if !available() {
+        return false;
+    }
     // SAFETY: the CPU has AVX-512F (checked above), the kernel's only requirement.
     unsafe {
         backward_tile(
             list, channels, bg, c, origin, size, width, buf, used, cot, s, out,
         )
-    }
+    };
+    true
 }
 
-/// [`forward_tile`], or a panic if this CPU lacks AVX-512F (callers check [`available`] first).
-pub(super) fn run_forward_tile(
+/// Runs [`forward_tile`] and returns `true`, or returns `false` (doing nothing) if this CPU lacks
+/// AVX-512F.
+pub(super) fn try_forward_tile(
     list: &[PairSplat<f32>],
     channels: &[f32],
     c: usize,
@@ -59,10 +64,13 @@ pub(super) fn run_forward_tile(
     size: [usize; 2],
     buf: &mut [f32],
     used: &mut u32,
-) {
-    assert!(available(), "the AVX-512 forward kernel needs AVX-512F");
+) -> bool {
+    if !available() {
+        return false;
+    }
     // SAFETY: the CPU has AVX-512F (checked above), the kernel's only requirement.
-    unsafe { forward_tile(list, channels, c, origin, size, buf, used) }
+    unsafe { forward_tile(list, channels, c, origin, size, buf, used) };
+    true
 }
 
 /// Lanes `s[0..16]` (panics if `s` is shorter).
