@@ -118,6 +118,10 @@ pub struct Args {
     /// Peak learning rate of the joint phase.
     #[arg(long, default_value_t = 5e-5)]
     pub joint_lr: f64,
+    /// Decay the joint phase's learning rate from the peak to zero along a cosine over
+    /// `--joint-steps` (default: constant after the warm-up).
+    #[arg(long)]
+    pub joint_cosine: bool,
     /// Probability that a fine-tuning or joint training pair has a static background (only the
     /// foreground layers move, as with the synthetic benchmark's fixed camera). The held-out
     /// figures are reported on the default generator (moving background) and with this setting.
@@ -131,7 +135,11 @@ fn save(net: &flow::SpyNet<f32>, out: &Path) -> Result<()> {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
     }
-    flow::save_safetensors(net, out).with_context(|| format!("writing {}", out.display()))
+    // Atomically (temporary file + rename): the joint phase rewrites the file at every new best,
+    // and a run stopped mid-write must leave the previous weights intact.
+    let bytes = flow::write_safetensors(net).context("serialising the weights")?;
+    gaussians::ply::write_atomically(out, &bytes)
+        .with_context(|| format!("writing {}", out.display()))
 }
 
 fn progress_bar(total: usize) -> Result<ProgressBar> {
@@ -180,6 +188,7 @@ pub fn run(args: Args) -> Result<()> {
         paired_input_init: !args.plain_init,
         seed: args.seed,
         distinct_pairs: None,
+        decay_steps: 0,
     };
     let start = std::time::Instant::now();
     let log = |bar: &ProgressBar, line: String| bar.suspend(|| eprintln!("{line}"));
@@ -291,9 +300,17 @@ pub fn run(args: Args) -> Result<()> {
     }
     bar.finish();
     if args.joint_steps > 0 {
+        let decay_steps = if args.joint_cosine {
+            args.joint_steps
+        } else {
+            0
+        };
         let mut joint = Trainer::from_net(
             trainer.net.clone(),
-            config(args.levels, pairs, args.joint_batch, args.joint_lr),
+            TrainConfig {
+                decay_steps,
+                ..config(args.levels, pairs, args.joint_batch, args.joint_lr)
+            },
         );
         let bar = progress_bar(args.joint_steps)?;
         let mut best = validation(&joint.net)?;
@@ -352,7 +369,7 @@ pub fn run(args: Args) -> Result<()> {
             "no_jitter_epe": epe_nj, "no_jitter_zero_flow_epe": zero_nj,
             "no_jitter_ratio": epe_nj / zero_nj,
             "joint_steps": args.joint_steps, "joint_batch": args.joint_batch,
-            "joint_lr": args.joint_lr, "static_background": args.static_background,
+            "joint_lr": args.joint_lr, "joint_cosine": args.joint_cosine, "static_background": args.static_background,
             "training_distribution_epe": epe_st, "training_distribution_zero_flow_epe": zero_st,
             "training_distribution_ratio": epe_st / zero_st,
         })

@@ -92,6 +92,7 @@ fn main() {
         paired_input_init: u("paired", "1") == 1,
         seed: u("seed", "1") as u64,
         distinct_pairs: None,
+        decay_steps: 0,
     });
     let evaln = u("evaln", "20") as u64;
     println!("{kv:?}");

@@ -70,6 +70,9 @@ pub struct TrainConfig {
     /// `Some(n)`: cycle over the fixed set of pairs `0..n` of the seed (a small data set, e.g. for
     /// tests that must see the loss go down); `None`: every step draws fresh pairs.
     pub distinct_pairs: Option<u64>,
+    /// Steps of a cosine learning-rate decay from the peak to zero, counted from a level's (or the
+    /// joint phase's) first step; later steps keep a rate of zero (0 = constant peak rate).
+    pub decay_steps: usize,
 }
 
 /// Network plus optimiser state of a coarse-to-fine training run.
@@ -194,19 +197,26 @@ impl Trainer {
     }
 
     /// Loss and learning rate of a level's step `t` (counted from 0): [`Loss::Mse`] for the first
-    /// `mse_steps`, then [`Loss::Epe`]; the rate ramps linearly over `warmup_steps`.
+    /// `mse_steps`, then [`Loss::Epe`]; the rate ramps linearly over `warmup_steps`
+    /// and, with `decay_steps`, follows a cosine from the peak to zero.
     fn schedule(&self, t: usize) -> (Loss, f64) {
         let kind = if t < self.cfg.mse_steps {
             Loss::Mse
         } else {
             Loss::Epe
         };
-        let lr = if self.cfg.warmup_steps > 0 {
-            self.cfg.lr * ((t + 1) as f64 / self.cfg.warmup_steps as f64).min(1.0)
+        let warm = if self.cfg.warmup_steps > 0 {
+            ((t + 1) as f64 / self.cfg.warmup_steps as f64).min(1.0)
         } else {
-            self.cfg.lr
+            1.0
         };
-        (kind, lr)
+        let decay = if self.cfg.decay_steps > 0 {
+            let progress = (t as f64 / self.cfg.decay_steps as f64).min(1.0);
+            0.5 * (1.0 + (std::f64::consts::PI * progress).cos())
+        } else {
+            1.0
+        };
+        (kind, self.cfg.lr * warm * decay)
     }
 
     /// Index in the data set of the run's `k`-th pair (cycling over `distinct_pairs` if set).

@@ -36,7 +36,46 @@ pub fn write_safetensors(net: &SpyNet<f32>) -> Result<Vec<u8>, FlowError> {
         ("format".to_string(), "spynet".to_string()),
         ("levels".to_string(), net.num_levels().to_string()),
     ]);
-    Ok(safetensors::serialize(views, Some(meta))?)
+    let bytes = safetensors::serialize(views, Some(meta))?;
+    Ok(with_sorted_metadata(bytes))
+}
+
+/// Rewrites a safetensors file's header with its `__metadata__` entries in key order: the container
+/// crate takes the metadata as a `HashMap` and writes it in that map's random iteration order, so the
+/// same network would otherwise give different bytes from run to run. Returns the input unchanged if
+/// its header is not the JSON object the crate writes.
+fn with_sorted_metadata(bytes: Vec<u8>) -> Vec<u8> {
+    let Some(len) = bytes
+        .get(..8)
+        .and_then(|b| <[u8; 8]>::try_from(b).ok())
+        .map(u64::from_le_bytes)
+        .and_then(|n| usize::try_from(n).ok())
+    else {
+        return bytes;
+    };
+    let Some(header) = bytes.get(8..8 + len) else {
+        return bytes;
+    };
+    let Ok(serde_json::Value::Object(mut top)) = serde_json::from_slice(header) else {
+        return bytes;
+    };
+    if let Some(serde_json::Value::Object(meta)) = top.get_mut("__metadata__") {
+        let sorted: std::collections::BTreeMap<String, serde_json::Value> =
+            std::mem::take(meta).into_iter().collect();
+        meta.extend(sorted);
+    }
+    let Ok(mut text) = serde_json::to_string(&serde_json::Value::Object(top)) else {
+        return bytes;
+    };
+    // The container pads its header with spaces to a multiple of 8 bytes.
+    while text.len() % 8 != 0 {
+        text.push(' ');
+    }
+    let mut out = Vec::with_capacity(8 + text.len() + bytes.len() - 8 - len);
+    out.extend_from_slice(&(text.len() as u64).to_le_bytes());
+    out.extend_from_slice(text.as_bytes());
+    out.extend_from_slice(&bytes[8 + len..]);
+    out
 }
 
 /// Parses safetensors bytes into a network; the number of levels is the number of consecutive

@@ -13,6 +13,23 @@ fn safetensors_round_trip_is_exact() {
 }
 
 #[test]
+fn safetensors_bytes_are_reproducible() {
+    // The metadata map's iteration order is random per map; every write must still give the same
+    // bytes (seven more writes: the chance that a random order repeats them all is 1/128).
+    let net = SpyNet::<f32>::random(2, 5);
+    let first = write_safetensors(&net).expect("serialise");
+    for _ in 0..7 {
+        assert_eq!(write_safetensors(&net).expect("serialise"), first);
+    }
+    let st = safetensors::SafeTensors::deserialize(&first).expect("parse");
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&first).expect("header");
+    let meta = meta.metadata().clone().expect("metadata");
+    assert_eq!(meta.get("format").map(String::as_str), Some("spynet"));
+    assert_eq!(meta.get("levels").map(String::as_str), Some("2"));
+    assert_eq!(st.names().len(), 2 * 5 * 2);
+}
+
+#[test]
 fn safetensors_missing_tensor_and_wrong_shape_are_named() {
     use safetensors::tensor::{Dtype, TensorView};
     let net = SpyNet::<f32>::random(2, 1);

@@ -23,6 +23,7 @@ fn config(levels: usize, size: usize) -> TrainConfig {
         paired_input_init: false,
         seed: 7,
         distinct_pairs: Some(2),
+        decay_steps: 0,
     }
 }
 
@@ -206,6 +207,7 @@ fn joint_steps_learn_every_level_and_are_bit_identical_for_one_and_three_threads
             let mut trainer = Trainer::new(TrainConfig {
                 batch: 3,
                 distinct_pairs: Some(3),
+                decay_steps: 0,
                 ..config(2, 16)
             });
             let start = trainer.net.clone();

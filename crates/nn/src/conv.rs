@@ -138,6 +138,54 @@ fn im2col<T: Real>(s: &Conv2dShape, img: &[T], r0: usize, r1: usize, col: &mut [
     }
 }
 
+/// The transpose of [`im2col`]: fills `rows` (`((r1 − r0)·W_out) × (C_in·k·k)`, row-major) with the
+/// receptive field of every output pixel of rows `r0..r1`, so that the weight gradient's GEMM reads
+/// it with contiguous rows instead of gathering a transposed im2col block element by element.
+fn im2row<T: Real>(s: &Conv2dShape, img: &[T], r0: usize, r1: usize, rows: &mut [T]) {
+    let (h, w, k, p) = (s.height, s.width, s.kernel, s.pad);
+    let wo = s.out_width();
+    let ckk = s.c_in * k * k;
+    for r in r0..r1 {
+        for x in 0..wo {
+            let dst = &mut rows[((r - r0) * wo + x) * ckk..((r - r0) * wo + x + 1) * ckk];
+            // Valid kernel columns kx: 0 <= x + kx - p < w.
+            let kx_lo = p.saturating_sub(x).min(k);
+            let kx_hi = (w + p).saturating_sub(x).min(k).max(kx_lo);
+            for ci in 0..s.c_in {
+                let plane = &img[ci * h * w..(ci + 1) * h * w];
+                for ky in 0..k {
+                    let d = &mut dst[(ci * k + ky) * k..(ci * k + ky + 1) * k];
+                    let iy = r + ky;
+                    if iy < p || iy - p >= h {
+                        d.fill(T::zero());
+                        continue;
+                    }
+                    let src = &plane[(iy - p) * w..(iy - p + 1) * w];
+                    if k == 7 && kx_lo == 0 && kx_hi == 7 {
+                        // The flow network's interior case as a fixed-size copy (a call to
+                        // memmove per 7 values cost a fifth of the weight-gradient pass).
+                        copy_fixed::<T, 7>(&src[x - p..], d);
+                        continue;
+                    }
+                    d[..kx_lo].fill(T::zero());
+                    d[kx_hi..].fill(T::zero());
+                    if kx_hi > kx_lo {
+                        let s0 = x + kx_lo - p;
+                        d[kx_lo..kx_hi].copy_from_slice(&src[s0..s0 + (kx_hi - kx_lo)]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Copies the first `N` values of `src` into `dst` (both at least `N` long) with a length known at
+/// compile time.
+#[inline(always)]
+fn copy_fixed<T: Copy, const N: usize>(src: &[T], dst: &mut [T]) {
+    dst[..N].copy_from_slice(&src[..N]);
+}
+
 /// The im2col + GEMM forward used by both the forward and the input-gradient pass.
 fn conv_core<T: Real>(
     s: &Conv2dShape,
@@ -363,14 +411,15 @@ pub fn conv2d_backward_weight<T: Real>(
     let partials: Vec<Vec<T>> = chunks
         .par_chunks(per_group.max(1))
         .map(|group| {
-            let mut col = ReusedBuffer(take_buffer::<T>(ckk * max_n));
+            let mut rows = ReusedBuffer(take_buffer::<T>(max_n * ckk));
             let mut dw = vec![T::zero(); s.c_out * ckk];
             for &(b, r0, r1) in group {
                 let n = (r1 - r0) * wo;
-                let col = &mut col.0[..ckk * n];
-                im2col(&s, &input[b * in_img..(b + 1) * in_img], r0, r1, col);
+                let rows = &mut rows.0[..n * ckk];
+                im2row(&s, &input[b * in_img..(b + 1) * in_img], r0, r1, rows);
                 let dy = &grad_output[b * out_img + r0 * wo..];
-                // dw (C_out × ckk) += dy_chunk (C_out × n, row stride H_out·W_out) · colᵀ.
+                // dw (C_out × ckk) += dy_chunk (C_out × n, row stride H_out·W_out) · rows (n × ckk);
+                // the same products summed in the same pixel order as with a transposed im2col.
                 T::gemm_unchecked(
                     s.c_out,
                     n,
@@ -379,9 +428,9 @@ pub fn conv2d_backward_weight<T: Real>(
                     dy,
                     hwo as isize,
                     1,
-                    col,
+                    rows,
+                    ckk as isize,
                     1,
-                    n as isize,
                     T::one(),
                     &mut dw,
                     ckk as isize,
