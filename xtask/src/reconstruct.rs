@@ -500,6 +500,7 @@ fn mean_times(recent: &[StepReport]) -> serde_json::Value {
         "adam": sum(|r| r.times.adam),
         "density": sum(|r| r.times.density),
         "flow": sum(|r| r.times.flow),
+        "flow_network": sum(|r| r.times.flow_network),
         "total": sum(|r| r.times.pose + r.times.render + r.times.loss + r.times.render_backward
             + r.times.model_backward + r.times.adam + r.times.density + r.times.flow),
     })

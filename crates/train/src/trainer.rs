@@ -364,6 +364,9 @@ pub struct StageTimes {
     /// The pair losses (flow, events): posing and rendering frame k+1, the flow network forward and
     /// backward, the event loss, frame k+1's rasterizer and model backward (0 without a pair).
     pub flow: f64,
+    /// The part of `flow` spent in the flow loss proper: resizing both renders, the frozen network's
+    /// forward and input gradient, the masked L1 (0 without a flow pair).
+    pub flow_network: f64,
 }
 
 /// What one step did.
@@ -848,6 +851,7 @@ impl Trainer {
             let rgb2 = &out2.image[..3 * hw];
             let mut d_image2 = vec![0.0f32; RENDER_CHANNELS * hw];
             if let Some((net, pair)) = flow_pair {
+                let t_network = Instant::now();
                 let fl = pair_flow_loss(
                     net,
                     rgb,
@@ -856,6 +860,7 @@ impl Trainer {
                     camera.width as usize,
                     &pair.target,
                 )?;
+                times.flow_network = t_network.elapsed().as_secs_f64();
                 let lambda = config.flow_weight;
                 flow_value = lambda * fl.loss;
                 for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl.d_first) {
