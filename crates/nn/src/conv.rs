@@ -9,7 +9,8 @@
 //! buffer; im2col blocks and that scratch are recycled per thread (see `BUFFERS`).
 //!
 //! The input gradient is itself a convolution of the output gradient with the flipped, transposed
-//! kernel (padding `k − 1 − pad`), so it reuses the same fast path. Weight gradients are reduced over
+//! kernel (padding `k − 1 − pad`), so it reuses the same fast path. The weight gradient gathers the
+//! receptive fields pixel-major (`im2row`) so that the GEMM reads them in place, and is reduced over
 //! chunks in a fixed order. This module must never depend on thread timing for any sum.
 
 use crate::{check_len, NnError, Real};
