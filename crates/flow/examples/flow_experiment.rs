@@ -93,6 +93,7 @@ fn main() {
         seed: u("seed", "1") as u64,
         distinct_pairs: None,
         decay_steps: 0,
+        extra_pairs: None,
     });
     let evaln = u("evaln", "20") as u64;
     println!("{kv:?}");

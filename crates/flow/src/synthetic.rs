@@ -20,6 +20,9 @@ pub struct Pair {
     pub img2: Vec<f32>,
     /// Ground-truth flow from frame 1 to frame 2, pixels.
     pub flow: Vec<f32>,
+    /// Per-pixel weight `(H, W)` of the training loss, normalised per pair (the loss is
+    /// `Σ wᵢ lᵢ / Σ wᵢ` at every level, with `w` 2×2-averaged like the flow); `None` = uniform.
+    pub weight: Option<Vec<f32>>,
 }
 
 /// Knobs of the generator.
@@ -391,6 +394,7 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
         img1,
         img2,
         flow,
+        weight: None,
     }
 }
 

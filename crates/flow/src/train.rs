@@ -1,7 +1,8 @@
 //! Training the project's own SPyNet weights on [`crate::synthetic`] pairs, coarse to fine as SPyNet
 //! was trained: level `l` is trained with levels `< l` frozen, on the end-point error between its
 //! output and the ground-truth flow reduced to its resolution (2×2 average pooling, vectors ×½ per
-//! level). Deterministic from the seed: pair `k` of a run is `generate_pair(seed, k)`.
+//! level). Deterministic from the seed: pair `k` of a run is `generate_pair(seed, k)`, or one of a
+//! fixed set of extra pairs chosen by a hash of the seed and `k` ([`ExtraPairs`]).
 //!
 //! The loss of one pair at level `l` is [`level_epe_loss`]: the mean over the level's pixels of the
 //! smoothed end-point error `√(Δu² + Δv² + ε)` with `ε = 1e-6` px². Its weight gradient is checked
@@ -9,9 +10,10 @@
 //! composition the optimiser sees (partial forward, loss, last-level backward) is covered, not only
 //! the individual ops.
 
-use crate::synthetic::{average_epe, generate_pair, PairConfig};
+use crate::synthetic::{average_epe, generate_pair, Pair, PairConfig};
 use crate::{FlowError, SpyNet};
 use nn::{avg_pool2x2_forward, pooled_size, Adam, AdamConfig, Real};
+use std::sync::Arc;
 
 /// Per-pixel loss of a level's flow against its ground truth.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,6 +75,84 @@ pub struct TrainConfig {
     /// Steps of a cosine learning-rate decay from the peak to zero, counted from a level's (or the
     /// joint phase's) first step; later steps keep a rate of zero (0 = constant peak rate).
     pub decay_steps: usize,
+    /// Fixed pairs from elsewhere (e.g. frames rendered by the synthetic benchmark's generator
+    /// with other seeds) mixed into the procedural ones; `None` = procedural pairs only.
+    pub extra_pairs: Option<ExtraPairs>,
+}
+
+/// A fixed set of training pairs mixed into a run's procedural pairs: pair `k` of the run is, with
+/// probability `fraction` (decided by a hash of the seed and `k`), one of `pairs` picked by another
+/// hash and mirrored left–right with probability ½ (image columns reversed, horizontal flow negated);
+/// otherwise the procedural pair `k`. Deterministic like the rest of the run.
+#[derive(Clone)]
+pub struct ExtraPairs {
+    /// The pairs, all of the run's image size.
+    pub pairs: Arc<Vec<Pair>>,
+    /// Probability in `[0, 1]` that a training pair is drawn from `pairs`.
+    pub fraction: f32,
+}
+
+impl std::fmt::Debug for ExtraPairs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ExtraPairs")
+            .field("pairs", &self.pairs.len())
+            .field("fraction", &self.fraction)
+            .finish()
+    }
+}
+
+/// SplitMix64 finaliser: a well-mixed 64-bit hash of `x`.
+fn mix64(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^ (x >> 31)
+}
+
+/// `pair` mirrored left–right: columns reversed in both images and the flow, horizontal flow negated.
+pub fn mirror_pair(pair: &Pair) -> Pair {
+    let (h, w) = (pair.height, pair.width);
+    let mirror = |data: &[f32], channels: usize, negate_first: bool| -> Vec<f32> {
+        let mut out = vec![0.0f32; data.len()];
+        for c in 0..channels {
+            let sign = if negate_first && c == 0 { -1.0 } else { 1.0 };
+            for y in 0..h {
+                let row = (c * h + y) * w;
+                for x in 0..w {
+                    out[row + x] = sign * data[row + w - 1 - x];
+                }
+            }
+        }
+        out
+    };
+    Pair {
+        height: h,
+        width: w,
+        img1: mirror(&pair.img1, 3, false),
+        img2: mirror(&pair.img2, 3, false),
+        flow: mirror(&pair.flow, 2, true),
+        weight: pair.weight.as_ref().map(|w| mirror(w, 1, false)),
+    }
+}
+
+impl TrainConfig {
+    /// Pair `index` of the run's training data: procedural, or from [`TrainConfig::extra_pairs`].
+    pub fn training_pair(&self, index: u64) -> Pair {
+        if let Some(extra) = &self.extra_pairs {
+            let h = mix64(self.seed ^ mix64(index ^ 0x005E_ED0F_E77A));
+            let draw = (h >> 40) as f32 / (1u64 << 24) as f32;
+            if !extra.pairs.is_empty() && draw < extra.fraction {
+                let h2 = mix64(h);
+                let pick = &extra.pairs[(h2 >> 1) as usize % extra.pairs.len()];
+                return if h2 & 1 == 1 {
+                    mirror_pair(pick)
+                } else {
+                    pick.clone()
+                };
+            }
+        }
+        generate_pair(self.seed, index, &self.pairs)
+    }
 }
 
 /// Network plus optimiser state of a coarse-to-fine training run.
@@ -115,6 +195,28 @@ pub fn flow_at_level(flow: &[f32], h: usize, w: usize, levels: usize, level: usi
     f
 }
 
+/// A per-pixel loss weight `(h, w)` reduced to pyramid level `level` of `levels` by repeated 2×2
+/// average pooling (values unchanged in scale, unlike the flow's).
+pub fn weight_at_level(
+    weight: &[f32],
+    h: usize,
+    w: usize,
+    levels: usize,
+    level: usize,
+) -> Vec<f32> {
+    let (mut f, mut h, mut w) = (weight.to_vec(), h, w);
+    for _ in level + 1..levels {
+        let (ph, pw) = (pooled_size(h), pooled_size(w));
+        let mut p = vec![0.0f32; ph * pw];
+        // Shapes are consistent by construction; an error here would be a programming error.
+        if avg_pool2x2_forward(1, h, w, &f, &mut p).is_err() {
+            return p;
+        }
+        (f, h, w) = (p, ph, pw);
+    }
+    f
+}
+
 /// Mean smoothed end-point-error loss of one pair at level `level` (see the module doc), in that
 /// level's pixels, and — if `weight_grads` is given — **accumulates** `scale · ∂loss/∂weights` of
 /// level `level` into it (lower levels are frozen). `truth` is the ground-truth flow already reduced
@@ -145,7 +247,7 @@ pub fn level_loss_on_tape<T: Real>(
     weight_grads: Option<&mut SpyNet<T>>,
     scale: f64,
 ) -> Result<(f64, f64), FlowError> {
-    let (loss, epe, g) = pixel_loss(&tape.flow, truth, kind, scale)?;
+    let (loss, epe, g) = pixel_loss(&tape.flow, truth, None, kind, scale)?;
     if let Some(grads) = weight_grads {
         net.backward_last_level_weights(tape, &g, grads)?;
     }
@@ -276,7 +378,7 @@ impl Trainer {
         let (kind, lr) = self.schedule(t);
         for b in 0..self.cfg.batch {
             let index = self.pair_index(self.next_pair);
-            let pair = generate_pair(self.cfg.seed, index, &self.cfg.pairs);
+            let pair = self.cfg.training_pair(index);
             self.next_pair += 1;
             let truth = flow_at_level(&pair.flow, n, n, self.cfg.levels, level);
             let tape = self
@@ -285,8 +387,13 @@ impl Trainer {
             if b == 0 {
                 live_relu = tape.live_relu_fractions(level);
             }
-            let (l, e) =
-                level_loss_on_tape(&self.net, &tape, &truth, kind, Some(&mut grads), scale)?;
+            let weight = pair
+                .weight
+                .as_ref()
+                .map(|w| weight_at_level(w, n, n, self.cfg.levels, level));
+            let (l, e, g) = pixel_loss(&tape.flow, &truth, weight.as_deref(), kind, scale)?;
+            self.net
+                .backward_last_level_weights(&tape, &g, &mut grads)?;
             loss += l;
             epe += e;
         }
@@ -328,14 +435,18 @@ impl Trainer {
         let per_pair: Vec<Result<PairGradient, FlowError>> = indices
             .par_iter()
             .map(|&index| {
-                let pair = generate_pair(cfg.seed, index, &cfg.pairs);
+                let pair = cfg.training_pair(index);
                 let tape = net.forward_to_level(&pair.img1, &pair.img2, n, n, levels - 1)?;
                 let mut level_grads = Vec::with_capacity(levels);
                 let (mut loss, mut epe) = (0.0, 0.0);
                 for l in 0..levels {
                     let truth = flow_at_level(&pair.flow, n, n, levels, l);
                     let out = tape.level_flow(l).unwrap_or(&[]);
-                    let (lo, e, g) = pixel_loss(out, &truth, kind, scale)?;
+                    let weight = pair
+                        .weight
+                        .as_ref()
+                        .map(|w| weight_at_level(w, n, n, levels, l));
+                    let (lo, e, g) = pixel_loss(out, &truth, weight.as_deref(), kind, scale)?;
                     loss += lo;
                     if l + 1 == levels {
                         epe = e;
@@ -391,11 +502,13 @@ struct PairGradient {
     live_relu: Vec<f64>,
 }
 
-/// Mean per-pixel loss of a `(2, h, w)` flow against its truth, accumulated in f64:
-/// `(loss, mean EPE, scale·∂loss/∂flow)`, in the flow's pixels.
+/// Weighted mean per-pixel loss of a `(2, h, w)` flow against its truth, accumulated in f64:
+/// `(loss, mean EPE, scale·∂loss/∂flow)`, in the flow's pixels. With `weight` (`(h, w)`, not all
+/// zero) both means are `Σ wᵢ xᵢ / Σ wᵢ`; without, uniform.
 fn pixel_loss<T: Real>(
     flow: &[T],
     truth: &[T],
+    weight: Option<&[f32]>,
     kind: Loss,
     scale: f64,
 ) -> Result<(f64, f64, Vec<T>), FlowError> {
@@ -407,21 +520,35 @@ fn pixel_loss<T: Real>(
         )));
     }
     let hw = truth.len() / 2;
-    let inv = 1.0 / hw.max(1) as f64;
+    if let Some(wt) = weight {
+        if wt.len() != hw {
+            return Err(FlowError::Size(format!(
+                "loss weight has {} values, expected {hw}",
+                wt.len()
+            )));
+        }
+    }
+    let weight_of = |i: usize| weight.map_or(1.0, |wt| f64::from(wt[i]));
+    let total: f64 = (0..hw).map(weight_of).sum();
+    if !(total > 0.0) {
+        return Err(FlowError::Size("loss weights sum to zero".into()));
+    }
+    let inv = 1.0 / total;
     let (mut loss, mut epe) = (0.0f64, 0.0f64);
     let mut g = vec![T::zero(); 2 * hw];
     for i in 0..hw {
+        let wi = weight_of(i);
         let du = (flow[i] - truth[i]).as_f64();
         let dv = (flow[hw + i] - truth[hw + i]).as_f64();
         let e = (du * du + dv * dv + EPE_EPS).sqrt();
-        epe += e;
+        epe += wi * e;
         let (l, gu, gv) = match kind {
             Loss::Epe => (e, du / e, dv / e),
             Loss::Mse => (0.5 * (du * du + dv * dv), du, dv),
         };
-        loss += l;
-        g[i] = T::of(gu * inv * scale);
-        g[hw + i] = T::of(gv * inv * scale);
+        loss += wi * l;
+        g[i] = T::of(wi * gu * inv * scale);
+        g[hw + i] = T::of(wi * gv * inv * scale);
     }
     Ok((loss * inv, epe * inv, g))
 }
@@ -442,6 +569,38 @@ pub fn evaluate(
         e_zero += average_epe(&vec![0.0; p.flow.len()], &p.flow);
     }
     let c = count.max(1) as f64;
+    Ok((e_net / c, e_zero / c))
+}
+
+/// Mean EPE (full resolution, pixels) of `net` and of the zero-flow baseline over fixed `pairs`
+/// (e.g. held-out [`ExtraPairs`]), pooled over all their pixels, each pixel counted with its
+/// [`Pair::weight`] (1 without); a weight of 0 or 1 makes it the EPE over a mask.
+pub fn evaluate_pairs(net: &SpyNet<f32>, pairs: &[Pair]) -> Result<(f64, f64), FlowError> {
+    let (mut e_net, mut e_zero, mut total) = (0.0, 0.0, 0.0);
+    for p in pairs {
+        let tape = net.forward(&p.img1, &p.img2, p.height, p.width)?;
+        let hw = p.height * p.width;
+        if p.weight.as_ref().is_some_and(|wt| wt.len() != hw) || p.flow.len() != 2 * hw {
+            return Err(FlowError::Size(format!(
+                "a {}x{} pair has {} flow values and a weight of the wrong size",
+                p.width,
+                p.height,
+                p.flow.len()
+            )));
+        }
+        for i in 0..hw {
+            let wi = p.weight.as_ref().map_or(1.0, |wt| f64::from(wt[i]));
+            let (gu, gv) = (f64::from(p.flow[i]), f64::from(p.flow[hw + i]));
+            let (du, dv) = (
+                f64::from(tape.flow[i]) - gu,
+                f64::from(tape.flow[hw + i]) - gv,
+            );
+            e_net += wi * (du * du + dv * dv).sqrt();
+            e_zero += wi * (gu * gu + gv * gv).sqrt();
+            total += wi;
+        }
+    }
+    let c = if total > 0.0 { total } else { 1.0 };
     Ok((e_net / c, e_zero / c))
 }
 

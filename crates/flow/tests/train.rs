@@ -24,6 +24,7 @@ fn config(levels: usize, size: usize) -> TrainConfig {
         seed: 7,
         distinct_pairs: Some(2),
         decay_steps: 0,
+        extra_pairs: None,
     }
 }
 
@@ -232,4 +233,158 @@ fn joint_steps_learn_every_level_and_are_bit_identical_for_one_and_three_threads
     for l in 0..2 {
         assert_ne!(start.levels[l], end.levels[l], "level {l} did not change");
     }
+}
+
+#[test]
+fn mirrored_pair_reverses_columns_and_negates_horizontal_flow() {
+    // 1×3 images, channel c's pixel x holds 10c + x; flow u = x + 1, v = −x.
+    let img: Vec<f32> = (0..3)
+        .flat_map(|c| (0..3).map(move |x| (10 * c + x) as f32))
+        .collect();
+    let pair = flow::synthetic::Pair {
+        height: 1,
+        width: 3,
+        img1: img.clone(),
+        img2: img.iter().map(|v| v + 100.0).collect(),
+        flow: vec![1.0, 2.0, 3.0, 0.0, -1.0, -2.0],
+        weight: Some(vec![1.0, 0.0, 0.5]),
+    };
+    let m = flow::train::mirror_pair(&pair);
+    assert_eq!(
+        m.img1,
+        vec![2.0, 1.0, 0.0, 12.0, 11.0, 10.0, 22.0, 21.0, 20.0]
+    );
+    assert_eq!(m.img2[0], 102.0);
+    assert_eq!(m.flow, vec![-3.0, -2.0, -1.0, -2.0, -1.0, 0.0]);
+    assert_eq!(m.weight, Some(vec![0.5, 0.0, 1.0]));
+    let back = flow::train::mirror_pair(&m);
+    assert_eq!(
+        (back.img1, back.img2, back.flow),
+        (pair.img1, pair.img2, pair.flow)
+    );
+}
+
+#[test]
+fn extra_pairs_are_mixed_in_at_the_requested_fraction() {
+    // One extra 16×16 pair with a constant flow of (5, 7) px, recognisable among procedural pairs.
+    let size = 16;
+    let plane = size * size;
+    let extra = flow::synthetic::Pair {
+        height: size,
+        width: size,
+        img1: vec![0.25; 3 * plane],
+        img2: vec![0.5; 3 * plane],
+        flow: [vec![5.0; plane], vec![7.0; plane]].concat(),
+        weight: None,
+    };
+    let with = |fraction: f32| TrainConfig {
+        extra_pairs: Some(flow::train::ExtraPairs {
+            pairs: std::sync::Arc::new(vec![extra.clone()]),
+            fraction,
+        }),
+        ..config(1, size)
+    };
+    let count = |cfg: &TrainConfig| {
+        let (mut plain, mut mirrored) = (0, 0);
+        for k in 0..400 {
+            let p = cfg.training_pair(k);
+            if p.flow[0] == 5.0 && p.flow[plane] == 7.0 {
+                plain += 1;
+            } else if p.flow[0] == -5.0 && p.flow[plane] == 7.0 {
+                mirrored += 1;
+            }
+        }
+        (plain, mirrored)
+    };
+    assert_eq!(count(&with(0.0)), (0, 0));
+    assert_eq!(count(&with(1.0)).0 + count(&with(1.0)).1, 400);
+    let (plain, mirrored) = count(&with(0.5));
+    // Binomial(400, ½) total and Binomial(total, ½) mirrored: 5 standard deviations each.
+    assert!(
+        (150..=250).contains(&(plain + mirrored)),
+        "{plain} + {mirrored}"
+    );
+    assert!(
+        plain > 50 && mirrored > 50,
+        "{plain} plain, {mirrored} mirrored"
+    );
+    // Same seed, same pairs.
+    assert_eq!(count(&with(0.5)), (plain, mirrored));
+    // Without extra pairs a run's pair k is the procedural pair k.
+    let cfg = config(1, size);
+    let p = cfg.training_pair(3);
+    let q = flow::synthetic::generate_pair(cfg.seed, 3, &cfg.pairs);
+    assert_eq!((p.img1, p.flow), (q.img1, q.flow));
+}
+
+#[test]
+fn zero_weight_pixels_do_not_reach_the_update_and_weighted_evaluation_masks() {
+    // Two extra pairs that differ only in the truth of the left half, which has weight 0: the
+    // joint and the per-level steps on either must give the same weights; with uniform weights
+    // they must not.
+    let size = 16;
+    let plane = size * size;
+    let base = generate_pair(
+        3,
+        0,
+        &PairConfig {
+            size,
+            ..PairConfig::default()
+        },
+    );
+    let left_half: Vec<f32> = (0..plane)
+        .map(|p| if p % size < size / 2 { 0.0 } else { 1.0 })
+        .collect();
+    let mut other = base.clone();
+    for p in 0..plane {
+        if left_half[p] == 0.0 {
+            other.flow[p] += 3.0;
+            other.flow[plane + p] -= 2.0;
+        }
+    }
+    let run = |pair: &flow::synthetic::Pair, weight: Option<Vec<f32>>, joint: bool| {
+        let mut trainer = Trainer::new(TrainConfig {
+            batch: 2,
+            extra_pairs: Some(flow::train::ExtraPairs {
+                pairs: std::sync::Arc::new(vec![flow::synthetic::Pair {
+                    weight,
+                    ..pair.clone()
+                }]),
+                fraction: 1.0,
+            }),
+            ..config(2, size)
+        });
+        for _ in 0..2 {
+            if joint {
+                trainer.step_joint().expect("joint step");
+            } else {
+                trainer.step(1).expect("level step");
+            }
+        }
+        trainer.net
+    };
+    for joint in [false, true] {
+        let weighted = Some(left_half.clone());
+        assert!(
+            run(&base, weighted.clone(), joint) == run(&other, weighted, joint),
+            "joint {joint}: zero-weight pixels changed the update"
+        );
+        assert!(
+            run(&base, None, joint) != run(&other, None, joint),
+            "joint {joint}: uniform weights ignored the changed pixels"
+        );
+    }
+    // Weighted evaluation: zero flow's EPE over the right half only.
+    let net = flow::SpyNet::random_init(2, 1, 0.0, false);
+    let masked = flow::synthetic::Pair {
+        weight: Some(left_half.clone()),
+        ..other.clone()
+    };
+    let (_, zero) = flow::train::evaluate_pairs(&net, &[masked]).expect("evaluate");
+    let expect: f64 = (0..plane)
+        .filter(|&p| left_half[p] == 1.0)
+        .map(|p| f64::from(other.flow[p]).hypot(f64::from(other.flow[plane + p])))
+        .sum::<f64>()
+        / (plane / 2) as f64;
+    assert!((zero - expect).abs() < 1e-9, "{zero} vs {expect}");
 }
