@@ -11,6 +11,12 @@
 //!    ([`flow::train::Trainer::step_joint`]), gradients flowing through the whole pyramid; the
 //!    weights are validated every `--report-every` steps and the best ones kept.
 //!
+//! With `--scene-pairs`, frame pairs rendered by the synthetic benchmark's generator (other seeds
+//! than the benchmark's; `data-fixtures/flow/make-scene-pairs.sh`) are mixed into the procedural
+//! pairs, their static pixels down-weighted (`--scene-static-weight`), and `--scene-validation`
+//! scenes replace the procedural validation pairs with the EPE over moving pixels — the flow loss's
+//! mask.
+//!
 //! Reports the held-out EPE against the zero-flow baseline; the weights are written after every
 //! phase and level, so a stopped run leaves its latest weights behind.
 
