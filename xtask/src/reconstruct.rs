@@ -141,9 +141,9 @@ fn enable_flow(
     );
     if config.flow_network.is_none() {
         eprintln!(
-            "note: the shipped flow weights are weak (held-out EPE ratio 0.58, 0.67 on the \
-             benchmark's moving pixels, no sharp/blurred distinction); with them the flow loss made \
-             the quick preset 3.5 dB worse in the human box (docs/BENCHMARKS.md, event \
+            "note: the shipped flow weights are weak (held-out EPE ratio 0.56, 0.45 on the \
+             benchmark's moving pixels); with them the flow loss made the quick preset 2.5 dB \
+             worse in the human box at the default weight (docs/BENCHMARKS.md, event \
              supervision). Pass --flow-network with better weights for a meaningful run."
         );
     }
