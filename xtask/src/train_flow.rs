@@ -556,7 +556,14 @@ pub fn run(args: Args) -> Result<()> {
         ..held_out
     };
     let (epe_nj, zero_nj) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &still)?;
-    let (epe_sv, zero_sv) = evaluate_pairs(&trainer.net, &scene_validation)?;
+    // `null` in the report without `--scene-validation` (rather than a meaningless 0).
+    let (epe_sv, zero_sv) = if scene_validation.is_empty() {
+        (None, None)
+    } else {
+        let (e, z) = evaluate_pairs(&trainer.net, &scene_validation)?;
+        (Some(e), Some(z))
+    };
+    let ratio_sv = epe_sv.zip(zero_sv).map(|(e, z)| e / z.max(1e-12));
     println!(
         "{}",
         serde_json::json!({
@@ -577,7 +584,7 @@ pub fn run(args: Args) -> Result<()> {
             "scene_validation": args.scene_validation,
             "scene_validation_pairs": scene_validation.len(),
             "scene_validation_epe": epe_sv, "scene_validation_zero_flow_epe": zero_sv,
-            "scene_validation_ratio": epe_sv / zero_sv.max(1e-12),
+            "scene_validation_ratio": ratio_sv,
             "scene_static_weight": args.scene_static_weight, "scene_tau": args.scene_tau,
         })
     );

@@ -68,6 +68,12 @@ fn scene_pairs_train_and_validate() {
     // Validation counts moving pixels only (|flow| > 0.25 px at 16×16), so zero flow errs.
     assert!(epe.is_finite() && zero > 0.25, "epe {epe}, zero {zero}");
     assert!(flow::load_safetensors(&out).is_ok());
+    // Without validation scenes the scene figures are null, not a made-up 0.
+    let o = train_flow(&out, &["--scene-pairs", &scene]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(report["scene_validation_ratio"].is_null(), "{report}");
+    assert_eq!(report["scene_validation_pairs"], 0);
 }
 
 #[test]
