@@ -146,19 +146,6 @@ fn conv_shape(i: usize, h: usize, w: usize) -> Conv2dShape {
     }
 }
 
-/// Small deterministic generator (SplitMix64) for weight initialisation.
-struct SplitMix(u64);
-impl SplitMix {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        ((z >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
-    }
-}
-
 /// `(2, h, w)` flow → `(2, ht, wt)`: bilinear ×2 (`align_corners = true`), values ×2, then replicate
 /// (or crop) to the target size.
 fn upsample_flow<T: Real>(
@@ -254,14 +241,14 @@ impl<T: Real> SpyNet<T> {
     /// `|∂I + ∂ₜI|`-type terms a motion estimate is built from.
     pub fn random_init(levels: usize, seed: u64, output_gain: f64, paired_input: bool) -> Self {
         let mut net = Self::zeros(levels);
-        let mut rng = SplitMix(seed ^ 0x5EED_F10F);
+        let mut rng = crate::synthetic::Rng(seed ^ 0x5EED_F10F);
         for level in &mut net.levels {
             for (i, conv) in level.iter_mut().enumerate() {
                 let fan_in = (LAYER_CHANNELS[i].0 * KERNEL * KERNEL) as f64;
                 let gain = if i == 4 { output_gain } else { 1.0 };
                 let bound = gain * (6.0 / fan_in).sqrt();
                 for v in &mut conv.weight {
-                    *v = T::of(bound * rng.uniform());
+                    *v = T::of(bound * rng.symmetric_f64());
                 }
                 if i == 0 && paired_input {
                     // Per output channel: the image-1 weights become a zero-mean (no DC) filter

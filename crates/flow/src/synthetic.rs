@@ -87,9 +87,11 @@ impl PairConfig {
     }
 }
 
-struct Rng(u64);
+/// Small deterministic generator (SplitMix64), the flow crate's only one: training pairs, weight
+/// initialisation and the trainer's pair mixing all draw from it.
+pub(crate) struct Rng(pub(crate) u64);
 impl Rng {
-    fn next_u64(&mut self) -> u64 {
+    pub(crate) fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -103,6 +105,10 @@ impl Rng {
     /// Uniform in [-a, a).
     fn sym(&mut self, a: f32) -> f32 {
         (2.0 * self.f() - 1.0) * a
+    }
+    /// Uniform in [-1, 1) with 53 random bits.
+    pub(crate) fn symmetric_f64(&mut self) -> f64 {
+        ((self.next_u64() >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
     }
 }
 

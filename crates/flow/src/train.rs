@@ -101,12 +101,9 @@ impl std::fmt::Debug for ExtraPairs {
     }
 }
 
-/// SplitMix64 finaliser: a well-mixed 64-bit hash of `x`.
-fn mix64(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
+/// A well-mixed 64-bit hash of `x`: the first output of SplitMix64 seeded with `x`.
+fn mix64(x: u64) -> u64 {
+    crate::synthetic::Rng(x).next_u64()
 }
 
 /// `pair` mirrored left–right: columns reversed in both images and the flow, horizontal flow negated.
@@ -181,18 +178,7 @@ pub struct StepReport {
 
 /// Ground-truth flow `(2, H, W)` reduced to level `level` of an `levels`-level pyramid.
 pub fn flow_at_level(flow: &[f32], h: usize, w: usize, levels: usize, level: usize) -> Vec<f32> {
-    let (mut f, mut h, mut w) = (flow.to_vec(), h, w);
-    for _ in level + 1..levels {
-        let (ph, pw) = (pooled_size(h), pooled_size(w));
-        let mut p = vec![0.0f32; 2 * ph * pw];
-        // Shapes are consistent by construction; an error here would be a programming error.
-        if avg_pool2x2_forward(2, h, w, &f, &mut p).is_err() {
-            return p;
-        }
-        p.iter_mut().for_each(|v| *v *= 0.5);
-        (f, h, w) = (p, ph, pw);
-    }
-    f
+    pool_to_level(flow, 2, 0.5, h, w, levels, level)
 }
 
 /// A per-pixel loss weight `(h, w)` reduced to pyramid level `level` of `levels` by repeated 2×2
@@ -204,13 +190,30 @@ pub fn weight_at_level(
     levels: usize,
     level: usize,
 ) -> Vec<f32> {
-    let (mut f, mut h, mut w) = (weight.to_vec(), h, w);
+    pool_to_level(weight, 1, 1.0, h, w, levels, level)
+}
+
+/// `(channels, h, w)` data 2×2-average-pooled from the finest level down to `level`, multiplied by
+/// `scale` at each halving.
+fn pool_to_level(
+    data: &[f32],
+    channels: usize,
+    scale: f32,
+    h: usize,
+    w: usize,
+    levels: usize,
+    level: usize,
+) -> Vec<f32> {
+    let (mut f, mut h, mut w) = (data.to_vec(), h, w);
     for _ in level + 1..levels {
         let (ph, pw) = (pooled_size(h), pooled_size(w));
-        let mut p = vec![0.0f32; ph * pw];
+        let mut p = vec![0.0f32; channels * ph * pw];
         // Shapes are consistent by construction; an error here would be a programming error.
-        if avg_pool2x2_forward(1, h, w, &f, &mut p).is_err() {
+        if avg_pool2x2_forward(channels, h, w, &f, &mut p).is_err() {
             return p;
+        }
+        if scale != 1.0 {
+            p.iter_mut().for_each(|v| *v *= scale);
         }
         (f, h, w) = (p, ph, pw);
     }
