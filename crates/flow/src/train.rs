@@ -507,8 +507,8 @@ struct PairGradient {
 
 /// Weighted mean per-pixel loss of a `(2, h, w)` flow against its truth, accumulated in f64:
 /// `(loss, mean EPE, scale·∂loss/∂flow)`, in the flow's pixels. With `weight` (`(h, w)`, not all
-/// zero) both means are `Σ wᵢ xᵢ / Σ wᵢ`; without, uniform.
-fn pixel_loss<T: Real>(
+/// zero) both means are `Σ wᵢ xᵢ / Σ wᵢ`; without, uniform. The training steps' per-level loss.
+pub fn pixel_loss<T: Real>(
     flow: &[T],
     truth: &[T],
     weight: Option<&[f32]>,

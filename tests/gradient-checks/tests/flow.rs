@@ -414,3 +414,64 @@ fn multiscale_weight_gradients_match_finite_differences() {
     check_multiscale(5);
     check_multiscale(11);
 }
+
+/// The training steps' per-pixel loss with per-pixel weights ([`flow::train::pixel_loss`]):
+/// its gradient w.r.t. the predicted flow against central differences, for both losses, random
+/// flows, truths and weights (a quarter of them zero). Tolerance as above: the loss is an O(1)
+/// weighted mean; away from `d = 0` (differences here are O(0.1–1) px) the smoothed norm's
+/// curvature is O(1/|d|) ≤ O(100), so truncation at `h = 1e-6` is ≤ 1e-10. A gradient without the
+/// weights (uniform), without the `1/Σw` normalisation or with a wrong sign changes entries by
+/// O(0.01–1) and fails; a 1.5× gradient is checked to fail too.
+fn check_weighted_pixel_loss(seed: u64, hw: usize, kind: flow::train::Loss) {
+    let mut rng = Rng(seed);
+    let mut vec_of = |n: usize, lo: f64, hi: f64| -> Vec<f64> {
+        (0..n).map(|_| lo + (hi - lo) * rng.next()).collect()
+    };
+    let flow = vec_of(2 * hw, -2.0, 2.0);
+    let truth: Vec<f64> = flow
+        .iter()
+        .zip(vec_of(2 * hw, 0.1, 1.0))
+        .enumerate()
+        .map(|(i, (f, d))| if i % 3 == 0 { f - d } else { f + d })
+        .collect();
+    let mut weight: Vec<f32> = vec_of(hw, -0.33, 1.0)
+        .iter()
+        .map(|&v| v.max(0.0) as f32)
+        .collect();
+    weight[0] = weight[0].max(0.5); // not all zero
+
+    let name = format!("weighted pixel loss seed {seed} {kind:?}");
+    let (_, _, grad) =
+        flow::train::pixel_loss(&flow, &truth, Some(&weight), kind, 1.0).expect("loss");
+    let numeric = central_differences(
+        |f| {
+            flow::train::pixel_loss(f, &truth, Some(&weight), kind, 1.0)
+                .expect("loss")
+                .0
+        },
+        &flow,
+        H,
+    );
+    let mut checker = GradientChecker::new();
+    checker.check(&name, &numeric, &grad, TOL);
+    checker.finish();
+    let scaled: Vec<f64> = grad.iter().map(|g| 1.5 * g).collect();
+    assert!(
+        !compare(&name, &numeric, &scaled, TOL).passed(),
+        "{name}: a 1.5x gradient passes"
+    );
+    let (_, _, uniform) = flow::train::pixel_loss(&flow, &truth, None, kind, 1.0).expect("loss");
+    assert!(
+        !compare(&name, &numeric, &uniform, TOL).passed(),
+        "{name}: the unweighted gradient passes"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+    #[test]
+    fn weighted_pixel_loss_gradient_matches_finite_differences(seed in any::<u64>(), hw in 2usize..40) {
+        check_weighted_pixel_loss(seed, hw, flow::train::Loss::Epe);
+        check_weighted_pixel_loss(seed, hw, flow::train::Loss::Mse);
+    }
+}
