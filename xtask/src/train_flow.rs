@@ -293,11 +293,10 @@ fn save(net: &flow::SpyNet<f32>, out: &Path) -> Result<()> {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
     }
-    // Atomically (temporary file + rename): the joint phase rewrites the file at every new best,
-    // and a run stopped mid-write must leave the previous weights intact.
-    let bytes = flow::write_safetensors(net).context("serialising the weights")?;
-    gaussians::ply::write_atomically(out, &bytes)
-        .with_context(|| format!("writing {}", out.display()))
+    // Atomically (`save_safetensors` writes a temporary file and renames it): the joint phase
+    // rewrites the file at every new best, and a run stopped mid-write must leave the previous
+    // weights intact.
+    flow::save_safetensors(net, out).with_context(|| format!("writing {}", out.display()))
 }
 
 fn progress_bar(total: usize) -> Result<ProgressBar> {

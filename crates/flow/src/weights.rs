@@ -7,6 +7,7 @@ use crate::{FlowError, SpyNet};
 use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 use std::collections::HashMap;
+use std::io::Write;
 use std::path::Path;
 
 fn tensor_name(l: usize, i: usize, what: &str) -> String {
@@ -128,13 +129,35 @@ pub fn read_safetensors(bytes: &[u8]) -> Result<SpyNet<f32>, FlowError> {
     Ok(net)
 }
 
-/// Writes `net` to a safetensors file.
+/// Writes `net` to a safetensors file atomically: to a temporary file beside `path`, synced, then
+/// renamed over it, so an interrupted write leaves any previous file at `path` intact.
 pub fn save_safetensors(net: &SpyNet<f32>, path: &Path) -> Result<(), FlowError> {
     let bytes = write_safetensors(net)?;
-    std::fs::write(path, bytes).map_err(|source| FlowError::Io {
+    let io = |source| FlowError::Io {
         path: path.display().to_string(),
         source,
-    })
+    };
+    let name = path.file_name().ok_or_else(|| {
+        io(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "the path names no file",
+        ))
+    })?;
+    let mut tmp_name = name.to_os_string();
+    tmp_name.push(format!(".partial{}", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    let written = std::fs::File::create(&tmp).and_then(|mut file| {
+        file.write_all(&bytes)?;
+        file.sync_all()
+    });
+    match written.and_then(|()| std::fs::rename(&tmp, path)) {
+        Ok(()) => Ok(()),
+        Err(source) => {
+            // Best effort: the error to report is the write's, not the clean-up's.
+            let _ = std::fs::remove_file(&tmp);
+            Err(io(source))
+        }
+    }
 }
 
 /// Reads a network from a safetensors file.

@@ -1,7 +1,9 @@
 //! Weights I/O (safetensors and Torch7 import, both on synthetic data built here) and bad-input errors.
 
 use flow::t7::{file_name, import_dir, parse_float_tensor, write_float_tensor};
-use flow::{read_safetensors, write_safetensors, FlowError, SpyNet};
+use flow::{
+    load_safetensors, read_safetensors, save_safetensors, write_safetensors, FlowError, SpyNet,
+};
 
 #[test]
 fn safetensors_round_trip_is_exact() {
@@ -10,6 +12,28 @@ fn safetensors_round_trip_is_exact() {
     let back = read_safetensors(&bytes).expect("parse");
     assert_eq!(back.num_levels(), 3);
     assert_eq!(back, net);
+}
+
+#[test]
+fn saving_replaces_the_file_whole_and_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("w.safetensors");
+    let (first, second) = (SpyNet::<f32>::random(2, 1), SpyNet::<f32>::random(3, 2));
+    save_safetensors(&first, &path).expect("save");
+    save_safetensors(&second, &path).expect("save over");
+    assert_eq!(load_safetensors(&path).expect("load"), second);
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .expect("list")
+        .map(|e| e.expect("entry").file_name())
+        .collect();
+    assert_eq!(names, [std::ffi::OsString::from("w.safetensors")]);
+    // A directory that does not exist: an error naming the file, nothing written.
+    let missing = dir.path().join("no-such-dir").join("w.safetensors");
+    let err = save_safetensors(&first, &missing).expect_err("no directory");
+    assert!(
+        matches!(&err, FlowError::Io { path, .. } if path.contains("no-such-dir")),
+        "{err}"
+    );
 }
 
 #[test]
