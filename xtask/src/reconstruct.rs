@@ -13,7 +13,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::blend::SemanticMode;
-use train::config::{FlowSource, Preset, TrainConfig};
+use train::config::{FlowGradient, FlowSource, Preset, TrainConfig};
 use train::init::{InitMode, SemanticInit};
 use train::trainer::{Body, StepReport, TrainContext, Trainer};
 use train::TrainError;
@@ -62,6 +62,11 @@ pub struct Args {
     /// τ: target flows no longer than this (pixels at 1/4 resolution) are not supervised.
     #[arg(long)]
     pub flow_tau: Option<f32>,
+    /// Which parameters the flow loss's gradient reaches: all (the paper) or geometry (only means
+    /// and covariances, hence positions, shapes and the deformation; not colours, opacities or
+    /// semantics — a deviation from the paper, for an ablation).
+    #[arg(long, value_parser = parse_flow_gradient)]
+    pub flow_gradient: Option<FlowGradient>,
     /// Weights of the frozen flow network (safetensors). Default: the shipped
     /// data-fixtures/flow/spynet-synthetic.safetensors.
     #[arg(long)]
@@ -99,6 +104,11 @@ fn parse_semantic_init(s: &str) -> Result<SemanticInit, String> {
         .map_err(|_| format!("`{s}`: expected one-hot or half"))
 }
 
+fn parse_flow_gradient(s: &str) -> Result<FlowGradient, String> {
+    serde_json::from_value(serde_json::Value::String(s.into()))
+        .map_err(|_| format!("`{s}`: expected all or geometry"))
+}
+
 fn parse_on_off(s: &str) -> Result<bool, String> {
     match s {
         "on" => Ok(true),
@@ -133,10 +143,12 @@ fn enable_flow(
         .context("preparing the flow loss")?;
     let pairs = ctx.flow_pairs.iter().filter(|p| p.is_some()).count();
     println!(
-        "flow loss: {pairs} pairs of consecutive training frames, source {:?}, λ {}, τ {} px, network {}",
+        "flow loss: {pairs} pairs of consecutive training frames, source {:?}, λ {}, τ {} px, \
+         gradient to {:?}, network {}",
         config.flow_source,
         config.flow_weight,
         config.flow_tau,
+        config.flow_gradient,
         path.display()
     );
     if config.flow_network.is_none() {
@@ -237,6 +249,9 @@ fn resolve_config(args: &Args) -> Result<TrainConfig> {
     }
     if let Some(v) = args.flow_tau {
         c.flow_tau = v;
+    }
+    if let Some(v) = args.flow_gradient {
+        c.flow_gradient = v;
     }
     if let Some(v) = &args.flow_network {
         c.flow_network = Some(v.clone());
@@ -469,6 +484,7 @@ pub fn run(args: Args) -> Result<()> {
             "flow_source": config.flow_source,
             "flow_weight": config.flow_weight,
             "flow_tau": config.flow_tau,
+            "flow_gradient": config.flow_gradient,
             "event_loss": config.event_loss,
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,

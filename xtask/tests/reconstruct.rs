@@ -249,6 +249,8 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
             "0.1",
             "--flow-tau",
             "0",
+            "--flow-gradient",
+            "geometry",
             "--flow-network",
             weights.to_str().unwrap(),
         ],
@@ -259,6 +261,7 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
     let text = metrics.to_string();
     assert!(text.contains("\"flow_loss\":true"), "{text}");
     assert!(text.contains("\"flow_source\":\"ground-truth\""), "{text}");
+    assert!(text.contains("\"flow_gradient\":\"geometry\""), "{text}");
     let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
     assert!(
         log.lines().any(|l| {
@@ -296,6 +299,15 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
                 "/nonexistent/w.safetensors",
             ],
             "train-flow",
+        ),
+        (
+            [
+                "--flow-gradient",
+                "colours",
+                "--flow-network",
+                weights.to_str().unwrap(),
+            ],
+            "expected all or geometry",
         ),
     ] {
         let mut args = vec!["--flow-loss", "on"];

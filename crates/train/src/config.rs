@@ -140,6 +140,10 @@ pub struct TrainConfig {
     pub flow_tau: f32,
     /// The renders and the flow are resized by this factor before the network (paper: 0.25).
     pub flow_scale: f32,
+    /// Which parameters the flow loss's gradient reaches: `all` (the paper) or `geometry` (only the
+    /// posed means and covariances, and through them positions, shapes and the deformation; not
+    /// colours, opacities or semantics). `geometry` is a deviation from the paper, for an ablation.
+    pub flow_gradient: FlowGradient,
     /// SPyNet-style weights (safetensors) of the frozen flow network; `None`: the project's shipped
     /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
     pub flow_network: Option<std::path::PathBuf>,
@@ -155,6 +159,18 @@ pub struct TrainConfig {
     pub event_threshold: f32,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
     pub event_log_eps: f32,
+}
+
+/// Which parameters the flow loss's gradient reaches (see [`TrainConfig::flow_gradient`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlowGradient {
+    /// Every parameter the two renders depend on (the paper).
+    #[default]
+    All,
+    /// Only the rasterizer's mean and covariance inputs: colours, opacities and semantic
+    /// probabilities get no share of the flow loss's gradient.
+    Geometry,
 }
 
 /// Source of the flow that supervises the flow loss.
@@ -252,6 +268,7 @@ impl TrainConfig {
             flow_weight: 0.05,
             flow_tau: 0.25,
             flow_scale: 0.25,
+            flow_gradient: FlowGradient::All,
             flow_network: None,
             event_loss: false,
             event_weight: 3.0,

@@ -10,7 +10,7 @@
 
 use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
-use crate::config::TrainConfig;
+use crate::config::{FlowGradient, TrainConfig};
 use crate::data::Dataset;
 use crate::event_loss::pair_event_loss;
 use crate::fit::{accumulate_screen_stats, exponential_rate, on_schedule};
@@ -31,7 +31,8 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rasterize_cpu::{
-    render_cov, render_cov_backward, Camera, Cotangents, CovSplats, RenderOutput, RenderSettings,
+    render_cov, render_cov_backward, Camera, Cotangents, CovSplats, Gradients, RenderOutput,
+    RenderSettings,
 };
 use scene::Split;
 use smpl_deform::deform_net::{pose_code, skinning_loss, NonRigidNet, SkinningField};
@@ -420,6 +421,60 @@ fn split_channel_cotangents(channels: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let colours = per.clone().flat_map(|c| c[..3].iter().copied()).collect();
     let prob = per.map(|c| c[3]).collect();
     (colours, prob)
+}
+
+/// Rasterizer backward of one frame's image cotangent `d_image` ((C, H, W)) plus, when given, the
+/// flow loss's cotangent `d_flow` on its RGB planes, of which only the geometric share is kept: the
+/// gradients w.r.t. the means, covariances and screen-space means (`FlowGradient::Geometry`). The
+/// backward is linear in the cotangent, so this is exactly the gradient of all losses with the
+/// flow loss's colour, opacity and semantic terms removed.
+fn backward_with_geometric_flow(
+    camera: &Camera,
+    splats: &CovSplats<'_, f32>,
+    settings: &RenderSettings,
+    out: &RenderOutput<f32>,
+    d_image: &[f32],
+    d_flow: Option<&[f32]>,
+) -> Result<Gradients<f32>, TrainError> {
+    let backward = |image: &[f32]| {
+        render_cov_backward(
+            camera,
+            splats,
+            settings,
+            out,
+            &Cotangents {
+                image,
+                alpha: None,
+                depth: None,
+            },
+        )
+    };
+    let Some(d_flow) = d_flow else {
+        return Ok(backward(d_image)?);
+    };
+    let mut padded = vec![0.0f32; d_image.len()];
+    padded[..d_flow.len()].copy_from_slice(d_flow);
+    let flow = backward(&padded)?;
+    if d_image.iter().all(|&v| v == 0.0) {
+        // Only the flow loss reaches this frame (frame k+1 without the event loss): one backward.
+        return Ok(Gradients {
+            opacity_logits: vec![0.0; flow.opacity_logits.len()],
+            channels: vec![0.0; flow.channels.len()],
+            background: vec![0.0; flow.background.len()],
+            ..flow
+        });
+    }
+    let mut grads = backward(d_image)?;
+    let add = |a: &mut [f32], b: &[f32]| a.iter_mut().zip(b).for_each(|(x, &y)| *x += y);
+    add(grads.means.as_flattened_mut(), flow.means.as_flattened());
+    add(
+        grads.means_2d.as_flattened_mut(),
+        flow.means_2d.as_flattened(),
+    );
+    for (a, b) in grads.covariances.iter_mut().zip(&flow.covariances) {
+        add(a.as_flattened_mut(), b.as_flattened());
+    }
+    Ok(grads)
 }
 
 /// All state of a reconstruction: parameters, optimiser moments, density statistics, the frame-order
@@ -843,6 +898,9 @@ impl Trainer {
             .map(|(_, p)| p.next_slot)
             .or(event_pair.map(|p| p.next_slot));
         let (mut flow_value, mut event_value) = (0.0f32, 0.0f32);
+        // With `FlowGradient::Geometry`, the flow loss's image cotangents (RGB of frames k and k+1),
+        // kept apart from the other losses' so that only their geometric share is used.
+        let (mut d_flow_first, mut d_flow_second) = (None, None);
         let mut second = None;
         if let Some(next_slot) = next_slot {
             let next = &ctx.frames[next_slot];
@@ -863,11 +921,20 @@ impl Trainer {
                 times.flow_network = t_network.elapsed().as_secs_f64();
                 let lambda = config.flow_weight;
                 flow_value = lambda * fl.loss;
-                for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl.d_first) {
-                    *o += lambda * g;
-                }
-                for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&fl.d_second) {
-                    *o += lambda * g;
+                let scaled = |g: &[f32]| g.iter().map(|&v| lambda * v).collect::<Vec<f32>>();
+                match config.flow_gradient {
+                    FlowGradient::All => {
+                        for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl.d_first) {
+                            *o += lambda * g;
+                        }
+                        for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&fl.d_second) {
+                            *o += lambda * g;
+                        }
+                    }
+                    FlowGradient::Geometry => {
+                        d_flow_first = Some(scaled(&fl.d_first));
+                        d_flow_second = Some(scaled(&fl.d_second));
+                    }
                 }
             }
             if let Some(pair) = event_pair {
@@ -886,16 +953,13 @@ impl Trainer {
         times.flow = t_flow.elapsed().as_secs_f64();
 
         let t0 = Instant::now();
-        let rg = render_cov_backward(
+        let rg = backward_with_geometric_flow(
             camera,
             &splats,
             &settings,
             &out,
-            &Cotangents {
-                image: &d_image,
-                alpha: None,
-                depth: None,
-            },
+            &d_image,
+            d_flow_first.as_deref(),
         )?;
         times.render_backward = t0.elapsed().as_secs_f64();
 
@@ -993,16 +1057,13 @@ impl Trainer {
             let t_flow = Instant::now();
             let channels2 = interleave_channels(&posed2);
             let splats2 = self.splats(&posed2, &channels2);
-            let rg2 = render_cov_backward(
+            let rg2 = backward_with_geometric_flow(
                 camera,
                 &splats2,
                 &settings,
                 &out2,
-                &Cotangents {
-                    image: &d_image2,
-                    alpha: None,
-                    depth: None,
-                },
+                &d_image2,
+                d_flow_second.as_deref(),
             )?;
             let (d_colours2, d_prob2) = split_channel_cotangents(&rg2.channels);
             let next = &ctx.frames[next_slot];
