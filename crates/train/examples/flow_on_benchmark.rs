@@ -5,6 +5,13 @@
 //! end-point error against the resized ground truth is compared with the zero-flow baseline — over
 //! the loss's mask M (|F| > τ, valid) and over every valid pixel. A ratio near 1 means the loss's
 //! gradient carries little information about the true motion.
+//!
+//! `flow_on_benchmark DIR WEIGHTS TAU RUN...` also asks which images the flow loss prefers: for each
+//! reconstruction directory RUN (with its `checkpoint.safetensors`), the model renders every pair of
+//! consecutive training frames the loss trains on, and the mean flow loss (the training step's masked
+//! L1, without λ) of those renders is printed next to the same loss on the sharp references and on
+//! the blurred input frames. A loss that scores a run's renders below the sharp truth pulls the
+//! reconstruction away from it.
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
@@ -99,6 +106,75 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             s[3] / v,
             s[2] / s[3].max(1e-12)
         );
+    }
+    if args.len() > 3 {
+        compare_renders(&data, net, tau, &args[3..])?;
+    }
+    Ok(())
+}
+
+/// The mean flow loss over the training pairs of the sharp frames, the blurred frames and the renders
+/// of each run in `runs`.
+fn compare_renders(
+    data: &train::data::Dataset,
+    net: flow::SpyNet<f32>,
+    tau: f32,
+    runs: &[String],
+) -> Result<(), Box<dyn std::error::Error>> {
+    let body_ref = smpl_deform::BodyRef::parse(&data.scene.body.model)?;
+    let body = train::trainer::Body::new(body_ref.load()?, data.scene.body.betas.clone())?;
+    let config = train::config::TrainConfig {
+        flow_loss: true,
+        flow_source: train::config::FlowSource::GroundTruth,
+        flow_tau: tau,
+        ..train::config::TrainConfig::default()
+    };
+    let mut ctx = train::trainer::TrainContext::new(data, body, config.seed)?;
+    ctx.enable_flow(data, &config, net.clone())?;
+    let (h, w) = (ctx.camera.height as usize, ctx.camera.width as usize);
+    let pairs: Vec<_> = ctx
+        .flow_pairs
+        .iter()
+        .enumerate()
+        .filter_map(|(slot, p)| p.as_ref().map(|p| (slot, p)))
+        .collect();
+    let frame_of = |slot: usize| {
+        let index = ctx.frames[slot].index;
+        data.frames.iter().find(|f| f.index == index)
+    };
+    let mean_loss = |images: &dyn Fn(usize) -> Result<Vec<f32>, Box<dyn std::error::Error>>| {
+        let mut sum = 0.0f64;
+        for &(slot, pair) in &pairs {
+            let (a, b) = (images(slot)?, images(pair.next_slot)?);
+            sum +=
+                f64::from(train::flow_loss::pair_flow_loss(&net, &a, &b, h, w, &pair.target)?.loss);
+        }
+        Ok::<f64, Box<dyn std::error::Error>>(sum / pairs.len().max(1) as f64)
+    };
+    println!(
+        "flow loss (masked L1, tau {tau} px) over the {} training pairs, lower = preferred:",
+        pairs.len()
+    );
+    let sharp = mean_loss(&|slot| {
+        frame_of(slot)
+            .and_then(|f| f.sharp.clone())
+            .ok_or_else(|| "a training frame has no sharp reference".into())
+    })?;
+    println!("{:>40}: {sharp:.4}", "sharp references");
+    let blurred = mean_loss(&|slot| Ok(ctx.frames[slot].image.clone()))?;
+    println!("{:>40}: {blurred:.4}", "blurred input");
+    for run in runs {
+        let model = train::trainer::Trainer::load_checkpoint(
+            &Path::new(run).join("checkpoint.safetensors"),
+            &ctx,
+        )?;
+        let loss = mean_loss(&|slot| {
+            let frame = &ctx.frames[slot];
+            let latent =
+                &model.latents[slot * model.config.latent_dim..][..model.config.latent_dim];
+            Ok(model.render(&ctx.camera, &frame.pose, latent)?.rgb)
+        })?;
+        println!("{run:>40}: {loss:.4}");
     }
     Ok(())
 }
