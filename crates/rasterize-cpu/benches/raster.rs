@@ -1,6 +1,7 @@
 #![allow(missing_docs)] // criterion_group! generates an undocumented function.
 //! Criterion benchmarks of the rasterizer on the `cargo xtask bench raster` cases (seeded random
-//! scenes): forward, and forward + backward with a constant cotangent.
+//! scenes): forward, forward + backward with a constant cotangent, and the backward alone with a
+//! dense and with a row-sparse cotangent.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use rasterize_cpu::synthetic::SyntheticScene;
@@ -35,6 +36,37 @@ fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
             .map(|g| g.means.len())
         })
     });
+    // Backward alone, with the forward done once outside the loop: a dense cotangent, and one that
+    // is zero on rows 2, 3, 6, 7, ... as where a loss reads the image through a 1/4 bilinear resize
+    // (the flow loss), which the backward skips.
+    let out = match render(&scene.camera, &scene.splats(), &settings) {
+        Ok(o) => o,
+        Err(e) => panic!("render: {e}"),
+    };
+    let mut half_rows = d_image.clone();
+    for (p, v) in half_rows.iter_mut().enumerate() {
+        if (p / w as usize) % 4 >= 2 {
+            *v = 0.0;
+        }
+    }
+    for (label, cot) in [("bwd", &d_image), ("bwd_half_rows", &half_rows)] {
+        group.bench_function(label, |b| {
+            b.iter(|| {
+                render_backward(
+                    &scene.camera,
+                    &scene.splats(),
+                    &settings,
+                    &out,
+                    &Cotangents {
+                        image: cot,
+                        alpha: None,
+                        depth: None,
+                    },
+                )
+                .map(|g| g.means.len())
+            })
+        });
+    }
     group.finish();
 }
 

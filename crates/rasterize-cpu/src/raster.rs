@@ -1222,6 +1222,12 @@ struct BackwardScratch<T: Real> {
     /// Per-column channel-gradient accumulators of the current pair, C × [`TILE_SIZE`] (column x
     /// sums the pair's pixels in tile column x).
     acc_channels: Vec<T>,
+    /// Tile rows with a non-zero cotangent (image, alpha or depth). A row whose cotangents are all
+    /// zero adds only exact zeros to every gradient, so the kernels skip it: same bits, less work
+    /// when a loss reads a subset of the pixels (the flow loss's 1/4 resize reads half the rows).
+    live_rows: [bool; TILE_SIZE],
+    /// `false` only in tests, to compare with the kernels that replay every row.
+    skip_zero_rows: bool,
 }
 
 impl<T: Real> BackwardScratch<T> {
@@ -1234,6 +1240,8 @@ impl<T: Real> BackwardScratch<T> {
             g_alpha: vec![T::zero(); TILE_PIXELS],
             g_depth: vec![T::zero(); TILE_PIXELS],
             acc_channels: vec![T::zero(); c * TILE_SIZE],
+            live_rows: [false; TILE_SIZE],
+            skip_zero_rows: true,
         }
     }
 
@@ -1266,6 +1274,14 @@ impl<T: Real> BackwardScratch<T> {
             if let Some(d) = cot.depth {
                 self.g_depth[idx..idx + size[0]].copy_from_slice(&d[pix..pix + size[0]]);
             }
+        }
+        for (y, live) in self.live_rows.iter_mut().enumerate() {
+            let row = y * TILE_SIZE..(y + 1) * TILE_SIZE;
+            let nonzero = |v: &[T]| v.iter().any(|&x| x != T::zero());
+            *live = !self.skip_zero_rows
+                || nonzero(&self.g_alpha[row.clone()])
+                || nonzero(&self.g_depth[row.clone()])
+                || (0..c).any(|j| nonzero(&self.g_img[j * TILE_PIXELS..][row.clone()]));
         }
     }
 }
@@ -1392,7 +1408,7 @@ fn backward_tile<T: Real>(
         // Per-column accumulators: mean x, y, conic a, b, c, opacity, depth; quad q holds columns
         // 4q..4q+4.
         let mut geo = [[k.zero; QUADS]; 7];
-        for y in y0..y1 {
+        for y in (y0..y1).filter(|&y| s.live_rows[y]) {
             let dy = sl.my - centre[y];
             let cc_dy_dy = cc * dy * dy;
             let (v_dy, v_cb_dy, v_cc_dy) = (v(dy), v(cb * dy), v(cc * dy));
@@ -1571,13 +1587,23 @@ mod tests {
                     })
                     .collect()
             };
-            let (d_image, d_alpha, d_depth) = (noise(c * hw), noise(hw), noise(hw));
+            let (mut d_image, mut d_alpha, mut d_depth) = (noise(c * hw), noise(hw), noise(hw));
+            // Rows 2, 3, 6, 7, ... have no cotangent (as where the flow loss's 1/4 resize reads
+            // nothing), so the kernels' zero-row skip is exercised.
+            for y in (0..height).filter(|y| y % 4 >= 2) {
+                let row = y * width..(y + 1) * width;
+                d_alpha[row.clone()].fill(0.0);
+                d_depth[row.clone()].fill(0.0);
+                for j in 0..c {
+                    d_image[j * hw..][row.clone()].fill(0.0);
+                }
+            }
             let cot = Cotangents {
                 image: &d_image,
                 alpha: Some(&d_alpha),
                 depth: Some(&d_depth),
             };
-            let mut checked_pairs = 0;
+            let (mut checked_pairs, mut skipped_rows) = (0, 0);
             for tile in 0..st.used.len() {
                 let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
                 let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
@@ -1623,16 +1649,43 @@ mod tests {
                         .all(|(a, b)| a.to_bits() == b.to_bits()),
                     "tile {tile}"
                 );
+                // Skipping the rows without a cotangent gives the bits of replaying every row.
+                let mut out_all = vec![0.0f32; slots];
+                let mut s_all = BackwardScratch::new(c);
+                s_all.skip_zero_rows = false;
+                backward_tile(
+                    list,
+                    channels,
+                    args.0,
+                    c,
+                    origin,
+                    size,
+                    width,
+                    args.1,
+                    args.2,
+                    &cot,
+                    &mut s_all,
+                    &mut out_all,
+                );
+                assert!(
+                    out_p
+                        .iter()
+                        .zip(&out_all)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "tile {tile}: skipping zero rows changed the gradients"
+                );
+                skipped_rows += s_p.live_rows[..size[1]].iter().filter(|&&l| !l).count();
                 checked_pairs += out_p
                     .chunks(7 + c)
                     .filter(|g| g.iter().any(|&v| v != 0.0))
                     .count();
             }
-            // The comparison is not vacuous: many pairs carry gradients.
+            // The comparison is not vacuous: many pairs carry gradients, and rows were skipped.
             assert!(
                 checked_pairs > n / 4,
                 "{checked_pairs} pairs with gradients"
             );
+            assert!(skipped_rows > 0, "no row was skipped");
         }
     }
 

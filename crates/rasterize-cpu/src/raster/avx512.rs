@@ -176,7 +176,7 @@ fn backward_tile(
         let z = v(p.depth);
         s.acc_channels.fill(0.0);
         let [mut a_mx, mut a_my, mut a_ca, mut a_cb, mut a_cc, mut a_op, mut a_z] = [zero; 7];
-        for y in y0..y1 {
+        for y in (y0..y1).filter(|&y| s.live_rows[y]) {
             let dy = sl.my - centre[y];
             let cc_dy_dy = cc * dy * dy;
             let v_dy = v(dy);
