@@ -293,8 +293,9 @@ impl Layer {
     }
 }
 
-/// Generates the pair number `index` of the data set `seed` (pairs are independent of each other).
-pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
+/// The layers of pair `index` of data set `seed` (background first, topmost last) and the second
+/// frame's brightness gain and offset.
+fn draw_layers(seed: u64, index: u64, cfg: &PairConfig) -> (Vec<Layer>, f32, f32) {
     let mut r = Rng(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ index.wrapping_mul(0x9E37_79B9));
     let n = cfg.size;
     let nf = n as f32;
@@ -344,6 +345,13 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
             t: [0.0, 0.0],
         };
     }
+    (layers, gain, bias)
+}
+
+/// Generates the pair number `index` of the data set `seed` (pairs are independent of each other).
+pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
+    let (layers, gain, bias) = draw_layers(seed, index, cfg);
+    let n = cfg.size;
     let ss = cfg.supersampling.max(1);
     let inv_samples = 1.0 / (ss * ss) as f32;
     let hw = n * n;
@@ -402,6 +410,34 @@ pub fn generate_pair(seed: u64, index: u64, cfg: &PairConfig) -> Pair {
         flow,
         weight: None,
     }
+}
+
+/// Which pixels of [`generate_pair`]`(seed, index, cfg)` are *matched* (`H × W`, row-major), in the
+/// sense of Sintel's "matched / unmatched" EPE: the surface seen at the pixel centre in frame 1,
+/// moved by its layer's motion, lands inside frame 2 and is still the topmost surface there. At
+/// unmatched pixels (out of frame, or occluded in frame 2) the images do not show where the point
+/// went; its flow can only be inferred from the neighbours.
+pub fn matched_pixels(seed: u64, index: u64, cfg: &PairConfig) -> Vec<bool> {
+    let (layers, _, _) = draw_layers(seed, index, cfg);
+    let n = cfg.size;
+    let nf = n as f32;
+    let mut matched = vec![false; n * n];
+    for y in 0..n {
+        for x in 0..n {
+            let p = [x as f32 + 0.5, y as f32 + 0.5];
+            let Some(first) = layers.iter().rposition(|l| l.covers(p)) else {
+                continue;
+            };
+            let q = layers[first].motion.forward(p);
+            if !(0.0..nf).contains(&q[0]) || !(0.0..nf).contains(&q[1]) {
+                continue;
+            }
+            // Frame 2 at q: the topmost layer whose moved shape covers q, as `generate_pair` draws it.
+            let second = layers.iter().rposition(|l| l.covers(l.motion.inverse(q)));
+            matched[y * n + x] = second == Some(first);
+        }
+    }
+    matched
 }
 
 /// Average end-point error `mean_p ‖f(p) − g(p)‖₂` of two `(2, H, W)` flows (pixels).

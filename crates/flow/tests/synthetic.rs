@@ -1,6 +1,6 @@
 //! The procedural pair generator: deterministic, and its ground-truth flow is consistent with its images.
 
-use flow::synthetic::{average_epe, generate_pair, PairConfig};
+use flow::synthetic::{average_epe, generate_pair, matched_pixels, PairConfig};
 
 /// Largest absolute difference between two images.
 fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -54,6 +54,49 @@ fn warping_frame_two_by_the_true_flow_reproduces_frame_one() {
         mean < 0.6,
         "warped/unwarped median photometric error ratios {ratios:?}"
     );
+}
+
+#[test]
+fn matched_pixels_are_where_the_true_flow_explains_the_images() {
+    // Without jitter, frame 2 warped by the true flow reproduces frame 1 at matched pixels (up to
+    // bilinear interpolation of the texture) and not at unmatched ones (out of frame, occluded).
+    let cfg = PairConfig {
+        brightness_jitter: 0.0,
+        ..PairConfig::default()
+    };
+    let (mut err, mut count) = ([0.0f64; 2], [0usize; 2]);
+    for k in 0..8 {
+        let p = generate_pair(23, k, &cfg);
+        let matched = matched_pixels(23, k, &cfg);
+        let hw = p.height * p.width;
+        assert_eq!(matched.len(), hw);
+        let mut warped = vec![0.0f32; p.img2.len()];
+        nn::warp_forward(1, 3, p.height, p.width, &p.img2, &p.flow, &mut warped).expect("warp");
+        for (i, &m) in matched.iter().enumerate() {
+            let e: f32 = (0..3)
+                .map(|c| (warped[c * hw + i] - p.img1[c * hw + i]).abs())
+                .sum();
+            err[usize::from(m)] += f64::from(e);
+            count[usize::from(m)] += 1;
+        }
+    }
+    let (unmatched, matched) = (err[0] / count[0] as f64, err[1] / count[1] as f64);
+    let share = count[1] as f64 / (count[0] + count[1]) as f64;
+    assert!(
+        (0.5..0.99).contains(&share),
+        "matched share {share}: both kinds must occur"
+    );
+    assert!(
+        matched < 0.25 * unmatched,
+        "mean photometric error matched {matched} vs unmatched {unmatched}"
+    );
+    // A static scene without foreground layers is matched everywhere.
+    let still = PairConfig {
+        max_foreground_layers: 0,
+        static_background: 1.0,
+        ..cfg
+    };
+    assert!(matched_pixels(5, 0, &still).iter().all(|&m| m));
 }
 
 #[test]
