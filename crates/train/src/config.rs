@@ -132,11 +132,13 @@ pub struct TrainConfig {
     pub flow_loss: bool,
     /// Which flow of `scene.json` supervises (`ground-truth`, `events`, `file`).
     pub flow_source: FlowSource,
-    /// λ_flow, the weight of L_flow in the step's loss. Provisional: not yet chosen by a sweep on the
-    /// benchmark.
+    /// λ_flow, the weight of L_flow in the step's loss (default 0.05). With the project's flow
+    /// weights the sweep on the default benchmark (0.05 / 0.015 / 0.005, `docs/BENCHMARKS.md`,
+    /// event supervision) found every value worse than no flow loss, which is why `flow_loss` is
+    /// off by default; 0.05 is an untuned starting value, not a sweep result.
     pub flow_weight: f32,
     /// τ: pixels whose target flow is at most this long (pixels at the network's resolution) are not
-    /// supervised. Provisional, like `flow_weight`.
+    /// supervised (default 0.25 px; not swept, since no λ_flow helped).
     pub flow_tau: f32,
     /// The renders and the flow are resized by this factor before the network (paper: 0.25).
     pub flow_scale: f32,
