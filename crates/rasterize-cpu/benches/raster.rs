@@ -5,7 +5,25 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use rasterize_cpu::synthetic::SyntheticScene;
-use rasterize_cpu::{render, render_backward, Cotangents, RenderSettings};
+use rasterize_cpu::{
+    render, render_backward, Cotangents, RasterError, RenderOutput, RenderSettings,
+};
+
+/// The backward of `scene` for an image cotangent (no alpha or depth), reduced to a count so that
+/// the work is not optimised away.
+fn backward(
+    scene: &SyntheticScene,
+    settings: &RenderSettings,
+    out: &RenderOutput<f32>,
+    image: &[f32],
+) -> Result<usize, RasterError> {
+    let cot = Cotangents {
+        image,
+        alpha: None,
+        depth: None,
+    };
+    render_backward(&scene.camera, &scene.splats(), settings, out, &cot).map(|g| g.means.len())
+}
 
 fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
     let scene = match SyntheticScene::new(n, w, h, 42) {
@@ -22,18 +40,7 @@ fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
     group.bench_function("fwd_bwd", |b| {
         b.iter(|| {
             let out = render(&scene.camera, &scene.splats(), &settings)?;
-            render_backward(
-                &scene.camera,
-                &scene.splats(),
-                &settings,
-                &out,
-                &Cotangents {
-                    image: &d_image,
-                    alpha: None,
-                    depth: None,
-                },
-            )
-            .map(|g| g.means.len())
+            backward(&scene, &settings, &out, &d_image)
         })
     });
     // Backward alone, with the forward done once outside the loop: a dense cotangent, and one that
@@ -50,22 +57,7 @@ fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
         }
     }
     for (label, cot) in [("bwd", &d_image), ("bwd_half_rows", &half_rows)] {
-        group.bench_function(label, |b| {
-            b.iter(|| {
-                render_backward(
-                    &scene.camera,
-                    &scene.splats(),
-                    &settings,
-                    &out,
-                    &Cotangents {
-                        image: cot,
-                        alpha: None,
-                        depth: None,
-                    },
-                )
-                .map(|g| g.means.len())
-            })
-        });
+        group.bench_function(label, |b| b.iter(|| backward(&scene, &settings, &out, cot)));
     }
     group.finish();
 }
