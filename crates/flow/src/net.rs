@@ -368,7 +368,7 @@ impl<T: Real> SpyNet<T> {
         h: usize,
         w: usize,
     ) -> Result<Tape<T>, FlowError> {
-        self.forward_impl(img1, img2, h, w, self.num_levels().saturating_sub(1))
+        self.forward_impl(img1, img2, h, w, self.num_levels().saturating_sub(1), None)
     }
 
     /// Runs only levels `0..=last_level` (coarse-to-fine training): [`Tape::flow`] is that level's
@@ -389,9 +389,59 @@ impl<T: Real> SpyNet<T> {
                 self.num_levels()
             )));
         }
-        self.forward_impl(img1, img2, h, w, last_level)
+        self.forward_impl(img1, img2, h, w, last_level, None)
     }
 
+    /// Diagnostic: a full forward pass in which the output of pyramid level `level` (0 = coarsest) is
+    /// replaced by `level_flow` `(2, h_l, w_l)`, in that level's pixels — e.g. the ground truth
+    /// pooled to the level ([`crate::train::flow_at_level`]) — and the finer levels refine it as
+    /// usual. It measures how much the finer levels' accuracy depends on the coarse estimate.
+    /// Returns every level's output (empty for levels up to `level`; index 0 = coarsest) and the
+    /// final flow `(2, h, w)`. There is no tape: the result is not meant to be differentiated.
+    /// `h` and `w` must be multiples of [`SpyNet::size_multiple`].
+    pub fn forward_with_level_flow(
+        &self,
+        img1: &[T],
+        img2: &[T],
+        h: usize,
+        w: usize,
+        level: usize,
+        level_flow: &[T],
+    ) -> Result<(Vec<Vec<T>>, Vec<T>), FlowError> {
+        let m = self.size_multiple();
+        let shift = self.num_levels().saturating_sub(1).saturating_sub(level);
+        let expected = 2 * (h >> shift) * (w >> shift);
+        if !h.is_multiple_of(m)
+            || !w.is_multiple_of(m)
+            || level >= self.num_levels()
+            || level_flow.len() != expected
+        {
+            return Err(FlowError::Size(format!(
+                "forward_with_level_flow needs sides that are multiples of {m}, a level < {} and a (2, h_l, w_l) flow of that level (got {h}x{w}, level {level}, {} values)",
+                self.num_levels(),
+                level_flow.len()
+            )));
+        }
+        let tape = self.forward_impl(
+            img1,
+            img2,
+            h,
+            w,
+            self.num_levels() - 1,
+            Some((level, level_flow)),
+        )?;
+        let outputs = tape
+            .levels
+            .into_iter()
+            .enumerate()
+            .map(|(l, lt)| if l <= level { Vec::new() } else { lt.out })
+            .collect();
+        Ok((outputs, tape.flow))
+    }
+
+    /// The forward pass up to `last_level`; with `given = Some((k, flow))`, levels `0..=k` are not
+    /// run and level `k`'s output is `flow` (the tape of those levels is then empty, so such a tape
+    /// must not reach [`SpyNet::backward`]).
     fn forward_impl(
         &self,
         img1: &[T],
@@ -399,6 +449,7 @@ impl<T: Real> SpyNet<T> {
         h: usize,
         w: usize,
         last_level: usize,
+        given: Option<(usize, &[T])>,
     ) -> Result<Tape<T>, FlowError> {
         self.check_structure()?;
         let n = 3 * h * w;
@@ -447,6 +498,17 @@ impl<T: Real> SpyNet<T> {
         let mut tapes = Vec::with_capacity(last_level + 1);
         let mut flow: Vec<T> = Vec::new();
         for l in 0..=last_level {
+            if let Some((k, given_flow)) = given.filter(|&(k, _)| l <= k) {
+                if l == k {
+                    flow = given_flow.to_vec();
+                }
+                tapes.push(LevelTape {
+                    up: Vec::new(),
+                    acts: Vec::new(),
+                    out: if l == k { flow.clone() } else { Vec::new() },
+                });
+                continue;
+            }
             let (lh, lw) = sizes[l];
             let hw = lh * lw;
             let up = if l == 0 {
