@@ -1,6 +1,8 @@
 //! `cargo xtask bench raster [--quick]`: times the rasterizer on seeded random scenes and prints one
 //! JSON line per case `{"case","gaussians","width","height","threads","fwd_ms","fwd_bwd_ms"}`
-//! (medians over repeats; plus `pairs`, the number of tile–Gaussian pairs), for 1 thread and for the
+//! (medians over repeats; plus `fwd_bwd_half_rows_ms`, forward + backward with a cotangent that is
+//! zero on every other pair of rows as behind the flow loss's 1/4 resize, and `pairs`, the number of
+//! tile–Gaussian pairs), for 1 thread and for the
 //! machine's threads; plus `steal_pct`, the hypervisor's steal time during the case (null off
 //! Linux). Scene generation and timing live in `rasterize_cpu::synthetic`.
 
@@ -77,6 +79,7 @@ pub fn run(args: Args) -> Result<()> {
                     "threads": t,
                     "fwd_ms": round(r.fwd_ms),
                     "fwd_bwd_ms": round(r.fwd_bwd_ms),
+                    "fwd_bwd_half_rows_ms": round(r.fwd_bwd_half_rows_ms),
                     "pairs": r.pairs,
                     "steal_pct": steal.percent(),
                 })

@@ -19,7 +19,8 @@ fn main() -> Result<(), rasterize_cpu::RasterError> {
             println!(
                 "{}",
                 serde_json::json!({"case": name, "gaussians": n, "width": w, "height": h, "threads": threads,
-                    "fwd_ms": (t.fwd_ms * 100.0).round() / 100.0, "fwd_bwd_ms": (t.fwd_bwd_ms * 100.0).round() / 100.0, "pairs": t.pairs})
+                    "fwd_ms": (t.fwd_ms * 100.0).round() / 100.0, "fwd_bwd_ms": (t.fwd_bwd_ms * 100.0).round() / 100.0,
+                    "fwd_bwd_half_rows_ms": (t.fwd_bwd_half_rows_ms * 100.0).round() / 100.0, "pairs": t.pairs})
             );
         }
     }

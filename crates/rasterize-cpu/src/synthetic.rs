@@ -106,6 +106,10 @@ pub struct Timing {
     pub fwd_ms: f64,
     /// Median forward + backward time (constant cotangent 1 on the image).
     pub fwd_bwd_ms: f64,
+    /// Median forward + backward time with the cotangent zero on rows 2, 3, 6, 7, … — the rows a
+    /// loss that reads the image through a 1/4 bilinear resize (the flow loss) leaves untouched,
+    /// which the backward skips.
+    pub fwd_bwd_half_rows_ms: f64,
     /// (tile, Gaussian) pairs of the render.
     pub pairs: usize,
 }
@@ -115,8 +119,9 @@ fn median(mut v: Vec<f64>) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
-/// Times `render` and `render` + `render_backward` on `scene` in a rayon pool of `threads` threads:
-/// one warm-up, then `repeats` timed runs of each; returns medians.
+/// Times `render`, and `render` + `render_backward` with a dense and a row-sparse cotangent, on
+/// `scene` in a rayon pool of `threads` threads: one warm-up, then `repeats` timed runs of each;
+/// returns medians.
 pub fn time_case(
     scene: &SyntheticScene,
     threads: usize,
@@ -132,37 +137,53 @@ pub fn time_case(
     let settings = crate::RenderSettings::default();
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let d_image = vec![1.0f32; 3 * w * h];
+    let half_rows: Vec<f32> = (0..3 * w * h)
+        .map(|i| {
+            if (i % (w * h).max(1)) / w.max(1) % 4 >= 2 {
+                0.0
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let forward_backward = |cotangent: &[f32]| -> Result<f64, RasterError> {
+        let t0 = Instant::now();
+        let out = crate::render(&scene.camera, &scene.splats(), &settings)?;
+        let grads = crate::render_backward(
+            &scene.camera,
+            &scene.splats(),
+            &settings,
+            &out,
+            &crate::Cotangents {
+                image: cotangent,
+                alpha: None,
+                depth: None,
+            },
+        )?;
+        let elapsed = t0.elapsed().as_secs_f64() * 1e3;
+        drop(grads);
+        Ok(elapsed)
+    };
     pool.install(|| {
-        let (mut fwd, mut both, mut pairs) = (Vec::new(), Vec::new(), 0);
+        let (mut fwd, mut both, mut sparse, mut pairs) = (Vec::new(), Vec::new(), Vec::new(), 0);
         for rep in 0..=repeats {
             let t0 = Instant::now();
             let out = crate::render(&scene.camera, &scene.splats(), &settings)?;
             let t_fwd = t0.elapsed().as_secs_f64() * 1e3;
             pairs = out.num_pairs;
             drop(out);
-            let t0 = Instant::now();
-            let out = crate::render(&scene.camera, &scene.splats(), &settings)?;
-            let grads = crate::render_backward(
-                &scene.camera,
-                &scene.splats(),
-                &settings,
-                &out,
-                &crate::Cotangents {
-                    image: &d_image,
-                    alpha: None,
-                    depth: None,
-                },
-            )?;
-            let t_both = t0.elapsed().as_secs_f64() * 1e3;
-            drop(grads);
+            let t_both = forward_backward(&d_image)?;
+            let t_sparse = forward_backward(&half_rows)?;
             if rep > 0 {
                 fwd.push(t_fwd);
                 both.push(t_both);
+                sparse.push(t_sparse);
             }
         }
         Ok(Timing {
             fwd_ms: median(fwd),
             fwd_bwd_ms: median(both),
+            fwd_bwd_half_rows_ms: median(sparse),
             pairs,
         })
     })
