@@ -4,7 +4,9 @@
 //! k+1 are resized to 1/4 exactly as in the training step, the network predicts the flow, and the
 //! end-point error against the resized ground truth is compared with the zero-flow baseline — over
 //! the loss's mask M (|F| > τ, valid) and over every valid pixel. A ratio near 1 means the loss's
-//! gradient carries little information about the true motion.
+//! gradient carries little information about the true motion. For the sharp frames it also reports
+//! the ratio over M with one pyramid level's output replaced by the resized truth pooled to that
+//! level (`SpyNet::forward_with_level_flow`): how much a perfect coarse estimate would help.
 //!
 //! `flow_on_benchmark DIR WEIGHTS TAU RUN...` also asks which images the flow loss prefers: for each
 //! reconstruction directory RUN (with its `checkpoint.safetensors`), the model renders every pair of
@@ -39,6 +41,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut sums = [[0.0f64; 4]; 2];
     let mut counts = [0usize; 2];
     let mut pairs = 0;
+    // Sharp frames, over M: the network's EPE with level l's output replaced by the pooled truth.
+    let levels = net.num_levels();
+    let mut substituted = vec![0.0f64; levels.saturating_sub(1)];
     for (k, sf) in data.scene.frames.iter().enumerate() {
         let Some(fr) = sf.flow(scene::FlowKind::GroundTruth) else {
             continue;
@@ -67,6 +72,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             let pred = net.forward(&small[0], &small[1], ho, wo)?.flow;
             let plane = ho * wo;
+            if which == 0 && ho % net.size_multiple() == 0 && wo % net.size_multiple() == 0 {
+                for (level, sum) in substituted.iter_mut().enumerate() {
+                    let truth = flow::train::flow_at_level(&target.flow, ho, wo, levels, level);
+                    let (_, out) =
+                        net.forward_with_level_flow(&small[0], &small[1], ho, wo, level, &truth)?;
+                    for p in (0..plane).filter(|&p| target.mask[p]) {
+                        let (gx, gy) = (target.flow[p], target.flow[plane + p]);
+                        *sum += f64::from((out[p] - gx).hypot(out[plane + p] - gy));
+                    }
+                }
+            }
             for p in 0..plane {
                 let (gx, gy) = (target.flow[p] as f64, target.flow[plane + p] as f64);
                 let (px, py) = (pred[p] as f64, pred[plane + p] as f64);
@@ -105,6 +121,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             s[2] / v,
             s[3] / v,
             s[2] / s[3].max(1e-12)
+        );
+    }
+    for (level, sum) in substituted.iter().enumerate() {
+        println!(
+            "  sharp frames with level {level}'s output replaced by the pooled truth: ratio over M {:.3}",
+            sum / sums[0][1].max(1e-12)
         );
     }
     if args.len() > 3 {
