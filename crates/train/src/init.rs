@@ -339,67 +339,34 @@ mod tests {
             feature_dim: 2,
             ..InitConfig::default()
         };
-        let random = initialise(
-            &v,
-            &f,
-            &w,
-            &[camera()],
-            &[[0.0; 3]],
-            &InitConfig {
-                mode: InitMode::Random,
-                ..base.clone()
-            },
-        );
+        let init_with =
+            |config: InitConfig| initialise(&v, &f, &w, &[camera()], &[[0.0; 3]], &config);
+        let random = init_with(InitConfig {
+            mode: InitMode::Random,
+            ..base.clone()
+        });
         assert_eq!((random.human, random.set.len()), (0, 120));
         assert!(random.set.semantic_logits.iter().all(|&l| l == 0.0));
-        let only = initialise(
-            &v,
-            &f,
-            &w,
-            &[camera()],
-            &[[0.0; 3]],
-            &InitConfig {
-                mode: InitMode::SmplOnly,
-                ..base.clone()
-            },
-        );
+        let only = init_with(InitConfig {
+            mode: InitMode::SmplOnly,
+            ..base.clone()
+        });
         assert_eq!((only.human, only.set.len()), (50, 50));
-        let half = initialise(
-            &v,
-            &f,
-            &w,
-            &[camera()],
-            &[[0.0; 3]],
-            &InitConfig {
-                semantic_init: SemanticInit::Half,
-                ..base.clone()
-            },
-        );
+        let half = init_with(InitConfig {
+            semantic_init: SemanticInit::Half,
+            ..base.clone()
+        });
         assert!(half.set.semantic_logits.iter().all(|&l| l == 0.0));
-        let scalar = initialise(
-            &v,
-            &f,
-            &w,
-            &[camera()],
-            &[[0.0; 3]],
-            &InitConfig {
-                semantic: SemanticMode::Scalar,
-                ..base.clone()
-            },
-        );
+        let scalar = init_with(InitConfig {
+            semantic: SemanticMode::Scalar,
+            ..base.clone()
+        });
         assert_eq!(scalar.set.semantic_classes, 1);
         assert!(scalar.set.semantic_logits.iter().all(|&l| l == 0.0));
-        let none = initialise(
-            &v,
-            &f,
-            &w,
-            &[camera()],
-            &[[0.0; 3]],
-            &InitConfig {
-                semantic: SemanticMode::None,
-                ..base
-            },
-        );
+        let none = init_with(InitConfig {
+            semantic: SemanticMode::None,
+            ..base
+        });
         assert_eq!(none.set.semantic_classes, 0);
     }
 
