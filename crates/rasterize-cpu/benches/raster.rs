@@ -5,24 +5,17 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use rasterize_cpu::synthetic::SyntheticScene;
-use rasterize_cpu::{
-    render, render_backward, Cotangents, RasterError, RenderOutput, RenderSettings,
-};
+use rasterize_cpu::{render, RasterError, RenderOutput, RenderSettings};
 
-/// The backward of `scene` for an image cotangent (no alpha or depth), reduced to a count so that
-/// the work is not optimised away.
+/// The backward of `scene` for an image cotangent, reduced to a count so that the work is not
+/// optimised away.
 fn backward(
     scene: &SyntheticScene,
     settings: &RenderSettings,
     out: &RenderOutput<f32>,
     image: &[f32],
 ) -> Result<usize, RasterError> {
-    let cot = Cotangents {
-        image,
-        alpha: None,
-        depth: None,
-    };
-    render_backward(&scene.camera, &scene.splats(), settings, out, &cot).map(|g| g.means.len())
+    scene.backward(settings, out, image).map(|g| g.means.len())
 }
 
 fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
@@ -31,7 +24,7 @@ fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
         Err(e) => panic!("scene: {e}"),
     };
     let settings = RenderSettings::default();
-    let d_image = vec![1.0f32; 3 * (w * h) as usize];
+    let d_image = scene.image_cotangent(false);
     let mut group = c.benchmark_group(name);
     group.sample_size(10);
     group.bench_function("fwd", |b| {
@@ -50,12 +43,7 @@ fn bench_case(c: &mut Criterion, name: &str, n: usize, w: u32, h: u32) {
         Ok(o) => o,
         Err(e) => panic!("render: {e}"),
     };
-    let mut half_rows = d_image.clone();
-    for (p, v) in half_rows.iter_mut().enumerate() {
-        if (p / w as usize) % 4 >= 2 {
-            *v = 0.0;
-        }
-    }
+    let half_rows = scene.image_cotangent(true);
     for (label, cot) in [("bwd", &d_image), ("bwd_half_rows", &half_rows)] {
         group.bench_function(label, |b| b.iter(|| backward(&scene, &settings, &out, cot)));
     }

@@ -97,6 +97,39 @@ impl SyntheticScene {
             num_channels: 3,
         }
     }
+
+    /// An image cotangent `(3, H, W)` of ones, zero on rows 2, 3, 6, 7, … when `half_rows` — the
+    /// rows a loss that reads the image through a 1/4 bilinear resize (the flow loss) leaves
+    /// untouched, which the backward skips.
+    pub fn image_cotangent(&self, half_rows: bool) -> Vec<f32> {
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        (0..3 * w * h)
+            .map(|i| {
+                let row = (i % (w * h).max(1)) / w.max(1);
+                if half_rows && row % 4 >= 2 {
+                    0.0
+                } else {
+                    1.0
+                }
+            })
+            .collect()
+    }
+
+    /// The rasterizer's backward of the scene's render `forward` for an image cotangent `image`
+    /// (no alpha or depth cotangent).
+    pub fn backward(
+        &self,
+        settings: &crate::RenderSettings,
+        forward: &crate::RenderOutput<f32>,
+        image: &[f32],
+    ) -> Result<crate::Gradients<f32>, RasterError> {
+        let cot = crate::Cotangents {
+            image,
+            alpha: None,
+            depth: None,
+        };
+        crate::render_backward(&self.camera, &self.splats(), settings, forward, &cot)
+    }
 }
 
 /// Median timings of one benchmark case (milliseconds).
@@ -135,31 +168,11 @@ pub fn time_case(
             RasterError::InvalidSettings(format!("rayon pool of {threads} threads: {e}"))
         })?;
     let settings = crate::RenderSettings::default();
-    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
-    let d_image = vec![1.0f32; 3 * w * h];
-    let half_rows: Vec<f32> = (0..3 * w * h)
-        .map(|i| {
-            if (i % (w * h).max(1)) / w.max(1) % 4 >= 2 {
-                0.0
-            } else {
-                1.0
-            }
-        })
-        .collect();
+    let (d_image, half_rows) = (scene.image_cotangent(false), scene.image_cotangent(true));
     let forward_backward = |cotangent: &[f32]| -> Result<f64, RasterError> {
         let t0 = Instant::now();
         let out = crate::render(&scene.camera, &scene.splats(), &settings)?;
-        let grads = crate::render_backward(
-            &scene.camera,
-            &scene.splats(),
-            &settings,
-            &out,
-            &crate::Cotangents {
-                image: cotangent,
-                alpha: None,
-                depth: None,
-            },
-        )?;
+        let grads = scene.backward(&settings, &out, cotangent)?;
         let elapsed = t0.elapsed().as_secs_f64() * 1e3;
         drop(grads);
         Ok(elapsed)
