@@ -41,12 +41,12 @@ pub struct Args {
     #[arg(long)]
     pub flow_network: Option<PathBuf>,
     /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
-    /// one-hot, event-loss, flow-gt, flow-events).
+    /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net).
     #[arg(long, value_delimiter = ',')]
     pub only: Option<Vec<String>>,
     /// Run the blur-level study (paper Figure 5) instead of the ablation set: one-hot, event-loss,
-    /// flow-gt and flow-events on the slow, medium and fast variants of the default benchmark
-    /// (ignores --data).
+    /// flow-gt, flow-events and flow-sharp-net on the slow, medium and fast variants of the default
+    /// benchmark (ignores --data).
     #[arg(long)]
     pub blur_levels: bool,
 }
@@ -60,7 +60,7 @@ struct Run {
     flow: Option<FlowSource>,
 }
 
-const RUNS: [Run; 6] = [
+const RUNS: [Run; 7] = [
     Run {
         name: "semantic-none",
         what: "no semantics (every Gaussian deformed), no events",
@@ -102,6 +102,15 @@ const RUNS: [Run; 6] = [
         semantic: SemanticMode::OneHot,
         event_loss: false,
         flow: Some(FlowSource::Events),
+    },
+    Run {
+        name: "flow-sharp-net",
+        what:
+            "one-hot + flow loss, targets from the flow network on the sharp frames (the paper's \
+               ZJU-MoCap-Blur protocol)",
+        semantic: SemanticMode::OneHot,
+        event_loss: false,
+        flow: Some(FlowSource::SharpNetwork),
     },
 ];
 
@@ -157,7 +166,13 @@ pub fn run(args: Args) -> Result<()> {
                 ..::synth::SynthConfig::preset(::synth::Preset::Default)
             };
             let data = crate::reconstruct::benchmark(&cfg, &format!("default-{label}"))?;
-            for r in selected(&["one-hot", "event-loss", "flow-gt", "flow-events"]) {
+            for r in selected(&[
+                "one-hot",
+                "event-loss",
+                "flow-gt",
+                "flow-events",
+                "flow-sharp-net",
+            ]) {
                 jobs.push((format!("{label}/{}", r.name), data.clone(), r));
             }
         }

@@ -130,15 +130,17 @@ pub struct TrainConfig {
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
     /// between the two renders is pulled towards that flow (see `train::flow_loss`).
     pub flow_loss: bool,
-    /// Which flow of `scene.json` supervises (`ground-truth`, `events`, `file`).
+    /// Which flow supervises: a flow of `scene.json` (`ground-truth`, `events`, `file`) or the
+    /// network's own flow between the sharp references (`sharp-network`).
     pub flow_source: FlowSource,
-    /// λ_flow, the weight of L_flow in the step's loss (default 0.05). With the project's flow
-    /// weights the sweep on the default benchmark (0.05 / 0.015 / 0.005, `docs/BENCHMARKS.md`,
-    /// event supervision) found every value worse than no flow loss, which is why `flow_loss` is
-    /// off by default; 0.05 is an untuned starting value, not a sweep result.
+    /// λ_flow, the weight of L_flow in the step's loss (default 0.015, chosen by a sweep on the
+    /// default benchmark, `quick` preset, with `sharp-network` targets: 0.005 / 0.015 / 0.03 / 0.05
+    /// gave +0.12 / +0.20 / +0.03 / −0.30 dB in the human box against no flow loss;
+    /// `docs/BENCHMARKS.md`, event supervision). With `ground-truth` or `events` targets every λ
+    /// tried lowers PSNR, which is why `flow_loss` is off by default.
     pub flow_weight: f32,
     /// τ: pixels whose target flow is at most this long (pixels at the network's resolution) are not
-    /// supervised (default 0.25 px; not swept, since no λ_flow helped).
+    /// supervised (default 0.25 px; not swept).
     pub flow_tau: f32,
     /// The renders and the flow are resized by this factor before the network (paper: 0.25).
     pub flow_scale: f32,
@@ -185,15 +187,22 @@ pub enum FlowSource {
     Events,
     /// Flow made by another tool (`external`).
     File,
+    /// The frozen flow network's own prediction between the *sharp reference* frames k and k+1 at
+    /// the loss's resolution (`train::flow_loss::network_target`): the paper's ZJU-MoCap-Blur
+    /// protocol, which infers the target from the sharp frames with a pretrained network (RAFT
+    /// there). Needs sharp references, so synthetic or reference data only; reads no flow file.
+    SharpNetwork,
 }
 
 impl FlowSource {
-    /// The `scene.json` flow kind this source reads.
-    pub fn kind(self) -> scene::FlowKind {
+    /// The `scene.json` flow kind this source reads; `None` for [`FlowSource::SharpNetwork`],
+    /// which reads the sharp reference frames instead.
+    pub fn kind(self) -> Option<scene::FlowKind> {
         match self {
-            Self::GroundTruth => scene::FlowKind::GroundTruth,
-            Self::Events => scene::FlowKind::EventsCm,
-            Self::File => scene::FlowKind::External,
+            Self::GroundTruth => Some(scene::FlowKind::GroundTruth),
+            Self::Events => Some(scene::FlowKind::EventsCm),
+            Self::File => Some(scene::FlowKind::External),
+            Self::SharpNetwork => None,
         }
     }
 }
@@ -206,8 +215,9 @@ impl std::str::FromStr for FlowSource {
             "gt" | "ground-truth" => Ok(Self::GroundTruth),
             "events" => Ok(Self::Events),
             "file" => Ok(Self::File),
+            "sharp-net" | "sharp-network" => Ok(Self::SharpNetwork),
             _ => Err(format!(
-                "unknown flow source `{s}` (expected gt, events or file)"
+                "unknown flow source `{s}` (expected gt, events, file or sharp-net)"
             )),
         }
     }
@@ -267,7 +277,7 @@ impl TrainConfig {
             checkpoint_every: 500,
             flow_loss: false,
             flow_source: FlowSource::Events,
-            flow_weight: 0.05,
+            flow_weight: 0.015,
             flow_tau: 0.25,
             flow_scale: 0.25,
             flow_gradient: FlowGradient::All,

@@ -82,6 +82,44 @@ pub fn prepare_target<T: Real>(
     })
 }
 
+/// A target made by the frozen network itself: frames k and k+1 (planar (3, H, W) RGB, normally the
+/// sharp references) are resized to (h_out, w_out) exactly as [`pair_flow_loss`] resizes renders,
+/// the network predicts the flow between them, and the mask keeps pixels whose predicted flow is
+/// longer than `tau` (resized pixels); every pixel counts as valid. This is the paper's protocol for
+/// ZJU-MoCap-Blur (target flow inferred from the sharp frames by a pretrained network, RAFT there),
+/// with the frozen network in RAFT's place; [`pair_flow_loss`] of the same two frames against it is
+/// exactly zero, so the sharp frames are a global minimum of the loss.
+#[allow(clippy::too_many_arguments)]
+pub fn network_target<T: Real>(
+    net: &SpyNet<T>,
+    first: &[T],
+    second: &[T],
+    height: usize,
+    width: usize,
+    h_out: usize,
+    w_out: usize,
+    tau: T,
+) -> Result<FlowTarget<T>, TrainError> {
+    let mut small = [
+        vec![T::zero(); 3 * h_out * w_out],
+        vec![T::zero(); 3 * h_out * w_out],
+    ];
+    for (img, out) in [first, second].into_iter().zip(small.iter_mut()) {
+        resize_bilinear_forward(3, height, width, img, h_out, w_out, true, out)?;
+    }
+    let flow = net.forward(&small[0], &small[1], h_out, w_out)?.flow;
+    let plane = h_out * w_out;
+    let mask = (0..plane)
+        .map(|p| (flow[p] * flow[p] + flow[plane + p] * flow[plane + p]).sqrt() > tau)
+        .collect();
+    Ok(FlowTarget {
+        height: h_out,
+        width: w_out,
+        flow,
+        mask,
+    })
+}
+
 /// Masked L1 between a predicted flow (2, h, w) and the target; writes dL/dpred into `grad` when given.
 /// Returns 0 (and a zero gradient) when no pixel is supervised.
 pub fn masked_l1<T: Real>(pred: &[T], target: &FlowTarget<T>, grad: Option<&mut [T]>) -> T {

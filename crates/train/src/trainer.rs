@@ -14,7 +14,7 @@ use crate::config::{FlowGradient, TrainConfig};
 use crate::data::Dataset;
 use crate::event_loss::pair_event_loss;
 use crate::fit::{accumulate_screen_stats, exponential_rate, on_schedule};
-use crate::flow_loss::{pair_flow_loss, prepare_target, FlowTarget};
+use crate::flow_loss::{network_target, pair_flow_loss, prepare_target, FlowTarget};
 use crate::image_loss::{l1, psnr, ssim, ImageShape};
 use crate::init::{initialise, InitConfig};
 use crate::model::{
@@ -259,69 +259,38 @@ impl TrainContext {
 
     /// Prepares the flow loss: for every training frame whose next frame in `scene.json` is also a
     /// training frame, reads the flow of `config.flow_source` (and its validity mask) and resizes it
-    /// to the network's resolution (`config.flow_scale`, τ = `config.flow_tau`). A pair without that
-    /// flow, or with a flow of the wrong size, is an error naming the frame and the file — refused
-    /// here, not mid-training. Frames whose next frame is a test frame (or the last frame) have no
-    /// pair.
+    /// to the network's resolution (`config.flow_scale`, τ = `config.flow_tau`) — or, for
+    /// `sharp-network`, runs `net` on the two sharp references at that resolution
+    /// ([`network_target`]). A pair without that flow (or without sharp references), or with a flow
+    /// of the wrong size, is an error naming the frame and the file — refused here, not
+    /// mid-training. Frames whose next frame is a test frame (or the last frame) have no pair.
     pub fn enable_flow(
         &mut self,
         data: &Dataset,
         config: &TrainConfig,
         net: SpyNet<f32>,
     ) -> Result<(), TrainError> {
-        let kind = config.flow_source.kind();
         let (w, h) = (self.camera.width as usize, self.camera.height as usize);
         let h_out = ((h as f64 * config.flow_scale as f64).round() as usize).max(1);
         let w_out = ((w as f64 * config.flow_scale as f64).round() as usize).max(1);
         let mut pairs = vec![None; self.frames.len()];
         for (slot, p) in Self::consecutive_training_pairs(data) {
-            let f = &data.frames[p];
-            let sf = &data.scene.frames[p];
-            let Some(fr) = sf.flow(kind) else {
-                return Err(TrainError::Config(format!(
-                    "{}: frame {} has no `{}` flow to the next training frame {} (needed by \
-                     the flow loss with flow source {:?})",
-                    data.dir.display(),
-                    f.index,
-                    kind.as_str(),
-                    data.frames[p + 1].index,
-                    config.flow_source
-                )));
-            };
-            let path = scene::Scene::resolve(&data.dir, &fr.path);
-            let flow = events::read_flow(&path)
-                .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
-            if (flow.width, flow.height) != (w, h) {
-                return Err(TrainError::Config(format!(
-                    "{}: flow is {}x{}, the camera is {w}x{h}",
-                    path.display(),
-                    flow.width,
-                    flow.height
-                )));
-            }
-            let valid = match &fr.valid_mask {
-                Some(rel) => {
-                    let mp = scene::Scene::resolve(&data.dir, rel);
-                    let (mw, mh, m) = scene::read_mask(&mp)?;
-                    if (mw as usize, mh as usize) != (w, h) {
+            let target = match config.flow_source.kind() {
+                Some(kind) => file_flow_target(data, p, kind, config, (h, w), (h_out, w_out))?,
+                None => {
+                    let (f, next) = (&data.frames[p], &data.frames[p + 1]);
+                    let (Some(first), Some(second)) = (&f.sharp, &next.sharp) else {
                         return Err(TrainError::Config(format!(
-                            "{}: mask is {mw}x{mh}, the camera is {w}x{h}",
-                            mp.display()
+                            "{}: frame {} or its next training frame {} has no sharp reference \
+                             (needed by the flow loss with flow source sharp-net)",
+                            data.dir.display(),
+                            f.index,
+                            next.index
                         )));
-                    }
-                    Some(m)
+                    };
+                    network_target(&net, first, second, h, w, h_out, w_out, config.flow_tau)?
                 }
-                None => None,
             };
-            let target = prepare_target(
-                &flow.data,
-                valid.as_deref(),
-                h,
-                w,
-                h_out,
-                w_out,
-                config.flow_tau,
-            )?;
             pairs[slot] = Some(FlowPair {
                 next_slot: slot + 1,
                 target,
@@ -1388,4 +1357,63 @@ struct CheckpointMeta {
     rng_seed: String,
     rng_word_pos: String,
     order: Vec<usize>,
+}
+
+/// The flow loss's target for the pair (frame `p`, frame `p + 1`) from the `kind` flow that
+/// `scene.json` names for frame `p` (and its validity mask), resized to `size_out`. A missing flow,
+/// an unreadable file or a flow or mask of the wrong size is an error naming the frame or the file.
+fn file_flow_target(
+    data: &Dataset,
+    p: usize,
+    kind: scene::FlowKind,
+    config: &TrainConfig,
+    (h, w): (usize, usize),
+    (h_out, w_out): (usize, usize),
+) -> Result<FlowTarget<f32>, TrainError> {
+    let f = &data.frames[p];
+    let Some(fr) = data.scene.frames[p].flow(kind) else {
+        return Err(TrainError::Config(format!(
+            "{}: frame {} has no `{}` flow to the next training frame {} (needed by \
+             the flow loss with flow source {:?})",
+            data.dir.display(),
+            f.index,
+            kind.as_str(),
+            data.frames[p + 1].index,
+            config.flow_source
+        )));
+    };
+    let path = scene::Scene::resolve(&data.dir, &fr.path);
+    let flow = events::read_flow(&path)
+        .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+    if (flow.width, flow.height) != (w, h) {
+        return Err(TrainError::Config(format!(
+            "{}: flow is {}x{}, the camera is {w}x{h}",
+            path.display(),
+            flow.width,
+            flow.height
+        )));
+    }
+    let valid = match &fr.valid_mask {
+        Some(rel) => {
+            let mp = scene::Scene::resolve(&data.dir, rel);
+            let (mw, mh, m) = scene::read_mask(&mp)?;
+            if (mw as usize, mh as usize) != (w, h) {
+                return Err(TrainError::Config(format!(
+                    "{}: mask is {mw}x{mh}, the camera is {w}x{h}",
+                    mp.display()
+                )));
+            }
+            Some(m)
+        }
+        None => None,
+    };
+    Ok(prepare_target(
+        &flow.data,
+        valid.as_deref(),
+        h,
+        w,
+        h_out,
+        w_out,
+        config.flow_tau,
+    )?)
 }

@@ -278,6 +278,96 @@ fn a_flow_source_the_scene_lacks_is_refused_at_load_time() {
 }
 
 #[test]
+fn sharp_network_targets_make_the_sharp_frames_a_zero_of_the_flow_loss() {
+    use train::config::FlowSource;
+    use train::flow_loss::pair_flow_loss;
+    assert_eq!(
+        "sharp-net".parse::<FlowSource>(),
+        Ok(FlowSource::SharpNetwork)
+    );
+    let data = load_dataset(&fixture()).unwrap();
+    let net = flow::SpyNet::random(2, 7);
+    let config = |flow_source| TrainConfig {
+        flow_loss: true,
+        flow_source,
+        flow_tau: 0.05,
+        ..tiny_config(8)
+    };
+    let mut sharp = context();
+    sharp
+        .enable_flow(&data, &config(FlowSource::SharpNetwork), net.clone())
+        .unwrap();
+    let gt = flow_context(&config(FlowSource::GroundTruth));
+    let (h, w) = (sharp.camera.height as usize, sharp.camera.width as usize);
+    let frame = |slot: usize| {
+        let index = sharp.frames[slot].index;
+        data.frames.iter().find(|f| f.index == index).unwrap()
+    };
+    let mut supervised = 0;
+    for (slot, (p, q)) in sharp.flow_pairs.iter().zip(&gt.flow_pairs).enumerate() {
+        // The same pairs as with a flow file, at the same resolution.
+        assert_eq!(p.is_some(), q.is_some(), "slot {slot}");
+        let Some(p) = p else { continue };
+        assert_eq!((p.target.height, p.target.width), (16, 16));
+        let (first, second) = (frame(slot), frame(p.next_slot));
+        let (a, b) = (
+            first.sharp.as_ref().unwrap(),
+            second.sharp.as_ref().unwrap(),
+        );
+        // Zero loss (and zero gradient) at the sharp frames themselves ...
+        let at_sharp = pair_flow_loss(&net, a, b, h, w, &p.target).unwrap();
+        assert_eq!(at_sharp.loss, 0.0);
+        assert!(at_sharp
+            .d_first
+            .iter()
+            .chain(&at_sharp.d_second)
+            .all(|&g| g == 0.0));
+        // ... but not at the blurred input frames, where the network sees other images.
+        let supervised_here = p.target.supervised();
+        if supervised_here > 0 {
+            let at_blurred = pair_flow_loss(&net, &first.image, &second.image, h, w, &p.target);
+            assert!(at_blurred.unwrap().loss > 0.0, "slot {slot}");
+        }
+        supervised += supervised_here;
+        // The mask is the predicted flow's magnitude against τ.
+        let plane = 16 * 16;
+        for i in 0..plane {
+            let (u, v) = (p.target.flow[i], p.target.flow[plane + i]);
+            assert_eq!(p.target.mask[i], (u * u + v * v).sqrt() > 0.05);
+        }
+    }
+    assert!(supervised > 0, "no pixel supervised");
+}
+
+#[test]
+fn sharp_network_targets_without_sharp_references_are_refused_at_load_time() {
+    let mut data = load_dataset(&fixture()).unwrap();
+    let config = TrainConfig {
+        flow_loss: true,
+        flow_source: train::config::FlowSource::SharpNetwork,
+        ..tiny_config(8)
+    };
+    // Drop the sharp reference of the first frame that starts a training pair.
+    let gt = flow_context(&TrainConfig {
+        flow_source: train::config::FlowSource::GroundTruth,
+        ..config.clone()
+    });
+    let slot = gt.flow_pairs.iter().position(Option::is_some).unwrap();
+    let index = gt.frames[slot].index;
+    let frame = data.frames.iter_mut().find(|f| f.index == index).unwrap();
+    frame.sharp = None;
+    let mut ctx = context();
+    let err = ctx
+        .enable_flow(&data, &config, flow::SpyNet::random(2, 7))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("sharp reference") && err.contains(&format!("frame {index}")),
+        "{err}"
+    );
+}
+
+#[test]
 fn the_event_generation_loss_trains_pairs_from_the_event_files() {
     let data = load_dataset(&fixture()).unwrap();
     let config = TrainConfig {
