@@ -219,6 +219,7 @@ pub fn run(args: Args) -> Result<()> {
             flow_weight: None,
             flow_tau: None,
             flow_gradient: None,
+            flow_measure: None,
             flow_network: args.flow_network.clone(),
             event_loss: Some(r.event_loss),
             event_weight: None,

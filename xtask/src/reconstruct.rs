@@ -13,7 +13,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::blend::SemanticMode;
-use train::config::{FlowGradient, FlowSource, Preset, TrainConfig};
+use train::config::{FlowGradient, FlowMeasure, FlowSource, Preset, TrainConfig};
 use train::init::{InitMode, SemanticInit};
 use train::trainer::{Body, StepReport, TrainContext, Trainer};
 use train::TrainError;
@@ -69,6 +69,12 @@ pub struct Args {
     /// semantics — a deviation from the paper, for an ablation).
     #[arg(long, value_parser = parse_flow_gradient)]
     pub flow_gradient: Option<FlowGradient>,
+    /// How the renders' motion is compared with the target flow: network (the paper: the frozen
+    /// flow network's prediction between the two renders) or warp (an ideal flow estimator:
+    /// render k against render k+1 warped back by the target flow — an ablation outside the paper
+    /// that shows what the flow constraint gives without any network's error).
+    #[arg(long)]
+    pub flow_measure: Option<FlowMeasure>,
     /// Weights of the frozen flow network (safetensors). Default: the shipped
     /// data-fixtures/flow/spynet-synthetic.safetensors.
     #[arg(long)]
@@ -146,14 +152,18 @@ fn enable_flow(
     let pairs = ctx.flow_pairs.iter().filter(|p| p.is_some()).count();
     println!(
         "flow loss: {pairs} pairs of consecutive training frames, source {:?}, λ {}, τ {} px, \
-         gradient to {:?}, network {}",
+         gradient to {:?}, measure {:?}, network {}",
         config.flow_source,
         config.flow_weight,
         config.flow_tau,
         config.flow_gradient,
+        config.flow_measure,
         path.display()
     );
-    if config.flow_network.is_none() && config.flow_source != FlowSource::SharpNetwork {
+    if config.flow_network.is_none()
+        && config.flow_source != FlowSource::SharpNetwork
+        && config.flow_measure == FlowMeasure::Network
+    {
         eprintln!(
             "note: the shipped flow weights are weak (held-out EPE ratio 0.56, 0.45 on the \
              benchmark's moving pixels); with them, flow targets from the generator or the events \
@@ -255,6 +265,9 @@ fn resolve_config(args: &Args) -> Result<TrainConfig> {
     }
     if let Some(v) = args.flow_gradient {
         c.flow_gradient = v;
+    }
+    if let Some(v) = args.flow_measure {
+        c.flow_measure = v;
     }
     if let Some(v) = &args.flow_network {
         c.flow_network = Some(v.clone());
@@ -488,6 +501,7 @@ pub fn run(args: Args) -> Result<()> {
             "flow_weight": config.flow_weight,
             "flow_tau": config.flow_tau,
             "flow_gradient": config.flow_gradient,
+            "flow_measure": config.flow_measure,
             "event_loss": config.event_loss,
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,

@@ -270,6 +270,32 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
         }),
         "no step logged a flow loss"
     );
+    // The ideal-estimator ablation (`--flow-measure warp`) runs and is recorded; a bad measure is
+    // refused with the expected values.
+    let out_warp = dir.path().join("warp");
+    reconstruct(
+        &out_warp,
+        &config,
+        &[
+            "--flow-loss",
+            "on",
+            "--flow-source",
+            "gt",
+            "--flow-measure",
+            "warp",
+            "--flow-network",
+            weights.to_str().unwrap(),
+        ],
+    );
+    let metrics = std::fs::read_to_string(out_warp.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"flow_measure\": \"warp\""), "{metrics}");
+    let o = xtask()
+        .args(["reconstruct", "--flow-measure", "raft", "--data"])
+        .arg(fixture())
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("network or warp"));
     // The event-generation loss alternative runs from the command line too.
     let out_ev = dir.path().join("events");
     let o = reconstruct(

@@ -148,6 +148,12 @@ pub struct TrainConfig {
     /// posed means and covariances, and through them positions, shapes and the deformation; not
     /// colours, opacities or semantics). `geometry` is a deviation from the paper, for an ablation.
     pub flow_gradient: FlowGradient,
+    /// How the renders' flow is compared with the target: `network` (the paper: the frozen flow
+    /// network's prediction between the renders) or `warp` (an ideal flow estimator: render k
+    /// against render k+1 warped back by the target flow, `train::flow_loss::pair_warp_loss`; an
+    /// ablation outside the paper that measures what the flow constraint can give without any
+    /// network's error). λ_flow weighs either; their units differ (pixels of flow vs intensity).
+    pub flow_measure: FlowMeasure,
     /// SPyNet-style weights (safetensors) of the frozen flow network; `None`: the project's shipped
     /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
     pub flow_network: Option<std::path::PathBuf>,
@@ -175,6 +181,34 @@ pub enum FlowGradient {
     /// Only the rasterizer's mean and covariance inputs: colours, opacities and semantic
     /// probabilities get no share of the flow loss's gradient.
     Geometry,
+}
+
+/// How the flow loss compares the renders' motion with the target (see
+/// [`TrainConfig::flow_measure`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlowMeasure {
+    /// The frozen flow network's prediction between the two renders, masked L1 against the target
+    /// flow (the paper).
+    #[default]
+    Network,
+    /// Brightness constancy along the target flow: masked L1 between render k and render k+1 warped
+    /// back by the target (what a perfect flow estimator would enforce; not in the paper).
+    Warp,
+}
+
+impl std::str::FromStr for FlowMeasure {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "network" => Ok(Self::Network),
+            "warp" => Ok(Self::Warp),
+            _ => Err(format!(
+                "unknown flow measure `{s}` (expected network or warp)"
+            )),
+        }
+    }
 }
 
 /// Source of the flow that supervises the flow loss.
@@ -281,6 +315,7 @@ impl TrainConfig {
             flow_tau: 0.25,
             flow_scale: 0.25,
             flow_gradient: FlowGradient::All,
+            flow_measure: FlowMeasure::Network,
             flow_network: None,
             event_loss: false,
             event_weight: 3.0,

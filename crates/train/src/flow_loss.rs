@@ -219,6 +219,101 @@ pub fn pair_flow_loss<T: Real>(
     })
 }
 
+/// [`pair_warp_loss`]'s result: the loss and its gradient w.r.t. both full-resolution renders.
+#[derive(Clone, Debug)]
+pub struct PairWarpLoss<T> {
+    /// L_warp (intensity units: mean over M of the L1 over the three colour channels).
+    pub loss: T,
+    /// ∂L_warp/∂(render of frame k), planar (3, H, W).
+    pub d_first: Vec<T>,
+    /// ∂L_warp/∂(render of frame k+1), planar (3, H, W).
+    pub d_second: Vec<T>,
+    /// Identifies the smooth piece of the loss the inputs fall in (the signs of the L1 residuals):
+    /// finite-difference probes whose signatures differ straddle a kink.
+    pub region_signature: u64,
+}
+
+/// The flow loss with an *ideal* flow estimator in place of the network — an ablation outside the
+/// paper. A perfect estimator reports the target flow F between two renders exactly when they obey
+/// brightness constancy along it, `R_{k+1}(p + F(p)) = R_k(p)`; so instead of comparing a network's
+/// flow with F, this compares render k with render k+1 warped back by F:
+///
+/// L_warp = (1/|M|) Σ_{p∈M} Σ_c |R_k(c, p) − warp(R_{k+1}, F)(c, p)|
+///
+/// at the target's resolution (both renders resized as in [`pair_flow_loss`], bilinear
+/// `align_corners = true`; `warp` is [`nn::warp_forward`]: bilinear, border padding). The target
+/// flow is fixed, so the gradient reaches the renders only: frame k directly, frame k+1 through the
+/// warp's image gradient. It measures what the flow constraint itself can tell the renders, free of
+/// any network's error; it is zero for renders that move exactly as F says (up to occlusion and the
+/// warp's interpolation).
+pub fn pair_warp_loss<T: Real>(
+    first: &[T],
+    second: &[T],
+    height: usize,
+    width: usize,
+    target: &FlowTarget<T>,
+) -> Result<PairWarpLoss<T>, TrainError> {
+    let (h, w) = (target.height, target.width);
+    let plane = h * w;
+    let mut small = [vec![T::zero(); 3 * plane], vec![T::zero(); 3 * plane]];
+    for (img, out) in [first, second].into_iter().zip(small.iter_mut()) {
+        resize_bilinear_forward(3, height, width, img, h, w, true, out)?;
+    }
+    let mut warped = vec![T::zero(); 3 * plane];
+    nn::warp_forward(1, 3, h, w, &small[1], &target.flow, &mut warped)?;
+    let count = target.supervised();
+    let mut d_small_first = vec![T::zero(); 3 * plane];
+    let mut d_warped = vec![T::zero(); 3 * plane];
+    let mut loss = T::zero();
+    let mut signature = 0xCBF2_9CE4_8422_2325u64;
+    if count > 0 {
+        let inv = T::one() / T::of(count as f64);
+        for p in (0..plane).filter(|&p| target.mask[p]) {
+            for c in 0..3 {
+                let i = c * plane + p;
+                let r = small[0][i] - warped[i];
+                loss = loss + r.abs();
+                let g = if r > T::zero() {
+                    inv
+                } else if r < T::zero() {
+                    -inv
+                } else {
+                    T::zero()
+                };
+                d_small_first[i] = g;
+                d_warped[i] = -g;
+                let sign = if r > T::zero() { 1u64 } else { 2 };
+                signature = (signature ^ sign.wrapping_add(i as u64))
+                    .wrapping_mul(0x1000_0000_01B3)
+                    .rotate_left(5);
+            }
+        }
+        loss = loss * inv;
+    }
+    let mut d_small_second = vec![T::zero(); 3 * plane];
+    nn::warp_backward(
+        1,
+        3,
+        h,
+        w,
+        &small[1],
+        &target.flow,
+        &d_warped,
+        Some(&mut d_small_second),
+        None,
+    )?;
+    let mut d_first = vec![T::zero(); 3 * height * width];
+    let mut d_second = vec![T::zero(); 3 * height * width];
+    resize_bilinear_backward(3, height, width, h, w, true, &d_small_first, &mut d_first)?;
+    resize_bilinear_backward(3, height, width, h, w, true, &d_small_second, &mut d_second)?;
+    Ok(PairWarpLoss {
+        loss,
+        d_first,
+        d_second,
+        region_signature: signature,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,6 +330,36 @@ mod tests {
         let still = prepare_target(&vec![0.1f32; 2 * h * w], None, h, w, 4, 6, 0.5).unwrap();
         assert_eq!(still.supervised(), 0);
         assert_eq!(masked_l1(&[1.0; 48], &still, None), 0.0);
+    }
+
+    #[test]
+    fn warp_loss_is_zero_exactly_for_frames_that_move_as_the_flow_says() {
+        // Frame k+1 is frame k shifted one pixel right; the flow says u = 1 everywhere. The last
+        // column's correspondent leaves the image (the warp clamps it), so it is marked invalid.
+        let (h, w) = (6, 8);
+        let plane = h * w;
+        let first: Vec<f32> = (0..3 * plane)
+            .map(|i| ((i * 37 % 11) as f32) / 10.0)
+            .collect();
+        let mut second = vec![0.5f32; 3 * plane];
+        for c in 0..3 {
+            for y in 0..h {
+                for x in 1..w {
+                    second[c * plane + y * w + x] = first[c * plane + y * w + x - 1];
+                }
+            }
+        }
+        let mut flow = vec![1.0f32; plane];
+        flow.extend(vec![0.0f32; plane]);
+        let valid: Vec<bool> = (0..plane).map(|p| p % w != w - 1).collect();
+        let target = prepare_target(&flow, Some(&valid), h, w, h, w, 0.5).unwrap();
+        assert_eq!(target.supervised(), h * (w - 1));
+        let exact = pair_warp_loss(&first, &second, h, w, &target).unwrap();
+        assert_eq!(exact.loss, 0.0);
+        // Frame k+1 not moved at all: the constraint is violated and the loss says so.
+        let still = pair_warp_loss(&first, &first, h, w, &target).unwrap();
+        assert!(still.loss > 0.1, "{}", still.loss);
+        assert!(still.d_second.iter().any(|&g| g != 0.0));
     }
 
     #[test]

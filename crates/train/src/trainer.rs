@@ -10,11 +10,13 @@
 
 use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
-use crate::config::{FlowGradient, TrainConfig};
+use crate::config::{FlowGradient, FlowMeasure, TrainConfig};
 use crate::data::Dataset;
 use crate::event_loss::pair_event_loss;
 use crate::fit::{accumulate_screen_stats, exponential_rate, on_schedule};
-use crate::flow_loss::{network_target, pair_flow_loss, prepare_target, FlowTarget};
+use crate::flow_loss::{
+    network_target, pair_flow_loss, pair_warp_loss, prepare_target, FlowTarget,
+};
 use crate::image_loss::{l1, psnr, ssim, ImageShape};
 use crate::init::{initialise, InitConfig};
 use crate::model::{
@@ -879,30 +881,33 @@ impl Trainer {
             let mut d_image2 = vec![0.0f32; RENDER_CHANNELS * hw];
             if let Some((net, pair)) = flow_pair {
                 let t_network = Instant::now();
-                let fl = pair_flow_loss(
-                    net,
-                    rgb,
-                    rgb2,
-                    camera.height as usize,
-                    camera.width as usize,
-                    &pair.target,
-                )?;
+                let (height, width) = (camera.height as usize, camera.width as usize);
+                let (fl_loss, fl_d_first, fl_d_second) = match config.flow_measure {
+                    FlowMeasure::Network => {
+                        let fl = pair_flow_loss(net, rgb, rgb2, height, width, &pair.target)?;
+                        (fl.loss, fl.d_first, fl.d_second)
+                    }
+                    FlowMeasure::Warp => {
+                        let wl = pair_warp_loss(rgb, rgb2, height, width, &pair.target)?;
+                        (wl.loss, wl.d_first, wl.d_second)
+                    }
+                };
                 times.flow_network = t_network.elapsed().as_secs_f64();
                 let lambda = config.flow_weight;
-                flow_value = lambda * fl.loss;
+                flow_value = lambda * fl_loss;
                 let scaled = |g: &[f32]| g.iter().map(|&v| lambda * v).collect::<Vec<f32>>();
                 match config.flow_gradient {
                     FlowGradient::All => {
-                        for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl.d_first) {
+                        for (o, &g) in d_image[..3 * hw].iter_mut().zip(&fl_d_first) {
                             *o += lambda * g;
                         }
-                        for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&fl.d_second) {
+                        for (o, &g) in d_image2[..3 * hw].iter_mut().zip(&fl_d_second) {
                             *o += lambda * g;
                         }
                     }
                     FlowGradient::Geometry => {
-                        d_flow_first = Some(scaled(&fl.d_first));
-                        d_flow_second = Some(scaled(&fl.d_second));
+                        d_flow_first = Some(scaled(&fl_d_first));
+                        d_flow_second = Some(scaled(&fl_d_second));
                     }
                 }
             }
