@@ -13,7 +13,10 @@
 //! consecutive training frames the loss trains on, and the mean flow loss (the training step's masked
 //! L1, without λ) of those renders is printed next to the same loss on the sharp references and on
 //! the blurred input frames. A loss that scores a run's renders below the sharp truth pulls the
-//! reconstruction away from it.
+//! reconstruction away from it. Next to the network's loss it prints the ideal-estimator loss
+//! (`train::flow_loss::pair_warp_loss`: render k against render k+1 warped back by the exact flow)
+//! at the loss's 1/4 resolution (τ as given) and at full resolution (τ × 4 px): whether even a
+//! perfect flow estimator would prefer the sharp frames.
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
@@ -164,27 +167,56 @@ fn compare_renders(
         let index = ctx.frames[slot].index;
         data.frames.iter().find(|f| f.index == index)
     };
+    // Full-resolution targets for the ideal-estimator loss at scale 1 (the pairs' own are at 1/4).
+    let mut full_targets = Vec::with_capacity(pairs.len());
+    for &(slot, _) in &pairs {
+        let k = data
+            .frames
+            .iter()
+            .position(|f| f.index == ctx.frames[slot].index)
+            .ok_or("a training frame is missing from the dataset")?;
+        let fr = data.scene.frames[k]
+            .flow(scene::FlowKind::GroundTruth)
+            .ok_or("a training pair has no ground-truth flow")?;
+        let flow = events::read_flow(scene::Scene::resolve(&data.dir, &fr.path))?;
+        full_targets.push(prepare_target(&flow.data, None, h, w, h, w, 4.0 * tau)?);
+    }
+    // Mean over the pairs of [network loss, ideal-estimator loss at 1/4, at full resolution].
     let mean_loss = |images: &dyn Fn(usize) -> Result<Vec<f32>, Box<dyn std::error::Error>>| {
-        let mut sum = 0.0f64;
-        for &(slot, pair) in &pairs {
+        let mut sum = [0.0f64; 3];
+        for (&(slot, pair), full) in pairs.iter().zip(&full_targets) {
             let (a, b) = (images(slot)?, images(pair.next_slot)?);
-            sum +=
-                f64::from(train::flow_loss::pair_flow_loss(&net, &a, &b, h, w, &pair.target)?.loss);
+            let fl = train::flow_loss::pair_flow_loss(&net, &a, &b, h, w, &pair.target)?;
+            let quarter = train::flow_loss::pair_warp_loss(&a, &b, h, w, &pair.target)?;
+            let whole = train::flow_loss::pair_warp_loss(&a, &b, h, w, full)?;
+            sum[0] += f64::from(fl.loss);
+            sum[1] += f64::from(quarter.loss);
+            sum[2] += f64::from(whole.loss);
         }
-        Ok::<f64, Box<dyn std::error::Error>>(sum / pairs.len().max(1) as f64)
+        let n = pairs.len().max(1) as f64;
+        Ok::<[f64; 3], Box<dyn std::error::Error>>(sum.map(|s| s / n))
     };
     println!(
-        "flow loss (masked L1, tau {tau} px) over the {} training pairs, lower = preferred:",
-        pairs.len()
+        "mean over the {} training pairs, lower = preferred: the flow loss (masked L1, tau {tau} px \
+         at 1/4) and the ideal-estimator loss (render k vs render k+1 warped by the exact flow, \
+         masked L1 over RGB) at 1/4 and at full resolution (tau {} px):",
+        pairs.len(),
+        4.0 * tau
     );
+    let print = |name: &str, l: [f64; 3]| {
+        println!(
+            "{name:>40}: network {:.4}  warp 1/4 {:.4}  warp full {:.4}",
+            l[0], l[1], l[2]
+        )
+    };
     let sharp = mean_loss(&|slot| {
         frame_of(slot)
             .and_then(|f| f.sharp.clone())
             .ok_or_else(|| "a training frame has no sharp reference".into())
     })?;
-    println!("{:>40}: {sharp:.4}", "sharp references");
+    print("sharp references", sharp);
     let blurred = mean_loss(&|slot| Ok(ctx.frames[slot].image.clone()))?;
-    println!("{:>40}: {blurred:.4}", "blurred input");
+    print("blurred input", blurred);
     for run in runs {
         let model = train::trainer::Trainer::load_checkpoint(
             &Path::new(run).join("checkpoint.safetensors"),
@@ -196,7 +228,7 @@ fn compare_renders(
                 &model.latents[slot * model.config.latent_dim..][..model.config.latent_dim];
             Ok(model.render(&ctx.camera, &frame.pose, latent)?.rgb)
         })?;
-        println!("{run:>40}: {loss:.4}");
+        print(run, loss);
     }
     Ok(())
 }
