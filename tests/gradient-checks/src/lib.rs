@@ -187,6 +187,38 @@ impl GradientChecker {
     }
 }
 
+/// Checks the gradient of a loss of two inputs stacked as `[first, second]` (e.g. two renders of a
+/// pair of frames): `numeric[j]` is the finite difference at input `probes[j]`, `analytic` the full
+/// analytic gradient, `first_len` the length of the first input. Besides the comparison itself it
+/// asserts that the negated gradient and the gradient with the second input's share zeroed both
+/// *fail*, so the check would catch a wrong sign or a missing path to the second input.
+pub fn check_pair_gradient(
+    name: &str,
+    numeric: &[f64],
+    probes: &[usize],
+    analytic: &[f64],
+    first_len: usize,
+    tol: Tolerance,
+) {
+    let ana: Vec<f64> = probes.iter().map(|&i| analytic[i]).collect();
+    let mut checker = GradientChecker::new();
+    checker.check(name, numeric, &ana, tol);
+    let negated: Vec<f64> = ana.iter().map(|a| -a).collect();
+    assert!(
+        !compare(name, numeric, &negated, tol).passed(),
+        "{name}: the negated gradient passes"
+    );
+    let no_second: Vec<f64> = probes
+        .iter()
+        .map(|&i| if i >= first_len { 0.0 } else { analytic[i] })
+        .collect();
+    assert!(
+        !compare(name, numeric, &no_second, tol).passed(),
+        "{name}: a zero gradient for the second input passes"
+    );
+    checker.finish();
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
