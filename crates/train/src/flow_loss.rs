@@ -100,13 +100,7 @@ pub fn network_target<T: Real>(
     w_out: usize,
     tau: T,
 ) -> Result<FlowTarget<T>, TrainError> {
-    let mut small = [
-        vec![T::zero(); 3 * h_out * w_out],
-        vec![T::zero(); 3 * h_out * w_out],
-    ];
-    for (img, out) in [first, second].into_iter().zip(small.iter_mut()) {
-        resize_bilinear_forward(3, height, width, img, h_out, w_out, true, out)?;
-    }
+    let small = resize_pair(first, second, height, width, h_out, w_out)?;
     let flow = net.forward(&small[0], &small[1], h_out, w_out)?.flow;
     let plane = h_out * w_out;
     let mask = (0..plane)
@@ -187,27 +181,19 @@ pub fn pair_flow_loss<T: Real>(
     target: &FlowTarget<T>,
 ) -> Result<PairFlowLoss<T>, TrainError> {
     let (h, w) = (target.height, target.width);
-    let mut small = [vec![T::zero(); 3 * h * w], vec![T::zero(); 3 * h * w]];
-    for (img, out) in [first, second].into_iter().zip(small.iter_mut()) {
-        resize_bilinear_forward(3, height, width, img, h, w, true, out)?;
-    }
+    let small = resize_pair(first, second, height, width, h, w)?;
     let tape = net.forward(&small[0], &small[1], h, w)?;
     let mut d_flow = vec![T::zero(); 2 * h * w];
     let loss = masked_l1(&tape.flow, target, Some(&mut d_flow));
     let (d_small_first, d_small_second) = net.backward(&tape, &d_flow, None)?;
-    let mut d_first = vec![T::zero(); 3 * height * width];
-    let mut d_second = vec![T::zero(); 3 * height * width];
-    resize_bilinear_backward(3, height, width, h, w, true, &d_small_first, &mut d_first)?;
-    resize_bilinear_backward(3, height, width, h, w, true, &d_small_second, &mut d_second)?;
+    let (d_first, d_second) =
+        resize_pair_backward(&d_small_first, &d_small_second, height, width, h, w)?;
     // Fold the L1 residual signs of supervised pixels into the network's region signature.
     let plane = h * w;
     let mut signature = tape.region_signature();
     for (i, &g) in d_flow.iter().enumerate() {
         if target.mask[i % plane] {
-            let sign = if g > T::zero() { 1u64 } else { 2 };
-            signature = (signature ^ sign.wrapping_add(i as u64))
-                .wrapping_mul(0x1000_0000_01B3)
-                .rotate_left(5);
+            signature = fold_sign(signature, g > T::zero(), i);
         }
     }
     Ok(PairFlowLoss {
@@ -217,6 +203,50 @@ pub fn pair_flow_loss<T: Real>(
         d_second,
         region_signature: signature,
     })
+}
+
+/// Both renders of a pair (planar (3, height, width)) resized to (3, h, w), bilinear with
+/// `align_corners = true`: the inputs of [`network_target`], [`pair_flow_loss`] and
+/// [`pair_warp_loss`].
+fn resize_pair<T: Real>(
+    first: &[T],
+    second: &[T],
+    height: usize,
+    width: usize,
+    h: usize,
+    w: usize,
+) -> Result<[Vec<T>; 2], TrainError> {
+    let mut small = [vec![T::zero(); 3 * h * w], vec![T::zero(); 3 * h * w]];
+    for (img, out) in [first, second].into_iter().zip(small.iter_mut()) {
+        resize_bilinear_forward(3, height, width, img, h, w, true, out)?;
+    }
+    Ok(small)
+}
+
+/// The backward of [`resize_pair`]: gradients w.r.t. the resized pair, (3, h, w) each, taken back
+/// to the renders' (3, height, width).
+fn resize_pair_backward<T: Real>(
+    d_small_first: &[T],
+    d_small_second: &[T],
+    height: usize,
+    width: usize,
+    h: usize,
+    w: usize,
+) -> Result<(Vec<T>, Vec<T>), TrainError> {
+    let mut d_first = vec![T::zero(); 3 * height * width];
+    let mut d_second = vec![T::zero(); 3 * height * width];
+    resize_bilinear_backward(3, height, width, h, w, true, d_small_first, &mut d_first)?;
+    resize_bilinear_backward(3, height, width, h, w, true, d_small_second, &mut d_second)?;
+    Ok((d_first, d_second))
+}
+
+/// Mixes the sign of L1 residual `index` (positive or not) into a region signature, so that
+/// finite-difference probes can tell when they cross a kink of the loss.
+fn fold_sign(signature: u64, positive: bool, index: usize) -> u64 {
+    let sign = if positive { 1u64 } else { 2 };
+    (signature ^ sign.wrapping_add(index as u64))
+        .wrapping_mul(0x1000_0000_01B3)
+        .rotate_left(5)
 }
 
 /// [`pair_warp_loss`]'s result: the loss and its gradient w.r.t. both full-resolution renders.
@@ -255,10 +285,7 @@ pub fn pair_warp_loss<T: Real>(
 ) -> Result<PairWarpLoss<T>, TrainError> {
     let (h, w) = (target.height, target.width);
     let plane = h * w;
-    let mut small = [vec![T::zero(); 3 * plane], vec![T::zero(); 3 * plane]];
-    for (img, out) in [first, second].into_iter().zip(small.iter_mut()) {
-        resize_bilinear_forward(3, height, width, img, h, w, true, out)?;
-    }
+    let small = resize_pair(first, second, height, width, h, w)?;
     let mut warped = vec![T::zero(); 3 * plane];
     nn::warp_forward(1, 3, h, w, &small[1], &target.flow, &mut warped)?;
     let count = target.supervised();
@@ -282,10 +309,7 @@ pub fn pair_warp_loss<T: Real>(
                 };
                 d_small_first[i] = g;
                 d_warped[i] = -g;
-                let sign = if r > T::zero() { 1u64 } else { 2 };
-                signature = (signature ^ sign.wrapping_add(i as u64))
-                    .wrapping_mul(0x1000_0000_01B3)
-                    .rotate_left(5);
+                signature = fold_sign(signature, r > T::zero(), i);
             }
         }
         loss = loss * inv;
@@ -302,10 +326,8 @@ pub fn pair_warp_loss<T: Real>(
         Some(&mut d_small_second),
         None,
     )?;
-    let mut d_first = vec![T::zero(); 3 * height * width];
-    let mut d_second = vec![T::zero(); 3 * height * width];
-    resize_bilinear_backward(3, height, width, h, w, true, &d_small_first, &mut d_first)?;
-    resize_bilinear_backward(3, height, width, h, w, true, &d_small_second, &mut d_second)?;
+    let (d_first, d_second) =
+        resize_pair_backward(&d_small_first, &d_small_second, height, width, h, w)?;
     Ok(PairWarpLoss {
         loss,
         d_first,
