@@ -68,7 +68,7 @@ pub struct TrainConfig {
     pub latent_dim: usize,
     /// Hidden width of the non-rigid network and of the skinning field.
     pub deform_hidden: usize,
-    /// Gaussians with human probability below this skip the human branch (see `train::model`).
+    /// Gaussians with human probability below this skip the human branch (see `train::posing`).
     pub semantic_gate: f32,
     /// Background colour (linear RGB) composited behind the Gaussians.
     pub background: [f32; 3],

@@ -11,7 +11,7 @@
 
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
-use crate::model::PosedFrame;
+use crate::posing::PosedFrame;
 use crate::trainer::{build_nets, Body, Trainer};
 use crate::TrainError;
 use gaussians::covariance::decompose_covariance;

@@ -15,7 +15,7 @@ pub mod fit;
 pub mod flow_loss;
 pub mod image_loss;
 pub mod init;
-pub mod model;
+pub mod posing;
 pub mod step;
 pub mod trainer;
 

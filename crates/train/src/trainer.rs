@@ -1,5 +1,5 @@
 //! The E-Sem3DGS optimisation loop (paper §4.5 without the event-flow term): one set of semantic
-//! Gaussians, posed per training frame by [`crate::model`], rendered in one rasterization with the human
+//! Gaussians, posed per training frame by [`crate::posing`], rendered in one rasterization with the human
 //! probability as a fourth channel, and optimised with L1 + λ·D-SSIM, the skinning loss and the AIAP
 //! losses; Adam per parameter group, the 3DGS position-rate decay, density control on its schedule,
 //! opacity resets, atomic checkpoints that resume bit for bit, and a NaN guard.
@@ -19,7 +19,7 @@ use crate::flow_loss::{
 };
 use crate::image_loss::{l1, psnr, ssim, ImageShape};
 use crate::init::{initialise, InitConfig};
-use crate::model::{
+use crate::posing::{
     pose_frame_backward, pose_frame_gated, FrameCotangents, FrameInputs, GaussianParams, ModelNets,
     PosedFrame,
 };
@@ -750,7 +750,7 @@ impl Trainer {
     ) -> Result<
         (
             PosedFrame<f32>,
-            crate::model::FrameCache<f32>,
+            crate::posing::FrameCache<f32>,
             RenderOutput<f32>,
         ),
         TrainError,

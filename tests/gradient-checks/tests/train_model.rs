@@ -1,4 +1,4 @@
-//! End-to-end finite-difference check of the per-frame model (`train::model`): non-rigid network →
+//! End-to-end finite-difference check of the per-frame model (`train::posing`): non-rigid network →
 //! learned skinning → LBS → deformed covariance, static covariance, both colour networks, semantic
 //! blend — w.r.t. every learnable quantity (Gaussian parameters, logits, the four networks, the frame
 //! latent and the bone transforms), for the one-hot and scalar semantics, with the exact blend
@@ -16,7 +16,7 @@ use proptest::prelude::*;
 use smpl_deform::deform_net::{NonRigidNet, SkinningField, NR_FEATURE_DIM};
 use train::blend::SemanticMode;
 use train::colour::{ColourNet, ColourNetConfig};
-use train::model::{
+use train::posing::{
     pose_frame_backward, pose_frame_gated, FrameCotangents, FrameInputs, GaussianParams, ModelNets,
 };
 
@@ -118,7 +118,12 @@ fn case(seed: u64, scalar: bool, gate: f64) -> Case {
     }
 }
 
-fn outputs(c: &Case) -> (train::model::PosedFrame<f64>, train::model::FrameCache<f64>) {
+fn outputs(
+    c: &Case,
+) -> (
+    train::posing::PosedFrame<f64>,
+    train::posing::FrameCache<f64>,
+) {
     let g = GaussianParams {
         means: &c.means,
         log_scales: &c.log_scales,

@@ -1,4 +1,4 @@
-//! The E-Sem3DGS model for one frame, up to rasterization: every Gaussian is read twice — deformed as a
+//! Posing the E-Sem3DGS Gaussians for one frame, up to rasterization: every Gaussian is read twice — deformed as a
 //! human Gaussian (non-rigid network, learned skinning weights, LBS with the frame's bones) and static
 //! as a scene Gaussian — coloured by the human and the scene colour networks, and blended by its human
 //! probability (see [`crate::blend`]) into one position, covariance and colour. The human probability
