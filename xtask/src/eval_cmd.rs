@@ -5,8 +5,9 @@
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::{Path, PathBuf};
+use train::body::Body;
 use train::eval::{evaluate_split, mean_metrics};
-use train::trainer::{Body, Trainer};
+use train::model::Model;
 
 /// Arguments of `eval`.
 #[derive(clap::Args, Debug)]
@@ -38,13 +39,13 @@ pub struct EvalSummary {
 
 /// Evaluates the test split, writes `out/metrics.json` and `out/eval/strip_NNNNNN.png`, prints a table.
 pub fn write_evaluation(
-    trainer: &Trainer,
+    model: &Model,
     body: &Body,
     data: &train::data::Dataset,
     out: &Path,
     summary: &EvalSummary,
 ) -> Result<()> {
-    let frames = evaluate_split(trainer, body, data, scene::Split::Test)?;
+    let frames = evaluate_split(model, body, data, scene::Split::Test)?;
     let strips = out.join("eval");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
     for f in &frames {
@@ -141,18 +142,18 @@ pub fn run(args: Args) -> Result<()> {
             .parent()
             .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
     });
-    let t = &loaded.trainer;
-    let human = t.human_count();
+    let model = &loaded.model;
+    let human = model.human_count();
     write_evaluation(
-        t,
+        model,
         &loaded.body,
         &data,
         &out,
         &EvalSummary {
             train_seconds: f64::NAN,
-            steps: t.step,
+            steps: loaded.manifest.steps,
             gaussians_human: human,
-            gaussians_scene: t.set.len() - human,
+            gaussians_scene: model.set.len() - human,
             extra: json!({ "model": args.model.display().to_string(), "data": data_dir.display().to_string() }),
         },
     )

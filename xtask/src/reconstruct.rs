@@ -13,9 +13,11 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::blend::SemanticMode;
+use train::body::Body;
 use train::config::{FlowGradient, FlowMeasure, FlowSource, Preset, TrainConfig};
+use train::data::TrainingData;
 use train::init::{InitMode, SemanticInit};
-use train::trainer::{Body, StepReport, TrainContext, Trainer};
+use train::trainer::{StepReport, Trainer};
 use train::TrainError;
 
 /// Arguments of `reconstruct`.
@@ -132,7 +134,7 @@ pub fn shipped_flow_network() -> PathBuf {
 
 /// Loads the frozen flow network of `config` and prepares the flow pairs of `ctx`.
 fn enable_flow(
-    ctx: &mut TrainContext,
+    ctx: &mut TrainingData,
     data: &train::data::Dataset,
     config: &TrainConfig,
 ) -> Result<()> {
@@ -215,19 +217,13 @@ pub fn benchmark(cfg: &::synth::SynthConfig, name: &str) -> Result<PathBuf> {
 
 /// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).
 pub fn scene_body(data: &train::data::Dataset) -> Result<Body> {
-    let spec = &data.scene.body;
-    let reference = smpl_deform::BodyRef::parse(&spec.model)
-        .with_context(|| format!("scene.json: body.model `{}`", spec.model))?;
-    let reference = match reference {
-        smpl_deform::BodyRef::SmplFile(p) if p.is_relative() => {
-            smpl_deform::BodyRef::SmplFile(data.dir.join(p))
-        }
-        r => r,
-    };
-    let model = reference
-        .load()
-        .with_context(|| format!("loading the body model `{}`", spec.model))?;
-    Ok(Body::new(model, spec.betas.clone())?)
+    Body::of_scene(data).with_context(|| {
+        format!(
+            "{}: loading the body model `{}` (scene.json body.model)",
+            data.dir.display(),
+            data.scene.body.model
+        )
+    })
 }
 
 /// The resolved configuration: preset, then the file, then the flags.
@@ -355,13 +351,13 @@ pub fn run(args: Args) -> Result<()> {
     let data = train::data::load_dataset(&data_dir)
         .with_context(|| format!("loading the scene {}", data_dir.display()))?;
     let body = scene_body(&data)?;
-    let mut ctx = TrainContext::new(&data, body.clone(), config.seed)?;
+    let mut ctx = TrainingData::new(&data, body.clone(), config.seed)?;
     let checkpoint = out.join("checkpoint.safetensors");
     let log_path = out.join("log.jsonl");
     let (mut trainer, mut train_seconds) = if args.resume {
         let t = Trainer::load_checkpoint(&checkpoint, &ctx)
             .with_context(|| format!("resuming from {}", checkpoint.display()))?;
-        if t.config != config && (args.config.is_some() || args.steps.is_some()) {
+        if *t.config() != config && (args.config.is_some() || args.steps.is_some()) {
             eprintln!("note: --resume continues with the configuration stored in the checkpoint");
         }
         let secs = truncate_log(&log_path, t.step)?;
@@ -370,7 +366,7 @@ pub fn run(args: Args) -> Result<()> {
         let _ = std::fs::remove_file(&log_path);
         (Trainer::new(&ctx, config)?, 0.0)
     };
-    let config = trainer.config.clone();
+    let config = trainer.config().clone();
     if config.flow_loss {
         enable_flow(&mut ctx, &data, &config)?;
     }
@@ -395,8 +391,8 @@ pub fn run(args: Args) -> Result<()> {
         ctx.camera.height,
         config.steps,
         trainer.step,
-        trainer.set.len(),
-        trainer.human_count(),
+        trainer.model.set.len(),
+        trainer.model.human_count(),
         rayon::current_num_threads()
     );
     let mut log = std::io::BufWriter::new(
@@ -469,17 +465,12 @@ pub fn run(args: Args) -> Result<()> {
         return Ok(());
     }
     let model_dir = out.join("model");
-    train::export::save_model(
-        &model_dir,
-        &trainer,
-        &data.scene.body.model,
-        &data.scene.body.betas,
-        &data.scene.camera,
-    )
-    .with_context(|| format!("writing the model to {}", model_dir.display()))?;
+    let model = &trainer.model;
+    train::export::save_model(&model_dir, model, trainer.step, &data)
+        .with_context(|| format!("writing the model to {}", model_dir.display()))?;
     if let Some(first) = ctx.frames.first() {
-        let r = trainer.render(&ctx.camera, &first.pose, trainer.latent_for(first.index))?;
-        let posed = train::export::posed_set(&trainer, &r.posed);
+        let r = model.render(&ctx.camera, &first.pose, model.latent_for(first.index))?;
+        let posed = train::export::posed_set(model, &r.posed);
         let path = model_dir.join(format!("posed_frame_{:06}.ply", first.index));
         gaussians::ply::write_ply(&path, &posed)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -488,8 +479,8 @@ pub fn run(args: Args) -> Result<()> {
     let summary = EvalSummary {
         train_seconds,
         steps: trainer.step,
-        gaussians_human: trainer.human_count(),
-        gaussians_scene: trainer.set.len() - trainer.human_count(),
+        gaussians_human: model.human_count(),
+        gaussians_scene: model.set.len() - model.human_count(),
         extra: serde_json::json!({
             "data": data_dir.display().to_string(),
             "preset": preset_name,
@@ -510,7 +501,7 @@ pub fn run(args: Args) -> Result<()> {
             "step_seconds_breakdown": breakdown,
         }),
     };
-    write_evaluation(&trainer, &ctx.body, &data, &out, &summary)?;
+    write_evaluation(model, &ctx.body, &data, &out, &summary)?;
     crate::curve::write_curve(&log_path, &out.join("curve.png"))?;
     println!("model: {}", model_dir.display());
     println!(

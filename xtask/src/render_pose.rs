@@ -50,7 +50,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let t = &loaded.trainer;
+    let t = &loaded.model;
     let first = t.frame_indices.first().copied().unwrap_or(0);
     for (k, v) in list.into_iter().enumerate() {
         let e: PoseEntry = serde_json::from_value(v)

@@ -195,36 +195,16 @@ fn load_scene_pairs(
         Ok(out)
     };
     let mut pairs = Vec::new();
-    for (k, frame) in data.scene.frames.iter().enumerate() {
-        let Some(fr) = frame.flow(scene::FlowKind::GroundTruth) else {
+    for k in 0..data.frames.len().saturating_sub(1) {
+        let Some(pair) = train::data::read_pair_flow(&data, k, scene::FlowKind::GroundTruth)
+            .with_context(|| format!("{}: frame {k}'s flow", dir.display()))?
+        else {
             continue;
         };
-        let (Some(a), Some(b)) = (data.frames.get(k), data.frames.get(k + 1)) else {
-            continue;
-        };
-        let path = scene::Scene::resolve(dir, &fr.path);
-        let gt = events::read_flow(&path).with_context(|| format!("reading {}", path.display()))?;
-        if (gt.width, gt.height) != (w, h) {
-            anyhow::bail!(
-                "{}: flow is {}x{}, the camera is {w}x{h}",
-                path.display(),
-                gt.width,
-                gt.height
-            );
-        }
-        let valid = match (&fr.valid_mask, weights.valid_only) {
-            (Some(rel), true) => {
-                let path = scene::Scene::resolve(dir, rel);
-                Some(
-                    scene::read_mask(&path)
-                        .with_context(|| format!("reading {}", path.display()))?
-                        .2,
-                )
-            }
-            _ => None,
-        };
+        let (a, b) = (&data.frames[k], &data.frames[k + 1]);
+        let valid = pair.valid.filter(|_| weights.valid_only);
         let target = train::flow_loss::prepare_target(
-            &gt.data,
+            &pair.flow,
             valid.as_deref(),
             h,
             w,

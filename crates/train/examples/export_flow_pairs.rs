@@ -16,6 +16,7 @@
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
+use train::data::read_pair_flow;
 use train::flow_loss::prepare_target;
 
 /// Seed and size of the `train-flow` held-out set (`xtask train-flow --eval-seed`, `--eval-pairs`).
@@ -61,20 +62,12 @@ fn main() -> Result<(), Error> {
         let (w, h) = (data.camera.width as usize, data.camera.height as usize);
         let (wo, ho) = (w / 4, h / 4);
         let mut n = 0usize;
-        for (k, frame) in data.scene.frames.iter().enumerate() {
-            let Some(fr) = frame.flow(scene::FlowKind::GroundTruth) else {
+        for k in 0..data.frames.len().saturating_sub(1) {
+            let Some(pair) = read_pair_flow(&data, k, scene::FlowKind::GroundTruth)? else {
                 continue;
             };
-            if k + 1 >= data.frames.len() {
-                continue;
-            }
-            let flow = events::read_flow(scene::Scene::resolve(&dir, &fr.path))?;
-            let valid = match &fr.valid_mask {
-                Some(rel) => Some(scene::read_mask(&scene::Scene::resolve(&dir, rel))?.2),
-                None => None,
-            };
-            let target = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, TAU)?;
-            let all = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, -1.0)?;
+            let target = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, TAU)?;
+            let all = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, -1.0)?;
             let (a, b) = (&data.frames[k], &data.frames[k + 1]);
             let (Some(sharp_a), Some(sharp_b)) = (&a.sharp, &b.sharp) else {
                 return Err(
@@ -90,7 +83,7 @@ fn main() -> Result<(), Error> {
             }
             write_f32(&bench, format!("{n:03}_full1.f32"), sharp_a)?;
             write_f32(&bench, format!("{n:03}_full2.f32"), sharp_b)?;
-            write_f32(&bench, format!("{n:03}_fullflow.f32"), &flow.data)?;
+            write_f32(&bench, format!("{n:03}_fullflow.f32"), &pair.flow)?;
             write_f32(&bench, format!("{n:03}_flow.f32"), &target.flow)?;
             write_f32(&bench, format!("{n:03}_mask.f32"), &as_f32(&target.mask))?;
             write_f32(&bench, format!("{n:03}_valid.f32"), &as_f32(&all.mask))?;

@@ -20,6 +20,7 @@
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
+use train::data::read_pair_flow;
 use train::flow_loss::prepare_target;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -47,20 +48,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Sharp frames, over M: the network's EPE with level l's output replaced by the pooled truth.
     let levels = net.num_levels();
     let mut substituted = vec![0.0f64; levels.saturating_sub(1)];
-    for (k, sf) in data.scene.frames.iter().enumerate() {
-        let Some(fr) = sf.flow(scene::FlowKind::GroundTruth) else {
+    for k in 0..data.frames.len().saturating_sub(1) {
+        let Some(pair) = read_pair_flow(&data, k, scene::FlowKind::GroundTruth)? else {
             continue;
         };
-        if k + 1 >= data.frames.len() {
-            continue;
-        }
-        let flow = events::read_flow(scene::Scene::resolve(&dir, &fr.path))?;
-        let valid = match &fr.valid_mask {
-            Some(rel) => Some(scene::read_mask(&scene::Scene::resolve(&dir, rel))?.2),
-            None => None,
-        };
-        let target = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, tau)?;
-        let all = prepare_target(&flow.data, valid.as_deref(), h, w, ho, wo, -1.0)?;
+        let target = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, tau)?;
+        let all = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, -1.0)?;
         let (a, b) = (&data.frames[k], &data.frames[k + 1]);
         let (Some(sharp_a), Some(sharp_b)) = (&a.sharp, &b.sharp) else {
             return Err(format!("frame {} or {} has no sharp reference", a.index, b.index).into());
@@ -146,15 +139,14 @@ fn compare_renders(
     tau: f32,
     runs: &[String],
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let body_ref = smpl_deform::BodyRef::parse(&data.scene.body.model)?;
-    let body = train::trainer::Body::new(body_ref.load()?, data.scene.body.betas.clone())?;
+    let body = train::body::Body::of_scene(data)?;
     let config = train::config::TrainConfig {
         flow_loss: true,
         flow_source: train::config::FlowSource::GroundTruth,
         flow_tau: tau,
         ..train::config::TrainConfig::default()
     };
-    let mut ctx = train::trainer::TrainContext::new(data, body, config.seed)?;
+    let mut ctx = train::data::TrainingData::new(data, body, config.seed)?;
     ctx.enable_flow(data, &config, net.clone())?;
     let (h, w) = (ctx.camera.height as usize, ctx.camera.width as usize);
     let pairs: Vec<_> = ctx
@@ -175,11 +167,9 @@ fn compare_renders(
             .iter()
             .position(|f| f.index == ctx.frames[slot].index)
             .ok_or("a training frame is missing from the dataset")?;
-        let fr = data.scene.frames[k]
-            .flow(scene::FlowKind::GroundTruth)
+        let pair = read_pair_flow(data, k, scene::FlowKind::GroundTruth)?
             .ok_or("a training pair has no ground-truth flow")?;
-        let flow = events::read_flow(scene::Scene::resolve(&data.dir, &fr.path))?;
-        full_targets.push(prepare_target(&flow.data, None, h, w, h, w, 4.0 * tau)?);
+        full_targets.push(prepare_target(&pair.flow, None, h, w, h, w, 4.0 * tau)?);
     }
     // Mean over the pairs of [network loss, ideal-estimator loss at 1/4, at full resolution].
     let mean_loss = |images: &dyn Fn(usize) -> Result<Vec<f32>, Box<dyn std::error::Error>>| {
@@ -221,12 +211,13 @@ fn compare_renders(
         let model = train::trainer::Trainer::load_checkpoint(
             &Path::new(run).join("checkpoint.safetensors"),
             &ctx,
-        )?;
+        )?
+        .model;
         let loss = mean_loss(&|slot| {
             let frame = &ctx.frames[slot];
-            let latent =
-                &model.latents[slot * model.config.latent_dim..][..model.config.latent_dim];
-            Ok(model.render(&ctx.camera, &frame.pose, latent)?.rgb)
+            Ok(model
+                .render(&ctx.camera, &frame.pose, model.latent(slot))?
+                .rgb)
         })?;
         print(run, loss);
     }

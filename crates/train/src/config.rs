@@ -72,6 +72,8 @@ pub struct TrainConfig {
     pub semantic_gate: f32,
     /// Background colour (linear RGB) composited behind the Gaussians.
     pub background: [f32; 3],
+    /// Near clipping plane of the rasterizer (m): Gaussians closer to the camera are not drawn.
+    pub near_plane: f64,
     /// Weight λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
     pub ssim_weight: f32,
     /// Weight of the skinning loss (learned weights vs the body's, on surface samples).
@@ -283,6 +285,7 @@ impl TrainConfig {
             deform_hidden: 64,
             semantic_gate: 0.01,
             background: [0.0; 3],
+            near_plane: 0.2,
             ssim_weight: 0.2,
             skinning_weight: 10.0,
             skinning_until: 500,
@@ -440,6 +443,9 @@ impl TrainConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(name, "must be a finite non-negative number");
             }
+        }
+        if !(self.near_plane > 0.0 && self.near_plane.is_finite()) {
+            return bad("near_plane", "must be a finite number > 0 (metres)");
         }
         if self.background.iter().any(|v| !v.is_finite()) {
             return bad("background", "must be finite");

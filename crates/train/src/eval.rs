@@ -161,8 +161,8 @@ pub struct EvaluatedFrame {
 /// data without one, against the observed frame — the figures then measure fidelity to the input).
 /// Unseen frames use the latent of the nearest training frame.
 pub fn evaluate_split(
-    trainer: &crate::trainer::Trainer,
-    body: &crate::trainer::Body,
+    model: &crate::model::Model,
+    body: &crate::body::Body,
     data: &crate::data::Dataset,
     split: scene::Split,
 ) -> Result<Vec<EvaluatedFrame>, crate::TrainError> {
@@ -170,7 +170,7 @@ pub fn evaluate_split(
     let mut out = Vec::new();
     for f in data.frames.iter().filter(|f| f.split == split) {
         let pose = body.prepare(&f.smpl)?;
-        let r = trainer.render(&data.camera, &pose, trainer.latent_for(f.index))?;
+        let r = model.render(&data.camera, &pose, model.latent_for(f.index))?;
         let no_mask = vec![false; w * h];
         let frame = EvalFrame {
             width: w,

@@ -9,14 +9,16 @@
 //! - `model.json` — [`ModelManifest`]: the configuration (network sizes, semantics), body model and
 //!   betas, camera, the frame number of each latent and the scene extent.
 
+use crate::body::{resolve_reference, Body};
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
+use crate::model::Model;
 use crate::posing::PosedFrame;
-use crate::trainer::{build_nets, Body, Trainer};
 use crate::TrainError;
 use gaussians::covariance::decompose_covariance;
 use gaussians::GaussianSet;
 use serde::{Deserialize, Serialize};
+use smpl_deform::BodyRef;
 use std::path::Path;
 
 /// Identifier in `model.json`.
@@ -48,8 +50,8 @@ pub struct ModelManifest {
 pub struct LoadedModel {
     /// The description.
     pub manifest: ModelManifest,
-    /// Parameters wrapped in a trainer (fresh optimiser state) so they can be rendered or fine-tuned.
-    pub trainer: Trainer,
+    /// The learned model.
+    pub model: Model,
     /// The canonical body.
     pub body: Body,
     /// The camera as the rasterizer takes it.
@@ -63,34 +65,39 @@ fn io_err(path: &Path, e: impl std::fmt::Display) -> TrainError {
     }
 }
 
-/// Writes `trainer` to `dir` (created). Files are written atomically.
+/// Writes `model`, trained for `steps` steps on the scene `data`, to `dir` (created). Files are
+/// written atomically. A relative SMPL path of the scene is stored resolved against the scene
+/// directory (as an absolute path), so the model loads from anywhere.
 pub fn save_model(
     dir: &Path,
-    trainer: &Trainer,
-    body_model: &str,
-    betas: &[f32],
-    camera: &scene::Camera,
+    model: &Model,
+    steps: usize,
+    data: &crate::data::Dataset,
 ) -> Result<(), TrainError> {
+    let body = &data.scene.body;
+    let body_model = match resolve_reference(&body.model, &data.dir)? {
+        BodyRef::SmplFile(p) => std::path::absolute(&p)
+            .map_err(|e| io_err(&p, e))?
+            .display()
+            .to_string(),
+        BodyRef::BuiltinMakehuman => body.model.clone(),
+    };
     std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
     let ply = dir.join("canonical.ply");
-    let bytes = gaussians::ply::write_ply_bytes(&trainer.set).map_err(|e| io_err(&ply, e))?;
+    let bytes = gaussians::ply::write_ply_bytes(&model.set).map_err(|e| io_err(&ply, e))?;
     gaussians::ply::write_atomically(&ply, &bytes).map_err(|e| io_err(&ply, e))?;
     let mut w = CheckpointWriter::default();
-    w.push("nonrigid", trainer.nets.nonrigid.mlp.params.clone());
-    w.push("skinning", trainer.nets.skinning.mlp.params.clone());
-    w.push("human_colour", trainer.nets.human_colour.mlp.params.clone());
-    w.push("scene_colour", trainer.nets.scene_colour.mlp.params.clone());
-    w.push("latents", trainer.latents.clone());
+    model.push_networks(&mut w);
     w.write(&dir.join("networks.safetensors"), MODEL_FORMAT)?;
     let manifest = ModelManifest {
         format: MODEL_FORMAT.into(),
-        config: trainer.config.clone(),
-        body_model: body_model.into(),
-        betas: betas.to_vec(),
-        camera: camera.clone(),
-        frame_indices: trainer.frame_indices.clone(),
-        scene_extent: trainer.scene_extent,
-        steps: trainer.step,
+        config: model.config.clone(),
+        body_model,
+        betas: body.betas.clone(),
+        camera: data.scene.camera.clone(),
+        frame_indices: model.frame_indices.clone(),
+        scene_extent: model.scene_extent,
+        steps,
     };
     let json = dir.join("model.json");
     let text = serde_json::to_string_pretty(&manifest).map_err(|e| io_err(&json, e))?;
@@ -108,21 +115,13 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
             format!("unknown model format `{}`", manifest.format),
         ));
     }
-    let body_model = smpl_deform::BodyRef::parse(&manifest.body_model)?.load()?;
-    let body = Body::new(body_model, manifest.betas.clone())?;
+    // `save_model` stores SMPL paths absolute; a hand-edited relative one is taken relative to `dir`.
+    let body = Body::load(&manifest.body_model, manifest.betas.clone(), dir)?;
     let ply = dir.join("canonical.ply");
     let set = gaussians::ply::read_ply(&ply).map_err(|e| io_err(&ply, e))?;
-    let mut nets = build_nets(&manifest.config, &body.canonical.posed.vertices)?;
-    let r = CheckpointReader::open(&dir.join("networks.safetensors"))?;
-    nets.nonrigid.mlp.params = r.get_len("nonrigid", nets.nonrigid.mlp.params.len())?;
-    nets.skinning.mlp.params = r.get_len("skinning", nets.skinning.mlp.params.len())?;
-    nets.human_colour.mlp.params = r.get_len("human_colour", nets.human_colour.mlp.params.len())?;
-    nets.scene_colour.mlp.params = r.get_len("scene_colour", nets.scene_colour.mlp.params.len())?;
-    let latents = r.get_len(
-        "latents",
-        manifest.frame_indices.len() * manifest.config.latent_dim,
-    )?;
-    let mut trainer = Trainer::from_parts(
+    let nets = Model::build_networks(&manifest.config, &body.canonical.posed.vertices)?;
+    let latents = vec![0.0; manifest.frame_indices.len() * manifest.config.latent_dim];
+    let mut model = Model::new(
         manifest.config.clone(),
         set,
         nets,
@@ -130,11 +129,11 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
         manifest.frame_indices.clone(),
         manifest.scene_extent,
     )?;
-    trainer.step = manifest.steps;
+    model.read_networks(&CheckpointReader::open(&dir.join("networks.safetensors"))?)?;
     let camera = crate::data::camera_of(&manifest.camera)?;
     Ok(LoadedModel {
         manifest,
-        trainer,
+        model,
         body,
         camera,
     })
@@ -146,9 +145,9 @@ const SH_C0: f32 = 0.282_094_8;
 /// The posed Gaussians of a frame as a standard 3DGS set: world means, the posed covariance decomposed
 /// into log-scales and a rotation, the trained opacity, colours baked into SH degree 0 (linear RGB
 /// c = 0.5 + C0·f_dc, the INRIA convention), and the semantic logits kept as extra properties.
-pub fn posed_set(trainer: &Trainer, posed: &PosedFrame<f32>) -> GaussianSet {
+pub fn posed_set(model: &Model, posed: &PosedFrame<f32>) -> GaussianSet {
     let n = posed.means.len();
-    let k = trainer.set.semantic_classes;
+    let k = model.set.semantic_classes;
     let mut set = GaussianSet::zeros(n, 0, 0, k);
     set.means = posed.means.clone();
     for i in 0..n {
@@ -160,7 +159,7 @@ pub fn posed_set(trainer: &Trainer, posed: &PosedFrame<f32>) -> GaussianSet {
             set.sh[i * 3 + c] = (posed.colours[i * 3 + c] - 0.5) / SH_C0;
         }
     }
-    set.opacity_logits = trainer.set.opacity_logits.clone();
-    set.semantic_logits = trainer.set.semantic_logits.clone();
+    set.opacity_logits = model.set.opacity_logits.clone();
+    set.semantic_logits = model.set.semantic_logits.clone();
     set
 }

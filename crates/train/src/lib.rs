@@ -4,6 +4,7 @@
 
 pub mod aiap;
 pub mod blend;
+pub mod body;
 pub mod checkpoint;
 pub mod colour;
 pub mod config;
@@ -11,12 +12,13 @@ pub mod data;
 pub mod eval;
 pub mod event_loss;
 pub mod export;
-pub mod fit;
 pub mod flow_loss;
 pub mod image_loss;
 pub mod init;
+pub mod model;
+pub mod optimisers;
 pub mod posing;
-pub mod step;
+pub mod schedule;
 pub mod trainer;
 
 /// Errors of the training crate.

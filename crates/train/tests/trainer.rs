@@ -4,22 +4,24 @@
 
 use smpl_deform::BodyModel;
 use std::path::PathBuf;
+use train::body::Body;
 use train::config::{Preset, TrainConfig};
 use train::data::load_dataset;
-use train::trainer::{Body, TrainContext, Trainer};
+use train::data::TrainingData;
+use train::trainer::Trainer;
 
 fn fixture() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data-fixtures/tiny")
 }
 
-fn context() -> TrainContext {
+fn context() -> TrainingData {
     let data = load_dataset(&fixture()).unwrap();
     let body = Body::new(
         BodyModel::builtin_makehuman().unwrap(),
         data.scene.body.betas.clone(),
     )
     .unwrap();
-    TrainContext::new(&data, body, 0).unwrap()
+    TrainingData::new(&data, body, 0).unwrap()
 }
 
 fn tiny_config(steps: usize) -> TrainConfig {
@@ -44,7 +46,7 @@ fn tiny_config(steps: usize) -> TrainConfig {
 
 /// Every learnable value of a trainer as bits.
 fn bits(t: &Trainer) -> Vec<u32> {
-    let s = &t.set;
+    let s = &t.model.set;
     s.means
         .iter()
         .flatten()
@@ -53,11 +55,11 @@ fn bits(t: &Trainer) -> Vec<u32> {
         .chain(&s.opacity_logits)
         .chain(&s.features)
         .chain(&s.semantic_logits)
-        .chain(&t.nets.nonrigid.mlp.params)
-        .chain(&t.nets.skinning.mlp.params)
-        .chain(&t.nets.human_colour.mlp.params)
-        .chain(&t.nets.scene_colour.mlp.params)
-        .chain(&t.latents)
+        .chain(&t.model.nets.nonrigid.mlp.params)
+        .chain(&t.model.nets.skinning.mlp.params)
+        .chain(&t.model.nets.human_colour.mlp.params)
+        .chain(&t.model.nets.scene_colour.mlp.params)
+        .chain(&t.model.latents)
         .map(|v| v.to_bits())
         .collect()
 }
@@ -90,8 +92,8 @@ fn training_reduces_the_loss_on_the_tiny_fixture() {
     let last: f32 = losses[50..].iter().sum::<f32>() / 10.0;
     assert!(last < 0.8 * first, "loss {first} → {last}");
     // Densification ran and kept the semantic classes.
-    assert!(t.set.len() != 1200, "density control changed nothing");
-    assert!(t.human_count() > 0);
+    assert!(t.model.set.len() != 1200, "density control changed nothing");
+    assert!(t.model.human_count() > 0);
 }
 
 #[test]
@@ -130,7 +132,7 @@ fn one_and_two_threads_give_identical_bits() {
 }
 
 /// A context with the flow loss on (ground-truth flow of the fixture, a random 2-level network).
-fn flow_context(config: &TrainConfig) -> TrainContext {
+fn flow_context(config: &TrainConfig) -> TrainingData {
     let data = load_dataset(&fixture()).unwrap();
     let mut ctx = context();
     ctx.enable_flow(&data, config, flow::SpyNet::random(2, 7))
@@ -192,24 +194,30 @@ fn the_flow_loss_trains_pairs_of_consecutive_training_frames() {
 
 /// The appearance parameters of a trainer (colour features, opacities, colour networks) as bits.
 fn appearance_bits(t: &Trainer) -> Vec<u32> {
-    let s = &t.set;
+    let s = &t.model.set;
     s.features
         .iter()
         .chain(&s.opacity_logits)
-        .chain(&t.nets.human_colour.mlp.params)
-        .chain(&t.nets.scene_colour.mlp.params)
+        .chain(&t.model.nets.human_colour.mlp.params)
+        .chain(&t.model.nets.scene_colour.mlp.params)
         .map(|v| v.to_bits())
         .collect()
 }
 
 /// The means of a trainer's Gaussians as bits.
 fn mean_bits(t: &Trainer) -> Vec<u32> {
-    t.set.means.iter().flatten().map(|v| v.to_bits()).collect()
+    t.model
+        .set
+        .means
+        .iter()
+        .flatten()
+        .map(|v| v.to_bits())
+        .collect()
 }
 
 /// The shapes (log-scales and rotations) of a trainer's Gaussians as bits.
 fn shape_bits(t: &Trainer) -> Vec<u32> {
-    let s = &t.set;
+    let s = &t.model.set;
     let scales = s.log_scales.iter().flatten();
     scales
         .chain(s.quats.iter().flatten())
@@ -231,7 +239,7 @@ fn a_geometric_flow_gradient_moves_the_means_and_leaves_appearance_alone() {
     // One step from the same start under three settings; the step's frame must have a flow pair.
     let one_step = |config: TrainConfig| {
         let mut t = Trainer::new(&ctx, config).unwrap();
-        let report = t.train_step(&ctx).unwrap();
+        let report = t.step(&ctx).unwrap();
         (t, report)
     };
     // The first seed whose first frame has a next frame.

@@ -2,7 +2,15 @@
 //! decoded images (linear, planar), masks and SMPL parameters, with the split.
 //!
 //! All validation is `scene::load`'s (every problem reported with its path, nothing skipped); this
-//! module only converts, and reports which file failed to decode if one does.
+//! module only converts, and reports which file failed to decode if one does. [`TrainingData`] is the
+//! training split prepared for the loop (poses, skinning samples, pair supervision).
+
+mod training;
+
+pub use training::{
+    consecutive_training_pairs, read_pair_flow, EventPair, FlowPair, PairFlow, TrainingData,
+    TrainingFrame,
+};
 
 use crate::TrainError;
 use rasterize_cpu::Camera;

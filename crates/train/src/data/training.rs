@@ -1,0 +1,297 @@
+//! What a training run reads and never changes: the training frames with their prepared poses, the
+//! skinning loss's surface samples, and the supervision of pairs of consecutive training frames (flow
+//! targets and event counts) — prepared once, refused at load time when a file is missing or wrong.
+
+use super::Dataset;
+use crate::body::{Body, PreparedPose};
+use crate::config::TrainConfig;
+use crate::flow_loss::{network_target, prepare_target, FlowTarget};
+use crate::TrainError;
+use flow::SpyNet;
+use rasterize_cpu::Camera;
+use scene::Split;
+
+/// One training frame as the loop uses it.
+#[derive(Clone, Debug)]
+pub struct TrainingFrame {
+    /// Frame number in `scene.json`.
+    pub index: u32,
+    /// Observed (blurred) image, planar (3, H, W) linear RGB.
+    pub image: Vec<f32>,
+    /// The frame's pose.
+    pub pose: PreparedPose,
+}
+
+/// Flow supervision of one training frame k: the next training frame and the target flow k → k+1.
+#[derive(Clone, Debug)]
+pub struct FlowPair {
+    /// Slot (position in [`TrainingData::frames`]) of frame k+1.
+    pub next_slot: usize,
+    /// The supervising flow at the network's resolution, with its mask.
+    pub target: FlowTarget<f32>,
+}
+
+/// Event supervision of one training frame k: the next training frame and C·E per pixel (C the
+/// contrast threshold, E the signed event count of [t_k, t_{k+1})), row-major H × W.
+#[derive(Clone, Debug)]
+pub struct EventPair {
+    /// Slot (position in [`TrainingData::frames`]) of frame k+1.
+    pub next_slot: usize,
+    /// Expected log-intensity change per pixel.
+    pub expected: Vec<f32>,
+}
+
+/// A flow of `scene.json` between frame k and k+1 at full resolution, read and checked.
+#[derive(Clone, Debug)]
+pub struct PairFlow {
+    /// Planar (2, H, W) flow (pixels).
+    pub flow: Vec<f32>,
+    /// The validity mask (H × W) `scene.json` names with it, if any.
+    pub valid: Option<Vec<bool>>,
+}
+
+/// Everything fixed during training: camera, training frames, body, skinning-loss samples and the
+/// pair supervision.
+#[derive(Clone, Debug)]
+pub struct TrainingData {
+    /// The fixed camera.
+    pub camera: Camera,
+    /// Training frames in time order (their position is the latent slot).
+    pub frames: Vec<TrainingFrame>,
+    /// The body.
+    pub body: Body,
+    /// Canonical surface samples for the skinning loss.
+    pub skin_points: Vec<[f32; 3]>,
+    /// Body skinning weights of `skin_points`, row-major (N, 24).
+    pub skin_weights: Vec<f32>,
+    /// Per training slot, the flow supervision of the pair (k, k+1) (empty unless
+    /// [`TrainingData::enable_flow`] was called; `None` for a frame whose next frame is not a
+    /// training frame).
+    pub flow_pairs: Vec<Option<FlowPair>>,
+    /// The frozen flow network of the flow loss.
+    pub flow_net: Option<SpyNet<f32>>,
+    /// Per training slot, the event supervision of the pair (k, k+1) (empty unless
+    /// [`TrainingData::enable_events`] was called).
+    pub event_pairs: Vec<Option<EventPair>>,
+}
+
+impl TrainingData {
+    /// Prepares the training split of `data` with `body` (surface samples drawn with `seed`).
+    pub fn new(data: &Dataset, body: Body, seed: u64) -> Result<Self, TrainError> {
+        let mut frames = Vec::new();
+        for f in data.frames.iter().filter(|f| f.split == Split::Train) {
+            frames.push(TrainingFrame {
+                index: f.index,
+                image: f.image.clone(),
+                pose: body.prepare(&f.smpl)?,
+            });
+        }
+        if frames.is_empty() {
+            return Err(TrainError::Config(format!(
+                "{}: the scene has no training frames",
+                data.dir.display()
+            )));
+        }
+        let samples = smpl_deform::sample_surface(
+            &body.canonical.posed.vertices,
+            &body.model.faces,
+            &body.model.weights,
+            16_384,
+            seed ^ 0x5c1_0000,
+        );
+        Ok(Self {
+            camera: data.camera.clone(),
+            frames,
+            body,
+            skin_points: samples.points,
+            skin_weights: samples.weights,
+            flow_pairs: Vec::new(),
+            flow_net: None,
+            event_pairs: Vec::new(),
+        })
+    }
+
+    /// Number of pixels per channel.
+    pub fn pixels(&self) -> usize {
+        self.camera.width as usize * self.camera.height as usize
+    }
+
+    /// Prepares the event-generation loss: for every pair of consecutive training frames, reads frame
+    /// k's `events` file (the events of [t_k, t_{k+1})) and turns it into C·E per pixel
+    /// (`config.event_threshold`). A pair whose frame has no events file, or whose events file cannot
+    /// be read, is an error naming the frame and the file — refused here, not mid-training.
+    pub fn enable_events(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+    ) -> Result<(), TrainError> {
+        let (w, h) = (self.camera.width, self.camera.height);
+        let sensor = events::SensorSize::new(w, h);
+        let mut pairs = vec![None; self.frames.len()];
+        let found = consecutive_training_pairs(data);
+        for &(slot, p) in &found {
+            let f = &data.frames[p];
+            let Some(rel) = &data.scene.frames[p].events else {
+                return Err(TrainError::Config(format!(
+                    "{}: frame {} has no events file (needed by the event loss)",
+                    data.dir.display(),
+                    f.index
+                )));
+            };
+            let path = scene::Scene::resolve(&data.dir, rel);
+            let stream = events::read_events(&path)
+                .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+            let counts = events::count_frame(&stream.as_slice(), sensor, events::CountMode::Signed);
+            pairs[slot] = Some(EventPair {
+                next_slot: slot + 1,
+                expected: counts.iter().map(|c| c * config.event_threshold).collect(),
+            });
+        }
+        if found.is_empty() {
+            return Err(TrainError::Config(format!(
+                "{}: no two consecutive frames are both training frames, so the event loss has \
+                 nothing to supervise",
+                data.dir.display()
+            )));
+        }
+        self.event_pairs = pairs;
+        Ok(())
+    }
+
+    /// Prepares the flow loss: for every training frame whose next frame in `scene.json` is also a
+    /// training frame, reads the flow of `config.flow_source` (and its validity mask) and resizes it
+    /// to the network's resolution (`config.flow_scale`, τ = `config.flow_tau`) — or, for
+    /// `sharp-network`, runs `net` on the two sharp references at that resolution
+    /// ([`network_target`]). A pair without that flow (or without sharp references), or with a flow
+    /// of the wrong size, is an error naming the frame and the file — refused here, not
+    /// mid-training. Frames whose next frame is a test frame (or the last frame) have no pair.
+    pub fn enable_flow(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+        net: SpyNet<f32>,
+    ) -> Result<(), TrainError> {
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        let h_out = ((h as f64 * config.flow_scale as f64).round() as usize).max(1);
+        let w_out = ((w as f64 * config.flow_scale as f64).round() as usize).max(1);
+        let mut pairs = vec![None; self.frames.len()];
+        for (slot, p) in consecutive_training_pairs(data) {
+            let target = match config.flow_source.kind() {
+                Some(kind) => {
+                    let Some(pair) = read_pair_flow(data, p, kind)? else {
+                        return Err(TrainError::Config(format!(
+                            "{}: frame {} has no `{}` flow to the next training frame {} (needed \
+                             by the flow loss with flow source {:?})",
+                            data.dir.display(),
+                            data.frames[p].index,
+                            kind.as_str(),
+                            data.frames[p + 1].index,
+                            config.flow_source
+                        )));
+                    };
+                    prepare_target(
+                        &pair.flow,
+                        pair.valid.as_deref(),
+                        h,
+                        w,
+                        h_out,
+                        w_out,
+                        config.flow_tau,
+                    )?
+                }
+                None => {
+                    let (f, next) = (&data.frames[p], &data.frames[p + 1]);
+                    let (Some(first), Some(second)) = (&f.sharp, &next.sharp) else {
+                        return Err(TrainError::Config(format!(
+                            "{}: frame {} or its next training frame {} has no sharp reference \
+                             (needed by the flow loss with flow source sharp-net)",
+                            data.dir.display(),
+                            f.index,
+                            next.index
+                        )));
+                    };
+                    network_target(&net, first, second, h, w, h_out, w_out, config.flow_tau)?
+                }
+            };
+            pairs[slot] = Some(FlowPair {
+                next_slot: slot + 1,
+                target,
+            });
+        }
+        if pairs.iter().all(Option::is_none) {
+            return Err(TrainError::Config(format!(
+                "{}: no two consecutive frames are both training frames, so the flow loss has \
+                 nothing to supervise",
+                data.dir.display()
+            )));
+        }
+        self.flow_pairs = pairs;
+        self.flow_net = Some(net);
+        Ok(())
+    }
+}
+
+/// Slots of consecutive training frames: `(slot of k, position of k in data.frames)` for every
+/// training frame whose next frame in `scene.json` is also a training frame (slot k+1 = slot k + 1).
+pub fn consecutive_training_pairs(data: &Dataset) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut slot = 0usize;
+    for (p, f) in data.frames.iter().enumerate() {
+        if f.split != Split::Train {
+            continue;
+        }
+        if data
+            .frames
+            .get(p + 1)
+            .is_some_and(|n| n.split == Split::Train)
+        {
+            out.push((slot, p));
+        }
+        slot += 1;
+    }
+    out
+}
+
+/// The `kind` flow that `scene.json` names for frame `p` (towards frame `p + 1`) and its validity
+/// mask, read and checked against the camera; `None` when the frame names no such flow. An unreadable
+/// file, or a flow or mask of the wrong size, is an error naming the file. The one reader of pair
+/// flows: the flow loss, the flow network's training and the diagnostic examples use it.
+pub fn read_pair_flow(
+    data: &Dataset,
+    p: usize,
+    kind: scene::FlowKind,
+) -> Result<Option<PairFlow>, TrainError> {
+    let Some(fr) = data.scene.frames.get(p).and_then(|f| f.flow(kind)) else {
+        return Ok(None);
+    };
+    let (w, h) = (data.camera.width as usize, data.camera.height as usize);
+    let path = scene::Scene::resolve(&data.dir, &fr.path);
+    let flow = events::read_flow(&path)
+        .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+    if (flow.width, flow.height) != (w, h) {
+        return Err(TrainError::Config(format!(
+            "{}: flow is {}x{}, the camera is {w}x{h}",
+            path.display(),
+            flow.width,
+            flow.height
+        )));
+    }
+    let valid = match &fr.valid_mask {
+        Some(rel) => {
+            let mp = scene::Scene::resolve(&data.dir, rel);
+            let (mw, mh, m) = scene::read_mask(&mp)?;
+            if (mw as usize, mh as usize) != (w, h) {
+                return Err(TrainError::Config(format!(
+                    "{}: mask is {mw}x{mh}, the camera is {w}x{h}",
+                    mp.display()
+                )));
+            }
+            Some(m)
+        }
+        None => None,
+    };
+    Ok(Some(PairFlow {
+        flow: flow.data,
+        valid,
+    }))
+}

@@ -1,0 +1,493 @@
+//! The learned E-Sem3DGS model — everything a reconstruction learns, and nothing about how it is
+//! optimised: the semantic Gaussian set, the four networks (non-rigid deformation, skinning field,
+//! human colour, scene colour), the per-training-frame latents, and the settings that shape its
+//! rendering (semantic mode, gate, background, near plane, all in [`TrainConfig`]).
+//!
+//! [`Model::forward`] poses the Gaussians for one frame (see [`crate::posing`]) and rasterizes them
+//! with the human probability as a fourth channel; the returned [`FramePass`] keeps what its backward
+//! needs, so one training step can hold any number of passes (one today, two with the pair losses, S
+//! with an exposure model) and differentiate each. Eval, export and rendering take a `Model`, never a
+//! trainer.
+
+use crate::body::PreparedPose;
+use crate::checkpoint::{CheckpointReader, CheckpointWriter};
+use crate::colour::{ColourNet, ColourNetConfig};
+use crate::config::TrainConfig;
+use crate::posing::{
+    pose_frame_backward, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
+    GaussianParams, ModelGradients, ModelNets, PosedFrame,
+};
+use crate::TrainError;
+use gaussians::GaussianSet;
+use rasterize_cpu::{
+    render_cov, render_cov_backward, Camera, Cotangents, CovSplats, Gradients, RenderOutput,
+    RenderSettings,
+};
+use smpl_deform::deform_net::{NonRigidNet, SkinningField};
+use std::time::Instant;
+
+/// Number of rendered channels: linear RGB and the human probability.
+pub const RENDER_CHANNELS: usize = 4;
+
+/// Names of the model's network parameter groups, in checkpoint order, with the tensor each is
+/// stored under (the per-frame latents are a group too).
+pub const NETWORK_GROUPS: [(&str, &str); 5] = [
+    ("nonrigid", "nonrigid"),
+    ("skinning", "skinning"),
+    ("human_colour", "human_colour"),
+    ("scene_colour", "scene_colour"),
+    ("latent", "latents"),
+];
+
+/// What a reconstruction learned.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// Hyper-parameters; the model reads its shapes and rendering settings from them.
+    pub config: TrainConfig,
+    /// The Gaussians (human ones in canonical space, scene ones in world space).
+    pub set: GaussianSet,
+    /// The four networks.
+    pub nets: ModelNets<f32>,
+    /// Per-training-frame latents, (frames, latent_dim).
+    pub latents: Vec<f32>,
+    /// Frame number of each latent slot (the training frames in time order).
+    pub frame_indices: Vec<u32>,
+    /// Scene extent (m): scales the position rate and the density thresholds.
+    pub scene_extent: f32,
+}
+
+/// A rendered frame of the model.
+#[derive(Clone, Debug)]
+pub struct Rendered {
+    /// Linear RGB, planar (3, H, W).
+    pub rgb: Vec<f32>,
+    /// Rendered human probability (H, W) (alpha-composited, 0 where nothing is drawn).
+    pub human: Vec<f32>,
+    /// The posed per-Gaussian attributes.
+    pub posed: PosedFrame<f32>,
+}
+
+/// Wall-clock seconds of a forward pass's two stages (not deterministic; for the step breakdown).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PassTiming {
+    /// Deformation, colour networks and blend.
+    pub pose: f64,
+    /// Rasterization.
+    pub render: f64,
+}
+
+/// One frame rendered by a model, with what its backward needs.
+pub struct FramePass<'a> {
+    model: &'a Model,
+    camera: &'a Camera,
+    pose: &'a PreparedPose,
+    latent: &'a [f32],
+    cache: FrameCache<f32>,
+    channels: Vec<f32>,
+    /// The posed per-Gaussian attributes (the rasterizer's inputs).
+    pub posed: PosedFrame<f32>,
+    /// The rasterizer's output: (RGB, human probability) planes and per-Gaussian screen data.
+    pub out: RenderOutput<f32>,
+    /// Stage timings of the forward.
+    pub timing: PassTiming,
+}
+
+/// A loss's gradients with respect to a pass's rasterizer inputs.
+#[derive(Clone, Debug)]
+pub struct PosedGradients {
+    /// dL/d posed means (world).
+    pub means: Vec<[f32; 3]>,
+    /// dL/d posed covariances.
+    pub covariances: Vec<[[f32; 3]; 3]>,
+    /// dL/d colours, N × 3.
+    pub colours: Vec<f32>,
+    /// dL/d human probability, N.
+    pub human_probability: Vec<f32>,
+    /// dL/d opacity logits (stored directly in the set: no model backward needed).
+    pub opacity_logits: Vec<f32>,
+    /// dL/d screen-space means (pixels), for density control.
+    pub means_2d: Vec<[f32; 2]>,
+}
+
+impl Model {
+    /// A model from its parts, checked against `config` (semantic logits, features, latents).
+    pub fn new(
+        config: TrainConfig,
+        set: GaussianSet,
+        nets: ModelNets<f32>,
+        latents: Vec<f32>,
+        frame_indices: Vec<u32>,
+        scene_extent: f32,
+    ) -> Result<Self, TrainError> {
+        config.validate()?;
+        let k = config.semantic.logits_per_gaussian();
+        if set.semantic_logits.len() != set.len() * k || set.feature_dim != config.feature_dim {
+            return Err(TrainError::Config(format!(
+                "the Gaussians carry {} semantic logits and {} features each; the configuration needs {k} and {}",
+                set.semantic_logits.len().checked_div(set.len()).unwrap_or(0),
+                set.feature_dim,
+                config.feature_dim
+            )));
+        }
+        if frame_indices.is_empty() {
+            return Err(TrainError::Config(
+                "a model needs at least one training frame".into(),
+            ));
+        }
+        if latents.len() != frame_indices.len() * config.latent_dim {
+            return Err(TrainError::Shape {
+                what: "frame latents".into(),
+                expected: frame_indices.len() * config.latent_dim,
+                found: latents.len(),
+            });
+        }
+        Ok(Self {
+            config,
+            set,
+            nets,
+            latents,
+            frame_indices,
+            scene_extent,
+        })
+    }
+
+    /// Freshly initialised networks of `config` for the canonical body `vertices`.
+    pub fn build_networks(
+        config: &TrainConfig,
+        vertices: &[[f32; 3]],
+    ) -> Result<ModelNets<f32>, TrainError> {
+        let mut human = ColourNetConfig::human();
+        human.feature_dim = config.feature_dim;
+        human.latent_dim = config.latent_dim;
+        let mut scene = ColourNetConfig::scene();
+        scene.feature_dim = config.feature_dim;
+        Ok(ModelNets {
+            nonrigid: NonRigidNet::new(vertices, config.deform_hidden, config.seed ^ 0x11)?,
+            skinning: SkinningField::new(vertices, config.deform_hidden, config.seed ^ 0x22)?,
+            human_colour: ColourNet::new(human, config.seed ^ 0x33)?,
+            scene_colour: ColourNet::new(scene, config.seed ^ 0x44)?,
+        })
+    }
+
+    /// The flat parameters of every network group ([`NETWORK_GROUPS`] order).
+    pub fn network_groups(&self) -> [&Vec<f32>; 5] {
+        [
+            &self.nets.nonrigid.mlp.params,
+            &self.nets.skinning.mlp.params,
+            &self.nets.human_colour.mlp.params,
+            &self.nets.scene_colour.mlp.params,
+            &self.latents,
+        ]
+    }
+
+    /// Mutable [`Model::network_groups`], for the optimisers and for loading.
+    pub fn network_groups_mut(&mut self) -> [&mut Vec<f32>; 5] {
+        [
+            &mut self.nets.nonrigid.mlp.params,
+            &mut self.nets.skinning.mlp.params,
+            &mut self.nets.human_colour.mlp.params,
+            &mut self.nets.scene_colour.mlp.params,
+            &mut self.latents,
+        ]
+    }
+
+    /// Adds every network group as a tensor (the one writer of network weights: checkpoints and
+    /// model directories share it).
+    pub fn push_networks(&self, w: &mut CheckpointWriter) {
+        for ((_, tensor), params) in NETWORK_GROUPS.iter().zip(self.network_groups()) {
+            w.push(*tensor, params.clone());
+        }
+    }
+
+    /// Replaces every network group by the tensors [`Model::push_networks`] wrote, checking each
+    /// length against this model's shapes.
+    pub fn read_networks(&mut self, r: &CheckpointReader) -> Result<(), TrainError> {
+        for ((_, tensor), params) in NETWORK_GROUPS.iter().zip(self.network_groups_mut()) {
+            *params = r.get_len(tensor, params.len())?;
+        }
+        Ok(())
+    }
+
+    /// Human probability of Gaussian `i`.
+    pub fn probability(&self, i: usize) -> f32 {
+        let k = self.config.semantic.logits_per_gaussian();
+        self.config
+            .semantic
+            .probability(&self.set.semantic_logits[i * k..(i + 1) * k])
+    }
+
+    /// Number of Gaussians with human probability ≥ 0.5.
+    pub fn human_count(&self) -> usize {
+        (0..self.set.len())
+            .filter(|&i| self.probability(i) >= 0.5)
+            .count()
+    }
+
+    /// The latent of training slot `slot`.
+    pub fn latent(&self, slot: usize) -> &[f32] {
+        let d = self.config.latent_dim;
+        &self.latents[slot * d..(slot + 1) * d]
+    }
+
+    /// The latent of the training frame nearest in frame number to `index` (for unseen frames).
+    pub fn latent_for(&self, index: u32) -> &[f32] {
+        let slot = self
+            .frame_indices
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, &f)| (i64::from(f) - i64::from(index)).abs())
+            .map_or(0, |(s, _)| s);
+        self.latent(slot)
+    }
+
+    /// The stored per-Gaussian parameters as the posing functions take them.
+    pub fn params(&self) -> GaussianParams<'_, f32> {
+        GaussianParams {
+            means: &self.set.means,
+            log_scales: &self.set.log_scales,
+            quats: &self.set.quats,
+            features: &self.set.features,
+            semantic_logits: &self.set.semantic_logits,
+        }
+    }
+
+    /// The rasterizer settings: the background colour with a 0 human-probability channel behind it
+    /// and the configured near plane.
+    pub fn render_settings(&self) -> RenderSettings {
+        let mut background: Vec<f64> = self
+            .config
+            .background
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect();
+        background.push(0.0);
+        RenderSettings {
+            near_plane: self.config.near_plane,
+            background,
+        }
+    }
+
+    /// Poses the model in `pose` with the frame latent `latent` and rasterizes it from `camera`.
+    pub fn forward<'a>(
+        &'a self,
+        camera: &'a Camera,
+        pose: &'a PreparedPose,
+        latent: &'a [f32],
+    ) -> Result<FramePass<'a>, TrainError> {
+        let t0 = Instant::now();
+        let inputs = frame_inputs(camera, pose, latent);
+        let (posed, cache) = pose_frame_gated(
+            &self.nets,
+            self.config.semantic,
+            self.config.semantic_gate,
+            &self.params(),
+            &inputs,
+        )?;
+        let channels = interleave_channels(&posed);
+        let pose_seconds = t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let out = render_cov(
+            camera,
+            &splats(self, &posed, &channels),
+            &self.render_settings(),
+        )?;
+        Ok(FramePass {
+            model: self,
+            camera,
+            pose,
+            latent,
+            cache,
+            channels,
+            posed,
+            out,
+            timing: PassTiming {
+                pose: pose_seconds,
+                render: t0.elapsed().as_secs_f64(),
+            },
+        })
+    }
+
+    /// Renders the model in `pose` with the frame latent `latent` from `camera`.
+    pub fn render(
+        &self,
+        camera: &Camera,
+        pose: &PreparedPose,
+        latent: &[f32],
+    ) -> Result<Rendered, TrainError> {
+        let pass = self.forward(camera, pose, latent)?;
+        Ok(Rendered {
+            rgb: pass.rgb().to_vec(),
+            human: pass.human().to_vec(),
+            posed: pass.posed,
+        })
+    }
+}
+
+impl FramePass<'_> {
+    fn pixels(&self) -> usize {
+        self.camera.width as usize * self.camera.height as usize
+    }
+
+    /// The rendered linear RGB, planar (3, H, W).
+    pub fn rgb(&self) -> &[f32] {
+        &self.out.image[..3 * self.pixels()]
+    }
+
+    /// The rendered human probability, (H, W).
+    pub fn human(&self) -> &[f32] {
+        let hw = self.pixels();
+        &self.out.image[3 * hw..4 * hw]
+    }
+
+    /// Rasterizer backward of the image cotangent `d_image` ((C, H, W), C = [`RENDER_CHANNELS`]) plus,
+    /// when given, a cotangent `d_geometric` of the RGB planes of which only the geometric share is
+    /// kept: its gradients w.r.t. the means, covariances and screen-space means. The backward is
+    /// linear in the cotangent, so this is exactly the gradient of all losses with `d_geometric`'s
+    /// colour, opacity and semantic terms removed (the flow loss's `geometry` ablation).
+    pub fn render_backward(
+        &self,
+        d_image: &[f32],
+        d_geometric: Option<&[f32]>,
+    ) -> Result<PosedGradients, TrainError> {
+        let g = self.rasterizer_backward(d_image, d_geometric)?;
+        let per = g.channels.chunks_exact(RENDER_CHANNELS);
+        let colours = per.clone().flat_map(|c| c[..3].iter().copied()).collect();
+        let human_probability = per.map(|c| c[3]).collect();
+        Ok(PosedGradients {
+            means: g.means,
+            covariances: g.covariances,
+            colours,
+            human_probability,
+            opacity_logits: g.opacity_logits,
+            means_2d: g.means_2d,
+        })
+    }
+
+    fn rasterizer_backward(
+        &self,
+        d_image: &[f32],
+        d_geometric: Option<&[f32]>,
+    ) -> Result<Gradients<f32>, TrainError> {
+        let splats = splats(self.model, &self.posed, &self.channels);
+        let settings = self.model.render_settings();
+        let backward = |image: &[f32]| {
+            render_cov_backward(
+                self.camera,
+                &splats,
+                &settings,
+                &self.out,
+                &Cotangents {
+                    image,
+                    alpha: None,
+                    depth: None,
+                },
+            )
+        };
+        let Some(d_geometric) = d_geometric else {
+            return Ok(backward(d_image)?);
+        };
+        let mut padded = vec![0.0f32; d_image.len()];
+        padded[..d_geometric.len()].copy_from_slice(d_geometric);
+        let geometric = backward(&padded)?;
+        if d_image.iter().all(|&v| v == 0.0) {
+            // Only the geometric cotangent reaches this frame: one backward.
+            return Ok(Gradients {
+                opacity_logits: vec![0.0; geometric.opacity_logits.len()],
+                channels: vec![0.0; geometric.channels.len()],
+                background: vec![0.0; geometric.background.len()],
+                ..geometric
+            });
+        }
+        let mut grads = backward(d_image)?;
+        let add = |a: &mut [f32], b: &[f32]| a.iter_mut().zip(b).for_each(|(x, &y)| *x += y);
+        add(
+            grads.means.as_flattened_mut(),
+            geometric.means.as_flattened(),
+        );
+        add(
+            grads.means_2d.as_flattened_mut(),
+            geometric.means_2d.as_flattened(),
+        );
+        for (a, b) in grads.covariances.iter_mut().zip(&geometric.covariances) {
+            add(a.as_flattened_mut(), b.as_flattened());
+        }
+        Ok(grads)
+    }
+
+    /// Backward through the posing (networks, blend, deformation) of the rasterizer-input gradients
+    /// `posed`: gradients of every learnable quantity of the model and of this frame's latent.
+    pub fn model_backward(
+        &self,
+        posed: &PosedGradients,
+    ) -> Result<ModelGradients<f32>, TrainError> {
+        let model = self.model;
+        pose_frame_backward(
+            &model.nets,
+            model.config.semantic,
+            &model.params(),
+            &frame_inputs(self.camera, self.pose, self.latent),
+            &self.cache,
+            &FrameCotangents {
+                means: &posed.means,
+                covariances: &posed.covariances,
+                colours: &posed.colours,
+                human_probability: &posed.human_probability,
+            },
+        )
+    }
+
+    /// The full backward of an image cotangent `d_image` ((C, H, W)): the model's gradients and the
+    /// rasterizer-input gradients (for the opacities and density statistics).
+    pub fn backward(
+        &self,
+        d_image: &[f32],
+    ) -> Result<(ModelGradients<f32>, PosedGradients), TrainError> {
+        let posed = self.render_backward(d_image, None)?;
+        Ok((self.model_backward(&posed)?, posed))
+    }
+
+    /// Indices of the Gaussians whose human branch was evaluated (human probability ≥ the gate).
+    pub fn active(&self) -> &[usize] {
+        self.cache.active()
+    }
+}
+
+fn frame_inputs<'a>(
+    camera: &Camera,
+    pose: &'a PreparedPose,
+    latent: &'a [f32],
+) -> FrameInputs<'a, f32> {
+    FrameInputs {
+        pose_code: &pose.pose_code,
+        bones: &pose.bones,
+        camera_centre: camera.center_world().map(|v| v as f32),
+        latent,
+    }
+}
+
+/// The rasterizer's view of a posed frame: its means and covariances with the set's opacities and
+/// the interleaved render channels.
+fn splats<'a>(
+    model: &'a Model,
+    posed: &'a PosedFrame<f32>,
+    channels: &'a [f32],
+) -> CovSplats<'a, f32> {
+    CovSplats {
+        means: &posed.means,
+        covariances: &posed.covariances,
+        opacity_logits: &model.set.opacity_logits,
+        channels,
+        num_channels: RENDER_CHANNELS,
+    }
+}
+
+/// Per-Gaussian render channels (r, g, b, p), N × 4 row-major.
+fn interleave_channels(posed: &PosedFrame<f32>) -> Vec<f32> {
+    let n = posed.means.len();
+    let mut channels = Vec::with_capacity(n * RENDER_CHANNELS);
+    for i in 0..n {
+        channels.extend_from_slice(&posed.colours[i * 3..i * 3 + 3]);
+        channels.push(posed.human_probability[i]);
+    }
+    channels
+}

@@ -1,0 +1,142 @@
+//! The optimisers of a [`Model`]: Adam on every Gaussian attribute group (with per-group rates, the
+//! moments following density control's splits and prunes) and one Adam per network parameter group
+//! ([`NETWORK_GROUPS`]), keyed by group name, with their checkpoint form.
+
+use crate::checkpoint::{CheckpointReader, CheckpointWriter};
+use crate::config::TrainConfig;
+use crate::model::{Model, NETWORK_GROUPS};
+use crate::TrainError;
+use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
+use gaussians::GaussianSet;
+
+/// Every optimiser state of a training run.
+#[derive(Clone, Debug)]
+pub struct Optimisers {
+    /// Adam over the Gaussian set's attribute groups.
+    pub gaussians: GaussianAdam,
+    /// One Adam per network group, in [`NETWORK_GROUPS`] order.
+    networks: Vec<nn::Adam<f32>>,
+}
+
+/// Step counts of a checkpoint's optimisers (stored in its JSON metadata).
+#[derive(Clone, Debug, PartialEq)]
+pub struct OptimiserSteps {
+    /// Per Gaussian attribute group.
+    pub gaussians: Vec<u64>,
+    /// Per network group, [`NETWORK_GROUPS`] order.
+    pub networks: Vec<u64>,
+}
+
+/// The learning rate of a network group.
+fn network_rate(config: &TrainConfig, group: &str) -> f32 {
+    match group {
+        "nonrigid" => config.lr_nonrigid,
+        "skinning" => config.lr_skinning,
+        "human_colour" | "scene_colour" => config.lr_colour,
+        _ => config.lr_latent,
+    }
+}
+
+/// Adam's defaults with the learning rate `lr`.
+pub fn adam_config(lr: f32) -> nn::AdamConfig {
+    nn::AdamConfig {
+        lr: f64::from(lr),
+        ..nn::AdamConfig::default()
+    }
+}
+
+/// The index of the network group `group` in [`NETWORK_GROUPS`].
+fn group_index(group: &str) -> Result<usize, TrainError> {
+    NETWORK_GROUPS
+        .iter()
+        .position(|(name, _)| *name == group)
+        .ok_or_else(|| TrainError::Config(format!("no network parameter group `{group}`")))
+}
+
+impl Optimisers {
+    /// Fresh optimiser state (zero moments) for `model`.
+    pub fn new(model: &Model) -> Self {
+        let networks = NETWORK_GROUPS
+            .iter()
+            .zip(model.network_groups())
+            .map(|((name, _), params)| {
+                nn::Adam::new(params.len(), adam_config(network_rate(&model.config, name)))
+            })
+            .collect();
+        Self {
+            gaussians: GaussianAdam::new(&model.set, AdamConfig::default()),
+            networks,
+        }
+    }
+
+    /// One Adam step of the Gaussian attribute groups at the rates `rates`.
+    pub fn step_gaussians(
+        &mut self,
+        set: &mut GaussianSet,
+        grads: &GaussianSet,
+        rates: &GaussianLearningRates,
+    ) -> Result<(), TrainError> {
+        self.gaussians
+            .step(set, grads, rates)
+            .map_err(|e| TrainError::Config(e.to_string()))
+    }
+
+    /// One Adam step of the network group `group` (a name of [`NETWORK_GROUPS`]).
+    pub fn step_network(
+        &mut self,
+        group: &str,
+        params: &mut [f32],
+        grads: &[f32],
+    ) -> Result<(), TrainError> {
+        let k = group_index(group)?;
+        Ok(self.networks[k].step(params, grads)?)
+    }
+
+    /// Adds every moment to `w` (`adam.<group>.{m,v}` and `<group>_adam.{m,v}`); returns the step
+    /// counts for the metadata.
+    pub fn save(&self, w: &mut CheckpointWriter) -> OptimiserSteps {
+        let gaussians = w.push_gaussian_adam("adam", &self.gaussians);
+        let networks = NETWORK_GROUPS
+            .iter()
+            .zip(&self.networks)
+            .map(|((name, _), adam)| w.push_adam(&format!("{name}_adam"), adam))
+            .collect();
+        OptimiserSteps {
+            gaussians,
+            networks,
+        }
+    }
+
+    /// The optimisers [`Optimisers::save`] wrote, for `model` (which fixes every length).
+    pub fn load(
+        r: &CheckpointReader,
+        model: &Model,
+        steps: &OptimiserSteps,
+    ) -> Result<Self, TrainError> {
+        let mut gaussians = GaussianAdam::new(&model.set, AdamConfig::default());
+        r.gaussian_adam("adam", &mut gaussians, &steps.gaussians)?;
+        if steps.networks.len() != NETWORK_GROUPS.len() {
+            return Err(r.error(format!(
+                "expected {} network optimiser step counts",
+                NETWORK_GROUPS.len()
+            )));
+        }
+        let networks = NETWORK_GROUPS
+            .iter()
+            .zip(model.network_groups())
+            .zip(&steps.networks)
+            .map(|(((name, _), params), &count)| {
+                r.adam(
+                    &format!("{name}_adam"),
+                    adam_config(network_rate(&model.config, name)),
+                    params.len(),
+                    count,
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            gaussians,
+            networks,
+        })
+    }
+}

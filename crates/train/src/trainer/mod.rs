@@ -1,0 +1,403 @@
+//! The E-Sem3DGS optimisation loop (paper §4.5): a [`Model`], its [`Optimisers`], the density
+//! statistics, the frame-order RNG and the AIAP neighbourhoods. [`Trainer::step`] renders the frame
+//! passes a step needs (frame k, and frame k+1 when a pair loss applies), takes their losses — L1 +
+//! λ·D-SSIM, the pair losses, the skinning and AIAP regularisers — runs one backward per pass, guards
+//! against non-finite values and steps the optimisers; [`Trainer::refine`] is density control and
+//! the opacity reset on their schedules. Checkpoints (`checkpoint.rs`) resume bit for bit.
+//!
+//! One step = one training frame from a seeded shuffled order (reshuffled each epoch). Everything that
+//! influences the parameters is deterministic for a seed and independent of the thread count; only the
+//! reported stage timings vary.
+
+mod checkpoint;
+mod report;
+mod terms;
+
+pub use checkpoint::CHECKPOINT_FORMAT;
+pub use report::{StageTimes, StepReport};
+pub use terms::warm_up_skinning;
+
+use crate::config::TrainConfig;
+use crate::data::TrainingData;
+use crate::image_loss::{psnr, ImageShape};
+use crate::init::{initialise, InitConfig};
+use crate::model::Model;
+use crate::optimisers::Optimisers;
+use crate::posing::ModelGradients;
+use crate::schedule::{accumulate_screen_stats, exponential_rate, on_schedule};
+use crate::TrainError;
+use gaussians::adam::GaussianLearningRates;
+use gaussians::density::{densify_and_prune, reset_opacity, DensifyConfig, DensityStats};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::time::Instant;
+use terms::{
+    add_aiap_canonical, aiap_terms, pair_terms, photometric, skinning_term, AiapNeighbours,
+    PairSupervision,
+};
+
+/// All state of a reconstruction: the model, its optimisers, density statistics, the frame-order
+/// RNG and the step count. Saving and loading it resumes a run bit for bit.
+#[derive(Clone, Debug)]
+pub struct Trainer {
+    /// What is learned.
+    pub model: Model,
+    /// Steps taken.
+    pub step: usize,
+    optimisers: Optimisers,
+    stats: DensityStats,
+    rng: ChaCha8Rng,
+    order: Vec<usize>,
+    aiap: AiapNeighbours,
+}
+
+/// Scene extent of an initial cube: half its diagonal.
+fn extent_of(cube: &([f32; 3], [f32; 3])) -> f32 {
+    let (lo, hi) = cube;
+    let d2: f32 = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum();
+    (0.5 * d2.sqrt()).max(1e-3)
+}
+
+/// What the densify/refine stage needs of a step's first pass.
+struct RefineInputs {
+    means_2d: Vec<[f32; 2]>,
+    radii: Vec<u32>,
+}
+
+impl Trainer {
+    /// Initialises the model (paper §4.2) for `data` and fresh optimiser state.
+    pub fn new(data: &TrainingData, config: TrainConfig) -> Result<Self, TrainError> {
+        config.validate()?;
+        let vertices = &data.body.canonical.posed.vertices;
+        let roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.root).collect();
+        let init = initialise(
+            vertices,
+            &data.body.model.faces,
+            &data.body.model.weights,
+            std::slice::from_ref(&data.camera),
+            &roots,
+            &InitConfig {
+                mode: config.init,
+                semantic: config.semantic,
+                semantic_init: config.semantic_init,
+                human_count: config.human_gaussians,
+                scene_count: config.scene_gaussians,
+                logit_magnitude: config.logit_magnitude,
+                feature_dim: config.feature_dim,
+                opacity: config.initial_opacity,
+                max_initial_scale: config.max_initial_scale,
+                seed: config.seed,
+                ..InitConfig::default()
+            },
+        );
+        let mut nets = Model::build_networks(&config, vertices)?;
+        warm_up_skinning(&mut nets.skinning, data, &config)?;
+        let latents = vec![0.0; data.frames.len() * config.latent_dim];
+        let frame_indices = data.frames.iter().map(|f| f.index).collect();
+        let model = Model::new(
+            config,
+            init.set,
+            nets,
+            latents,
+            frame_indices,
+            extent_of(&init.cube),
+        )?;
+        Ok(Self::with_model(model))
+    }
+
+    /// A trainer with fresh optimiser state around `model` (e.g. to fine-tune a saved model).
+    pub fn with_model(model: Model) -> Self {
+        Self {
+            optimisers: Optimisers::new(&model),
+            stats: DensityStats::new(model.set.len()),
+            rng: ChaCha8Rng::seed_from_u64(model.config.seed ^ 0x0dde_0000),
+            order: Vec::new(),
+            aiap: AiapNeighbours::of(&model),
+            model,
+            step: 0,
+        }
+    }
+
+    /// The hyper-parameters.
+    pub fn config(&self) -> &TrainConfig {
+        &self.model.config
+    }
+
+    /// Runs steps until `self.step == until`, calling `on_step` after each.
+    pub fn run(
+        &mut self,
+        data: &TrainingData,
+        until: usize,
+        mut on_step: impl FnMut(&Self, &StepReport) -> Result<(), TrainError>,
+    ) -> Result<(), TrainError> {
+        while self.step < until {
+            let report = self.step(data)?;
+            on_step(self, &report)?;
+        }
+        Ok(())
+    }
+
+    /// The training slot of the next step: the seeded order, reshuffled each epoch.
+    fn next_slot(&mut self, frames: usize) -> usize {
+        if self.order.is_empty() {
+            self.order = (0..frames).collect();
+            self.order.shuffle(&mut self.rng);
+        }
+        self.order.pop().unwrap_or(0) % frames
+    }
+
+    /// One optimisation step on the next training frame of the seeded order, then [`Trainer::refine`].
+    /// On a non-finite loss or gradient nothing is updated and [`TrainError::NonFinite`] is returned.
+    pub fn step(&mut self, data: &TrainingData) -> Result<StepReport, TrainError> {
+        let config = self.model.config.clone();
+        let step = self.step;
+        let slot = self.next_slot(data.frames.len());
+        let frame = &data.frames[slot];
+        let camera = &data.camera;
+        let (height, width) = (camera.height as usize, camera.width as usize);
+        let mut times = StageTimes::default();
+        let model = &self.model;
+
+        // Frame k: forward and photometric loss.
+        let first = model.forward(camera, &frame.pose, model.latent(slot))?;
+        times.pose = first.timing.pose;
+        times.render = first.timing.render;
+        let t0 = Instant::now();
+        let shape = ImageShape {
+            channels: 3,
+            height,
+            width,
+        };
+        let photo = photometric(first.rgb(), &frame.image, shape, config.ssim_weight);
+        let mut d_image = photo.d_image;
+        times.loss = t0.elapsed().as_secs_f64();
+
+        // Frame k+1 when a pair loss applies: its forward and the pair losses of both renders.
+        let t_pair = Instant::now();
+        let pair = PairSupervision::of(data, &config, slot);
+        let second = match &pair {
+            Some(pair) => {
+                let next = &data.frames[pair.next_slot];
+                let pass = model.forward(camera, &next.pose, model.latent(pair.next_slot))?;
+                let terms = pair_terms(
+                    pair,
+                    &config,
+                    first.rgb(),
+                    pass.rgb(),
+                    (height, width),
+                    &mut d_image,
+                )?;
+                times.flow_network = terms.flow_network_seconds;
+                Some((pair.next_slot, pass, terms))
+            }
+            None => None,
+        };
+        times.flow = t_pair.elapsed().as_secs_f64();
+        let (d_geometric_first, d_geometric_second) = match &second {
+            Some((_, _, terms)) => match &terms.d_flow_geometric {
+                Some((a, b)) => (Some(a.as_slice()), Some(b.as_slice())),
+                None => (None, None),
+            },
+            None => (None, None),
+        };
+
+        // Frame k: backward, with the AIAP regulariser on its posed human Gaussians.
+        let t0 = Instant::now();
+        let mut posed_grads = first.render_backward(&d_image, d_geometric_first)?;
+        times.render_backward = t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        let (aiap_value, aiap_canonical) =
+            aiap_terms(&self.aiap, model, &first.posed, &config, &mut posed_grads);
+        let mut grads = first.model_backward(&posed_grads)?;
+        add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
+        let mut opacity_grads = posed_grads.opacity_logits;
+
+        // Frame k+1: backward, accumulated into the shared gradients.
+        let (mut flow_value, mut event_value) = (0.0f32, 0.0f32);
+        let mut second_latent = None;
+        let mut second_backward_seconds = 0.0;
+        if let Some((next_slot, pass, terms)) = &second {
+            let t = Instant::now();
+            let posed2 = pass.render_backward(&terms.d_second, d_geometric_second)?;
+            let grads2 = pass.model_backward(&posed2)?;
+            grads.add_shared(&grads2);
+            for (o, &g) in opacity_grads.iter_mut().zip(&posed2.opacity_logits) {
+                *o += g;
+            }
+            second_latent = Some((*next_slot, grads2.latent));
+            (flow_value, event_value) = (terms.flow, terms.event);
+            second_backward_seconds = t.elapsed().as_secs_f64();
+            times.flow += second_backward_seconds;
+        }
+        let skinning_value = skinning_term(
+            &model.nets.skinning,
+            data,
+            &config,
+            step,
+            &mut grads.skinning,
+        )?;
+        // (Frame k+1's backward ran inside this interval; it is counted under `flow`.)
+        times.model_backward = t0.elapsed().as_secs_f64() - second_backward_seconds;
+
+        let loss = photo.value + aiap_value + skinning_value + flow_value + event_value;
+        let finite = loss.is_finite()
+            && opacity_grads.iter().all(|v| v.is_finite())
+            && second_latent
+                .as_ref()
+                .is_none_or(|(_, g)| g.iter().all(|v| v.is_finite()))
+            && all_finite(&grads);
+        if !finite {
+            return Err(TrainError::NonFinite { step });
+        }
+        let psnr_value = psnr(first.rgb(), &frame.image);
+        let active = first.active().len();
+        let refine_inputs = RefineInputs {
+            means_2d: posed_grads.means_2d,
+            radii: first.out.radii.clone(),
+        };
+        drop(second);
+        drop(first);
+
+        let t0 = Instant::now();
+        self.apply_gradients(slot, grads, opacity_grads, second_latent)?;
+        times.adam = t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
+        self.refine(data, &refine_inputs);
+        times.density = t0.elapsed().as_secs_f64();
+        let human = self.model.human_count();
+        Ok(StepReport {
+            step,
+            frame: frame.index,
+            loss,
+            l1: photo.l1,
+            ssim: photo.ssim,
+            skinning: skinning_value,
+            aiap: aiap_value,
+            flow: flow_value,
+            event: event_value,
+            psnr: psnr_value,
+            gaussians_human: human,
+            gaussians_scene: self.model.set.len() - human,
+            active,
+            times,
+        })
+    }
+
+    /// One optimiser step of every parameter group: the Gaussians (position rate decayed over the
+    /// run), the networks (the non-rigid one only from `nonrigid_from` on) and the latents of the
+    /// step's frames.
+    fn apply_gradients(
+        &mut self,
+        slot: usize,
+        grads: ModelGradients<f32>,
+        opacity_grads: Vec<f32>,
+        second_latent: Option<(usize, Vec<f32>)>,
+    ) -> Result<(), TrainError> {
+        let config = &self.model.config;
+        let step = self.step;
+        let mut set_grads = self.model.set.zeros_like();
+        set_grads.means = grads.means;
+        set_grads.log_scales = grads.log_scales;
+        set_grads.quats = grads.quats;
+        set_grads.opacity_logits = opacity_grads;
+        set_grads.features = grads.features;
+        set_grads.semantic_logits = grads.semantic_logits;
+        let rates = GaussianLearningRates {
+            means: exponential_rate(
+                config.lr_means * self.model.scene_extent,
+                config.lr_means_final_fraction,
+                step,
+                config.steps,
+            ),
+            log_scales: config.lr_log_scales,
+            quats: config.lr_quats,
+            opacity_logits: config.lr_opacity,
+            sh_dc: 0.0,
+            sh_rest: 0.0,
+            features: config.lr_features,
+            semantic_logits: config.lr_semantic,
+        };
+        let d = config.latent_dim;
+        let mut latent_grads = vec![0.0f32; self.model.latents.len()];
+        latent_grads[slot * d..(slot + 1) * d].copy_from_slice(&grads.latent);
+        if let Some((next_slot, g)) = &second_latent {
+            latent_grads[next_slot * d..(next_slot + 1) * d].copy_from_slice(g);
+        }
+        let nonrigid_frozen = step < config.nonrigid_from;
+        self.optimisers
+            .step_gaussians(&mut self.model.set, &set_grads, &rates)?;
+        let [nonrigid, skinning, human_colour, scene_colour, latents] =
+            self.model.network_groups_mut();
+        let groups = [
+            ("nonrigid", nonrigid, &grads.nonrigid),
+            ("skinning", skinning, &grads.skinning),
+            ("human_colour", human_colour, &grads.human_colour),
+            ("scene_colour", scene_colour, &grads.scene_colour),
+            ("latent", latents, &latent_grads),
+        ];
+        for (name, params, g) in groups {
+            if name == "nonrigid" && nonrigid_frozen {
+                continue;
+            }
+            self.optimisers.step_network(name, params, g)?;
+        }
+        Ok(())
+    }
+
+    /// Density control after a step: the step's screen-space statistics, densify and prune on the
+    /// schedule (AIAP neighbourhoods refreshed after), and the opacity reset; advances the step count.
+    fn refine(&mut self, data: &TrainingData, inputs: &RefineInputs) {
+        let config = self.model.config.clone();
+        accumulate_screen_stats(
+            &mut self.stats,
+            &data.camera,
+            &inputs.means_2d,
+            &inputs.radii,
+        );
+        let done = self.step + 1;
+        if on_schedule(
+            done,
+            config.densify_from,
+            config.densify_until,
+            config.densify_every,
+        ) {
+            let densify = DensifyConfig {
+                grad_threshold: config.densify_grad_threshold,
+                scene_extent: self.model.scene_extent,
+                min_opacity: config.prune_min_opacity,
+                max_gaussians: config.max_gaussians,
+                ..DensifyConfig::default()
+            };
+            densify_and_prune(
+                &mut self.model.set,
+                &mut self.optimisers.gaussians,
+                &mut self.stats,
+                &densify,
+                config.seed ^ (done as u64).wrapping_mul(0x9e37_79b9),
+            );
+            self.aiap = AiapNeighbours::of(&self.model);
+        }
+        if config.opacity_reset_every > 0
+            && done.is_multiple_of(config.opacity_reset_every)
+            && done < config.steps
+        {
+            reset_opacity(&mut self.model.set, &mut self.optimisers.gaussians, 0.01);
+        }
+        self.step = done;
+    }
+}
+
+/// True when every gradient of `g` is finite.
+fn all_finite(g: &ModelGradients<f32>) -> bool {
+    g.means.iter().flatten().all(|v| v.is_finite())
+        && g.log_scales.iter().flatten().all(|v| v.is_finite())
+        && g.quats.iter().flatten().all(|v| v.is_finite())
+        && g.features.iter().all(|v| v.is_finite())
+        && g.semantic_logits.iter().all(|v| v.is_finite())
+        && g.nonrigid.iter().all(|v| v.is_finite())
+        && g.skinning.iter().all(|v| v.is_finite())
+        && g.human_colour.iter().all(|v| v.is_finite())
+        && g.scene_colour.iter().all(|v| v.is_finite())
+        && g.latent.iter().all(|v| v.is_finite())
+}

@@ -1,0 +1,358 @@
+//! The loss terms of one training step, each returning its value and its cotangents: the
+//! photometric loss of a pass, the pair losses (flow, events) between the passes of frames k and k+1,
+//! the AIAP regulariser on the human Gaussians and the skinning loss on canonical surface samples.
+
+use crate::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP_NEIGHBOURS};
+use crate::config::{FlowGradient, FlowMeasure, TrainConfig};
+use crate::data::{EventPair, FlowPair, TrainingData};
+use crate::event_loss::pair_event_loss;
+use crate::flow_loss::{pair_flow_loss, pair_warp_loss};
+use crate::image_loss::{l1, ssim, ImageShape};
+use crate::model::{Model, PosedGradients, RENDER_CHANNELS};
+use crate::posing::{ModelGradients, PosedFrame};
+use crate::TrainError;
+use flow::SpyNet;
+use gaussians::covariance::{covariance_3d, covariance_3d_backward};
+use smpl_deform::deform_net::{skinning_loss, SkinningField};
+use std::time::Instant;
+
+/// (1 − λ)·L1 + λ·(1 − SSIM) of a render against its target, with the image cotangent.
+pub(super) struct Photometric {
+    /// The weighted loss.
+    pub value: f32,
+    /// The L1 term.
+    pub l1: f32,
+    /// SSIM (not 1 − SSIM).
+    pub ssim: f32,
+    /// dL/d image, (C, H, W) with C = [`RENDER_CHANNELS`] (zero on the probability plane).
+    pub d_image: Vec<f32>,
+}
+
+/// The photometric loss of `rgb` ((3, H, W)) against `target`.
+pub(super) fn photometric(
+    rgb: &[f32],
+    target: &[f32],
+    shape: ImageShape,
+    ssim_weight: f32,
+) -> Photometric {
+    let hw = shape.height * shape.width;
+    let mut d_l1 = vec![0.0f32; 3 * hw];
+    let mut d_ssim = vec![0.0f32; 3 * hw];
+    let l1_value = l1(rgb, target, Some(&mut d_l1));
+    let ssim_value = ssim(rgb, target, shape, Some(&mut d_ssim));
+    let w = ssim_weight;
+    let value = (1.0 - w) * l1_value + w * (1.0 - ssim_value);
+    let mut d_image = vec![0.0f32; RENDER_CHANNELS * hw];
+    for (o, (&a, &b)) in d_image.iter_mut().zip(d_l1.iter().zip(&d_ssim)) {
+        *o = (1.0 - w) * a - w * b;
+    }
+    Photometric {
+        value,
+        l1: l1_value,
+        ssim: ssim_value,
+        d_image,
+    }
+}
+
+/// The supervision of the pair (k, k+1) that a step uses, if any.
+pub(super) struct PairSupervision<'a> {
+    /// Slot of frame k+1.
+    pub next_slot: usize,
+    /// The flow loss's frozen network and target.
+    pub flow: Option<(&'a SpyNet<f32>, &'a FlowPair)>,
+    /// The event-generation loss's expected log-intensity change.
+    pub events: Option<&'a EventPair>,
+}
+
+impl<'a> PairSupervision<'a> {
+    /// The pair supervision of slot `slot` under `config`; `None` when no pair loss applies.
+    pub fn of(data: &'a TrainingData, config: &TrainConfig, slot: usize) -> Option<Self> {
+        let flow = match (config.flow_loss, data.flow_net.as_ref()) {
+            (true, Some(net)) => data
+                .flow_pairs
+                .get(slot)
+                .and_then(Option::as_ref)
+                .map(|p| (net, p)),
+            _ => None,
+        };
+        let events = if config.event_loss {
+            data.event_pairs.get(slot).and_then(Option::as_ref)
+        } else {
+            None
+        };
+        let next_slot = flow
+            .map(|(_, p)| p.next_slot)
+            .or(events.map(|p| p.next_slot))?;
+        Some(Self {
+            next_slot,
+            flow,
+            events,
+        })
+    }
+}
+
+/// Values and cotangents of the pair losses.
+pub(super) struct PairTerms {
+    /// λ_flow·L_flow.
+    pub flow: f32,
+    /// The weighted event-generation loss.
+    pub event: f32,
+    /// Cotangent of frame k+1's image (C, H, W).
+    pub d_second: Vec<f32>,
+    /// With `FlowGradient::Geometry`, the flow loss's RGB cotangents of frames k and k+1, kept apart
+    /// so that only their geometric share is used.
+    pub d_flow_geometric: Option<(Vec<f32>, Vec<f32>)>,
+    /// Seconds in the flow loss proper (resize, network, masked L1).
+    pub flow_network_seconds: f64,
+}
+
+/// The pair losses between the renders `rgb` (frame k) and `rgb2` (frame k+1), both (3, H, W); frame
+/// k's share of their cotangent is added to `d_first`.
+pub(super) fn pair_terms(
+    pair: &PairSupervision<'_>,
+    config: &TrainConfig,
+    rgb: &[f32],
+    rgb2: &[f32],
+    (height, width): (usize, usize),
+    d_first: &mut [f32],
+) -> Result<PairTerms, TrainError> {
+    let hw = height * width;
+    let mut terms = PairTerms {
+        flow: 0.0,
+        event: 0.0,
+        d_second: vec![0.0f32; RENDER_CHANNELS * hw],
+        d_flow_geometric: None,
+        flow_network_seconds: 0.0,
+    };
+    if let Some((net, flow_pair)) = pair.flow {
+        let t_network = Instant::now();
+        let (fl_loss, fl_d_first, fl_d_second) = match config.flow_measure {
+            FlowMeasure::Network => {
+                let fl = pair_flow_loss(net, rgb, rgb2, height, width, &flow_pair.target)?;
+                (fl.loss, fl.d_first, fl.d_second)
+            }
+            FlowMeasure::Warp => {
+                let wl = pair_warp_loss(rgb, rgb2, height, width, &flow_pair.target)?;
+                (wl.loss, wl.d_first, wl.d_second)
+            }
+        };
+        terms.flow_network_seconds = t_network.elapsed().as_secs_f64();
+        let lambda = config.flow_weight;
+        terms.flow = lambda * fl_loss;
+        match config.flow_gradient {
+            FlowGradient::All => {
+                for (o, &g) in d_first[..3 * hw].iter_mut().zip(&fl_d_first) {
+                    *o += lambda * g;
+                }
+                for (o, &g) in terms.d_second[..3 * hw].iter_mut().zip(&fl_d_second) {
+                    *o += lambda * g;
+                }
+            }
+            FlowGradient::Geometry => {
+                let scaled = |g: &[f32]| g.iter().map(|&v| lambda * v).collect::<Vec<f32>>();
+                terms.d_flow_geometric = Some((scaled(&fl_d_first), scaled(&fl_d_second)));
+            }
+        }
+    }
+    if let Some(event_pair) = pair.events {
+        let el = pair_event_loss(rgb, rgb2, &event_pair.expected, config.event_log_eps);
+        let lambda = config.event_weight;
+        terms.event = lambda * el.loss;
+        for (o, &g) in d_first[..3 * hw].iter_mut().zip(&el.d_first) {
+            *o += lambda * g;
+        }
+        for (o, &g) in terms.d_second[..3 * hw].iter_mut().zip(&el.d_second) {
+            *o += lambda * g;
+        }
+    }
+    Ok(terms)
+}
+
+/// The AIAP neighbourhoods: the human Gaussians (probability ≥ 0.5) and their K nearest human
+/// neighbours in canonical space, refreshed after density control.
+#[derive(Clone, Debug, Default)]
+pub(super) struct AiapNeighbours {
+    /// Set indices of the human Gaussians.
+    pub index: Vec<usize>,
+    /// K neighbours per entry of `index` (positions in `index`), empty with too few Gaussians.
+    pub neighbours: Vec<u32>,
+}
+
+impl AiapNeighbours {
+    /// The neighbourhoods of `model`'s current human Gaussians.
+    pub fn of(model: &Model) -> Self {
+        let index: Vec<usize> = (0..model.set.len())
+            .filter(|&i| model.probability(i) >= 0.5)
+            .collect();
+        let points: Vec<[f32; 3]> = index.iter().map(|&i| model.set.means[i]).collect();
+        let neighbours = if points.len() > AIAP_NEIGHBOURS {
+            gaussians::init::knn_indices(&points, AIAP_NEIGHBOURS)
+        } else {
+            Vec::new()
+        };
+        Self { index, neighbours }
+    }
+}
+
+/// The AIAP loss's canonical-side cotangents (per human Gaussian of the neighbourhoods).
+pub(super) struct AiapCanonical {
+    means: Vec<[f32; 3]>,
+    covariances: Vec<[f32; 6]>,
+}
+
+/// The AIAP losses of the posed frame `posed` (positions and covariances of the human Gaussians
+/// against their canonical ones): adds the posed-side cotangents to `d_posed`, returns the weighted
+/// value and the canonical-side cotangents for [`add_aiap_canonical`].
+pub(super) fn aiap_terms(
+    aiap: &AiapNeighbours,
+    model: &Model,
+    posed: &PosedFrame<f32>,
+    config: &TrainConfig,
+    d_posed: &mut PosedGradients,
+) -> (f32, AiapCanonical) {
+    let mut canonical = AiapCanonical {
+        means: vec![[0.0f32; 3]; aiap.index.len()],
+        covariances: vec![[0.0f32; 6]; aiap.index.len()],
+    };
+    let mut value = 0.0f32;
+    if aiap.neighbours.is_empty()
+        || (config.aiap_position_weight <= 0.0 && config.aiap_covariance_weight <= 0.0)
+    {
+        return (value, canonical);
+    }
+    let set = &model.set;
+    let idx = &aiap.index;
+    let canon_x: Vec<[f32; 3]> = idx.iter().map(|&i| set.means[i]).collect();
+    let posed_x: Vec<[f32; 3]> = idx.iter().map(|&i| posed.means[i]).collect();
+    let mut d_posed_x = vec![[0.0f32; 3]; idx.len()];
+    value += aiap_loss(
+        &canon_x,
+        &posed_x,
+        &aiap.neighbours,
+        AIAP_NEIGHBOURS,
+        config.aiap_position_weight,
+        Some(&mut canonical.means),
+        Some(&mut d_posed_x),
+    );
+    let canon_c: Vec<[f32; 6]> = idx
+        .iter()
+        .map(|&i| upper_triangle(&covariance_3d(set.log_scales[i], set.quats[i])))
+        .collect();
+    let posed_c: Vec<[f32; 6]> = idx
+        .iter()
+        .map(|&i| upper_triangle(&posed.covariances[i]))
+        .collect();
+    let mut d_posed_c = vec![[0.0f32; 6]; idx.len()];
+    value += aiap_loss(
+        &canon_c,
+        &posed_c,
+        &aiap.neighbours,
+        AIAP_NEIGHBOURS,
+        config.aiap_covariance_weight,
+        Some(&mut canonical.covariances),
+        Some(&mut d_posed_c),
+    );
+    for (a, &i) in idx.iter().enumerate() {
+        for ax in 0..3 {
+            d_posed.means[i][ax] += d_posed_x[a][ax];
+        }
+        let g = upper_triangle_backward(&d_posed_c[a]);
+        for r in 0..3 {
+            for c in 0..3 {
+                d_posed.covariances[i][r][c] += g[r][c];
+            }
+        }
+    }
+    (value, canonical)
+}
+
+/// Adds the AIAP loss's canonical-side cotangents to the stored parameters' gradients.
+pub(super) fn add_aiap_canonical(
+    aiap: &AiapNeighbours,
+    model: &Model,
+    canonical: &AiapCanonical,
+    grads: &mut ModelGradients<f32>,
+) {
+    let set = &model.set;
+    for (a, &i) in aiap.index.iter().enumerate() {
+        for ax in 0..3 {
+            grads.means[i][ax] += canonical.means[a][ax];
+        }
+        let g = upper_triangle_backward(&canonical.covariances[a]);
+        let (ds, dq) = covariance_3d_backward(set.log_scales[i], set.quats[i], &g);
+        for ax in 0..3 {
+            grads.log_scales[i][ax] += ds[ax];
+        }
+        for ax in 0..4 {
+            grads.quats[i][ax] += dq[ax];
+        }
+    }
+}
+
+/// The canonical surface samples of step `step`'s skinning-loss window: `m` consecutive samples of
+/// the pool (wrapping), and their body weights (m × bones).
+fn skinning_window(data: &TrainingData, step: usize, m: usize) -> (Vec<[f32; 3]>, Vec<f32>) {
+    let pool = data.skin_points.len();
+    let start = (step * m) % pool;
+    let nb = data.skin_weights.len() / pool;
+    let idx: Vec<usize> = (0..m).map(|j| (start + j) % pool).collect();
+    let pts = idx.iter().map(|&j| data.skin_points[j]).collect();
+    let target = idx
+        .iter()
+        .flat_map(|&j| data.skin_weights[j * nb..(j + 1) * nb].iter().copied())
+        .collect();
+    (pts, target)
+}
+
+/// The weighted skinning loss of step `step` (learned weights vs the body's on a window of surface
+/// samples that moves every step); its gradient is added to `d_field`. Zero after
+/// `config.skinning_until`.
+pub(super) fn skinning_term(
+    field: &SkinningField<f32>,
+    data: &TrainingData,
+    config: &TrainConfig,
+    step: usize,
+    d_field: &mut [f32],
+) -> Result<f32, TrainError> {
+    if step >= config.skinning_until || config.skinning_weight <= 0.0 || data.skin_points.is_empty()
+    {
+        return Ok(0.0);
+    }
+    let m = config.skinning_samples.min(data.skin_points.len()).max(1);
+    let (pts, target) = skinning_window(data, step, m);
+    let (pred, cache) = field.forward(&pts)?;
+    let (value, mut d_pred) = skinning_loss(&pred, &target);
+    for g in &mut d_pred {
+        *g *= config.skinning_weight;
+    }
+    field.backward(&cache, &d_pred, d_field)?;
+    Ok(value * config.skinning_weight)
+}
+
+/// Fits the skinning field to the body's skinning weights on the data's canonical surface samples
+/// (`config.skinning_warmup_steps` Adam steps of the skinning loss, 2048 samples each, its own
+/// optimiser state, deterministic).
+pub fn warm_up_skinning(
+    field: &mut SkinningField<f32>,
+    data: &TrainingData,
+    config: &TrainConfig,
+) -> Result<(), TrainError> {
+    let pool = data.skin_points.len();
+    if config.skinning_warmup_steps == 0 || pool == 0 {
+        return Ok(());
+    }
+    let m = 2048.min(pool);
+    let mut adam = nn::Adam::new(
+        field.mlp.num_params(),
+        crate::optimisers::adam_config(config.lr_skinning.max(1e-3) * 5.0),
+    );
+    for step in 0..config.skinning_warmup_steps {
+        let (pts, target) = skinning_window(data, step, m);
+        let (pred, cache) = field.forward(&pts)?;
+        let (_, d_pred) = skinning_loss(&pred, &target);
+        let mut grads = vec![0.0f32; field.mlp.num_params()];
+        field.backward(&cache, &d_pred, &mut grads)?;
+        adam.step(&mut field.mlp.params, &grads)?;
+    }
+    Ok(())
+}
