@@ -14,7 +14,7 @@ use image::{Rgb, RgbImage};
 use std::path::Path;
 use std::path::PathBuf;
 use train::blend::SemanticMode;
-use train::config::{FlowSource, Preset};
+use train::config::{FlowSource, Preset, TrainOptions};
 
 /// Arguments of `ablate`.
 #[derive(clap::Args, Debug)]
@@ -31,15 +31,9 @@ pub struct Args {
     /// TOML or JSON file overriding preset values for every run.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Optimisation steps of every run.
-    #[arg(long)]
-    pub steps: Option<usize>,
-    /// Seed of every run.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Weights of the frozen flow network (default: the shipped ones).
-    #[arg(long)]
-    pub flow_network: Option<PathBuf>,
+    /// Training options of every run (each run then sets its own, e.g. --semantic, --event-loss).
+    #[command(flatten, next_help_heading = "Training options of every run")]
+    pub options: TrainOptions,
     /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
     /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net).
     #[arg(long, value_delimiter = ',')]
@@ -51,66 +45,89 @@ pub struct Args {
     pub blur_levels: bool,
 }
 
-/// One configuration of the ablation set.
+/// One configuration of the ablation set: its name, a description and the training options it sets
+/// over the preset, the --config file and the options given to every run.
 struct Run {
     name: &'static str,
     what: &'static str,
-    semantic: SemanticMode,
-    event_loss: bool,
-    flow: Option<FlowSource>,
+    options: fn() -> TrainOptions,
 }
 
 const RUNS: [Run; 7] = [
     Run {
         name: "semantic-none",
         what: "no semantics (every Gaussian deformed), no events",
-        semantic: SemanticMode::None,
-        event_loss: false,
-        flow: None,
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::None),
+            event_loss: Some(false),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
     },
     Run {
         name: "semantic-scalar",
         what: "one sigmoid logit (p = 0.5 at start), no events",
-        semantic: SemanticMode::Scalar,
-        event_loss: false,
-        flow: None,
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::Scalar),
+            event_loss: Some(false),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
     },
     Run {
         name: "one-hot",
         what: "one-hot semantics (paper), no events",
-        semantic: SemanticMode::OneHot,
-        event_loss: false,
-        flow: None,
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            event_loss: Some(false),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
     },
     Run {
         name: "event-loss",
         what: "one-hot + event-generation loss (EventNeRF/E-NeRF)",
-        semantic: SemanticMode::OneHot,
-        event_loss: true,
-        flow: None,
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            event_loss: Some(true),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
     },
     Run {
         name: "flow-gt",
         what: "one-hot + flow loss, ground-truth flow",
-        semantic: SemanticMode::OneHot,
-        event_loss: false,
-        flow: Some(FlowSource::GroundTruth),
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            event_loss: Some(false),
+            flow_loss: Some(true),
+            flow_source: Some(FlowSource::GroundTruth),
+            ..TrainOptions::default()
+        },
     },
     Run {
         name: "flow-events",
         what: "one-hot + flow loss, event-only flow (contrast maximisation)",
-        semantic: SemanticMode::OneHot,
-        event_loss: false,
-        flow: Some(FlowSource::Events),
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            event_loss: Some(false),
+            flow_loss: Some(true),
+            flow_source: Some(FlowSource::Events),
+            ..TrainOptions::default()
+        },
     },
     Run {
         name: "flow-sharp-net",
         what:
             "one-hot + flow loss, targets from the flow network on the sharp frames (the paper's \
                ZJU-MoCap-Blur protocol)",
-        semantic: SemanticMode::OneHot,
-        event_loss: false,
-        flow: Some(FlowSource::SharpNetwork),
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            event_loss: Some(false),
+            flow_loss: Some(true),
+            flow_source: Some(FlowSource::SharpNetwork),
+            ..TrainOptions::default()
+        },
     },
 ];
 
@@ -209,21 +226,7 @@ pub fn run(args: Args) -> Result<()> {
             out: Some(run_out.clone()),
             preset: args.preset,
             config: args.config.clone(),
-            steps: args.steps,
-            seed: args.seed,
-            semantic: Some(r.semantic),
-            init: None,
-            semantic_init: None,
-            flow_loss: Some(r.flow.is_some()),
-            flow_source: r.flow,
-            flow_weight: None,
-            flow_tau: None,
-            flow_gradient: None,
-            flow_measure: None,
-            flow_network: args.flow_network.clone(),
-            event_loss: Some(r.event_loss),
-            event_weight: None,
-            event_threshold: None,
+            options: args.options.overridden_by(&(r.options)()),
             resume: false,
             stop_after: None,
         };
@@ -282,7 +285,7 @@ fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -
                     md.push_str(&format!(" {cell} |"));
                 }
                 json.push(serde_json::json!({
-                    "run": label, "what": r.what, "dir": dir.display().to_string(), "metrics": m,
+                    "run": label, "what": r.what, "options": (r.options)(), "dir": dir.display().to_string(), "metrics": m,
                 }));
             }
             Err(e) => {
@@ -290,7 +293,7 @@ fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -
                 md.push_str(&format!(" failed: {msg} |"));
                 md.push_str(&" |".repeat(COLUMNS.len() - 1));
                 json.push(serde_json::json!({
-                    "run": label, "what": r.what, "dir": dir.display().to_string(),
+                    "run": label, "what": r.what, "options": (r.options)(), "dir": dir.display().to_string(),
                     "error": format!("{e:#}"),
                 }));
             }

@@ -12,11 +12,9 @@ use anyhow::{bail, Context, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use train::blend::SemanticMode;
 use train::body::Body;
-use train::config::{FlowGradient, FlowMeasure, FlowSource, Preset, TrainConfig};
+use train::config::{FlowMeasure, FlowSource, Preset, TrainConfig, TrainOptions};
 use train::data::TrainingData;
-use train::init::{InitMode, SemanticInit};
 use train::trainer::{StepReport, Trainer};
 use train::TrainError;
 
@@ -33,98 +31,22 @@ pub struct Args {
     /// Hyper-parameter preset: quick (minutes on 2 cores) or full.
     #[arg(long, default_value = "quick")]
     pub preset: Preset,
-    /// TOML or JSON file overriding preset values (any field of train::config::TrainConfig).
+    /// TOML or JSON file overriding preset values (any field of the training options below, in
+    /// snake_case).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Number of optimisation steps.
-    #[arg(long)]
-    pub steps: Option<usize>,
-    /// Seed of initialisation, networks, frame order and splits.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Semantic parameterisation: one-hot (paper), scalar, none (everything deformed).
-    #[arg(long, value_parser = parse_semantic)]
-    pub semantic: Option<SemanticMode>,
-    /// Initial points: smpl+cube (paper), random, smpl-only.
-    #[arg(long, value_parser = parse_init)]
-    pub init: Option<InitMode>,
-    /// Initial semantic logits: one-hot (paper) or half (p = 0.5 everywhere).
-    #[arg(long, value_parser = parse_semantic_init)]
-    pub semantic_init: Option<SemanticInit>,
-    /// Event-flow supervision (paper §4.4): `on` or `off` (default off).
-    #[arg(long, value_parser = parse_on_off)]
-    pub flow_loss: Option<bool>,
-    /// Flow that supervises the flow loss: gt (the generator's exact flow), events (contrast
-    /// maximisation on the events), file (an external flow named in scene.json), sharp-net (the
-    /// frozen flow network's own flow between the sharp reference frames — the paper's
-    /// ZJU-MoCap-Blur protocol; needs sharp references).
-    #[arg(long)]
-    pub flow_source: Option<FlowSource>,
-    /// λ_flow, the weight of the flow loss.
-    #[arg(long)]
-    pub flow_weight: Option<f32>,
-    /// τ: target flows no longer than this (pixels at 1/4 resolution) are not supervised.
-    #[arg(long)]
-    pub flow_tau: Option<f32>,
-    /// Which parameters the flow loss's gradient reaches: all (the paper) or geometry (only means
-    /// and covariances, hence positions, shapes and the deformation; not colours, opacities or
-    /// semantics — a deviation from the paper, for an ablation).
-    #[arg(long, value_parser = parse_flow_gradient)]
-    pub flow_gradient: Option<FlowGradient>,
-    /// How the renders' motion is compared with the target flow: network (the paper: the frozen
-    /// flow network's prediction between the two renders) or warp (an ideal flow estimator:
-    /// render k against render k+1 warped back by the target flow — an ablation outside the paper
-    /// that shows what the flow constraint gives without any network's error).
-    #[arg(long)]
-    pub flow_measure: Option<FlowMeasure>,
-    /// Weights of the frozen flow network (safetensors). Default: the shipped
-    /// data-fixtures/flow/spynet-synthetic.safetensors.
-    #[arg(long)]
-    pub flow_network: Option<PathBuf>,
-    /// The event-generation loss of EventNeRF / E-NeRF (log-intensity change between renders of
-    /// consecutive frames vs C × the events in between; the paper's Table 6 alternative): on or off.
-    #[arg(long, value_parser = parse_on_off)]
-    pub event_loss: Option<bool>,
-    /// Weight of the event-generation loss (default: the preset's, 3).
-    #[arg(long)]
-    pub event_weight: Option<f32>,
-    /// Contrast threshold C of the event camera (log-intensity units).
-    #[arg(long)]
-    pub event_threshold: Option<f32>,
+    /// Training options: each overrides the preset and the --config file.
+    #[command(
+        flatten,
+        next_help_heading = "Training options (override the preset and --config)"
+    )]
+    pub options: TrainOptions,
     /// Continue from OUT/checkpoint.safetensors (same bits as an uninterrupted run).
     #[arg(long)]
     pub resume: bool,
     /// Stop after this many steps of this invocation (the run can be resumed later).
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
-}
-
-fn parse_semantic(s: &str) -> Result<SemanticMode, String> {
-    serde_json::from_value(serde_json::Value::String(s.into()))
-        .map_err(|_| format!("`{s}`: expected one-hot, scalar or none"))
-}
-
-fn parse_init(s: &str) -> Result<InitMode, String> {
-    serde_json::from_value(serde_json::Value::String(s.into()))
-        .map_err(|_| format!("`{s}`: expected smpl+cube, random or smpl-only"))
-}
-
-fn parse_semantic_init(s: &str) -> Result<SemanticInit, String> {
-    serde_json::from_value(serde_json::Value::String(s.into()))
-        .map_err(|_| format!("`{s}`: expected one-hot or half"))
-}
-
-fn parse_flow_gradient(s: &str) -> Result<FlowGradient, String> {
-    serde_json::from_value(serde_json::Value::String(s.into()))
-        .map_err(|_| format!("`{s}`: expected all or geometry"))
-}
-
-fn parse_on_off(s: &str) -> Result<bool, String> {
-    match s {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        _ => Err(format!("`{s}`: expected on or off")),
-    }
 }
 
 /// The project's own flow-network weights (`cargo xtask train-flow` writes them there).
@@ -228,57 +150,11 @@ pub fn scene_body(data: &train::data::Dataset) -> Result<Body> {
 
 /// The resolved configuration: preset, then the file, then the flags.
 fn resolve_config(args: &Args) -> Result<TrainConfig> {
-    let mut c = TrainConfig::preset(args.preset);
-    if let Some(path) = &args.config {
-        c = TrainConfig::load_over(path, &c)?;
-    }
-    if let Some(v) = args.steps {
-        c.steps = v;
-    }
-    if let Some(v) = args.seed {
-        c.seed = v;
-    }
-    if let Some(v) = args.semantic {
-        c.semantic = v;
-    }
-    if let Some(v) = args.init {
-        c.init = v;
-    }
-    if let Some(v) = args.semantic_init {
-        c.semantic_init = v;
-    }
-    if let Some(v) = args.flow_loss {
-        c.flow_loss = v;
-    }
-    if let Some(v) = args.flow_source {
-        c.flow_source = v;
-    }
-    if let Some(v) = args.flow_weight {
-        c.flow_weight = v;
-    }
-    if let Some(v) = args.flow_tau {
-        c.flow_tau = v;
-    }
-    if let Some(v) = args.flow_gradient {
-        c.flow_gradient = v;
-    }
-    if let Some(v) = args.flow_measure {
-        c.flow_measure = v;
-    }
-    if let Some(v) = &args.flow_network {
-        c.flow_network = Some(v.clone());
-    }
-    if let Some(v) = args.event_loss {
-        c.event_loss = v;
-    }
-    if let Some(v) = args.event_weight {
-        c.event_weight = v;
-    }
-    if let Some(v) = args.event_threshold {
-        c.event_threshold = v;
-    }
-    c.validate()?;
-    Ok(c)
+    Ok(TrainConfig::resolve(
+        args.preset,
+        args.config.as_deref(),
+        &args.options,
+    )?)
 }
 
 /// Keeps the log lines of steps before `step` and returns their summed wall time.
@@ -357,7 +233,7 @@ pub fn run(args: Args) -> Result<()> {
     let (mut trainer, mut train_seconds) = if args.resume {
         let t = Trainer::load_checkpoint(&checkpoint, &ctx)
             .with_context(|| format!("resuming from {}", checkpoint.display()))?;
-        if *t.config() != config && (args.config.is_some() || args.steps.is_some()) {
+        if *t.config() != config {
             eprintln!("note: --resume continues with the configuration stored in the checkpoint");
         }
         let secs = truncate_log(&log_path, t.step)?;

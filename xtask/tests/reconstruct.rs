@@ -295,7 +295,7 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
         .output()
         .unwrap();
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("network or warp"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("possible values: network, warp"));
     // The event-generation loss alternative runs from the command line too.
     let out_ev = dir.path().join("events");
     let o = reconstruct(

@@ -20,7 +20,9 @@
 use num_traits::Float;
 
 /// How a Gaussian's human probability is parameterised (`--semantic`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum SemanticMode {
     /// Two logits (scene, human); p = softmax(l)[1] (the paper's one-hot semantics).

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// A named set of defaults.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Preset {
     /// Short schedule, fewer Gaussians (the default of `cargo xtask reconstruct`).
@@ -24,157 +24,203 @@ pub enum Preset {
     Full,
 }
 
-impl std::str::FromStr for Preset {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "quick" => Ok(Self::Quick),
-            "full" => Ok(Self::Full),
-            _ => Err(format!("unknown preset `{s}` (expected quick or full)")),
+/// Declares every training option once — its documentation (which is also its `--help` text), its
+/// type, its `quick`-preset default and any clap attribute — and generates from that one list
+/// [`TrainConfig`] (the complete, serde-(de)serialisable configuration), [`TrainOptions`] (one
+/// optional `--kebab-case` flag per field, flattened into `cargo xtask reconstruct` and used by
+/// `ablate` to describe its runs) and [`TrainConfig::apply`]. Adding a training option means adding
+/// one entry here.
+macro_rules! training_options {
+    ($(
+        $(#[doc = $doc:literal])*
+        $(#[arg($($arg:tt)*)])?
+        $name:ident: $ty:ty = $default:expr,
+    )*) => {
+        /// All hyper-parameters of a reconstruction.
+        #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        pub struct TrainConfig {
+            $($(#[doc = $doc])* pub $name: $ty,)*
         }
-    }
+
+        /// Overrides of a [`TrainConfig`]: every field optional, `None` keeping the preset's (or the
+        /// config file's) value. As command-line flags, each is `--field-name` with the field's
+        /// documentation as its help.
+        #[derive(Clone, Debug, Default, PartialEq, clap::Args, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        pub struct TrainOptions {
+            $(
+                $(#[doc = $doc])*
+                #[arg(long $(, $($arg)*)?)]
+                #[serde(skip_serializing_if = "Option::is_none")]
+                pub $name: Option<$ty>,
+            )*
+        }
+
+        impl TrainOptions {
+            /// These options with every field that `later` sets taken from `later`.
+            pub fn overridden_by(&self, later: &TrainOptions) -> TrainOptions {
+                TrainOptions {
+                    $($name: later.$name.clone().or_else(|| self.$name.clone()),)*
+                }
+            }
+        }
+
+        impl TrainConfig {
+            /// The `quick` preset: every option's declared default.
+            fn quick() -> Self {
+                Self { $($name: $default,)* }
+            }
+
+            /// Overwrites every field that `options` sets.
+            pub fn apply(&mut self, options: &TrainOptions) {
+                $(if let Some(v) = &options.$name {
+                    self.$name = v.clone();
+                })*
+            }
+        }
+    };
 }
 
-/// All hyper-parameters of a reconstruction.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct TrainConfig {
+training_options! {
     /// Optimisation steps (one training frame each).
-    pub steps: usize,
+    steps: usize = 1200,
     /// Seed of the initial samples, the networks, the frame order and the density-control splits.
-    pub seed: u64,
+    seed: u64 = 0,
     /// Semantic parameterisation (`one-hot`, `scalar`, `none`).
-    pub semantic: SemanticMode,
+    semantic: SemanticMode = SemanticMode::OneHot,
     /// Initial points (`smpl+cube`, `random`, `smpl-only`).
-    pub init: InitMode,
+    init: InitMode = InitMode::SmplCube,
     /// Initial semantic logits (`one-hot`, `half`).
-    pub semantic_init: SemanticInit,
+    semantic_init: SemanticInit = SemanticInit::OneHot,
     /// Initial human Gaussians (on and just inside the canonical body surface).
-    pub human_gaussians: usize,
+    human_gaussians: usize = 6_000,
     /// Initial scene Gaussians (uniform in the visible part of the scene cube).
-    pub scene_gaussians: usize,
+    scene_gaussians: usize = 20_000,
     /// Density control never grows the set beyond this many Gaussians.
-    pub max_gaussians: usize,
+    max_gaussians: usize = 45_000,
     /// λ_logit, the magnitude of the initial one-hot logits (paper: 3).
-    pub logit_magnitude: f32,
+    logit_magnitude: f32 = 3.0,
     /// Initial opacity of every Gaussian (3DGS-Avatar: 0.1).
-    pub initial_opacity: f32,
+    initial_opacity: f32 = 0.1,
     /// Upper bound on the initial (kNN) scale of a Gaussian, metres.
-    pub max_initial_scale: f32,
+    max_initial_scale: f32 = 0.03,
     /// Per-Gaussian colour-feature length (paper: 32).
-    pub feature_dim: usize,
+    feature_dim: usize = 32,
     /// Per-frame latent length of the human colour network (paper: 16).
-    pub latent_dim: usize,
+    latent_dim: usize = 16,
     /// Hidden width of the non-rigid network and of the skinning field.
-    pub deform_hidden: usize,
+    deform_hidden: usize = 64,
     /// Gaussians with human probability below this skip the human branch (see `train::posing`).
-    pub semantic_gate: f32,
+    semantic_gate: f32 = 0.01,
     /// Background colour (linear RGB) composited behind the Gaussians.
-    pub background: [f32; 3],
+    #[arg(value_parser = parse_rgb)]
+    background: [f32; 3] = [0.0; 3],
     /// Near clipping plane of the rasterizer (m): Gaussians closer to the camera are not drawn.
-    pub near_plane: f64,
+    near_plane: f64 = 0.2,
     /// Weight λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
-    pub ssim_weight: f32,
+    ssim_weight: f32 = 0.2,
     /// Weight of the skinning loss (learned weights vs the body's, on surface samples).
-    pub skinning_weight: f32,
+    skinning_weight: f32 = 10.0,
     /// The skinning loss is applied before this step only.
-    pub skinning_until: usize,
+    skinning_until: usize = 500,
     /// Surface samples per step for the skinning loss.
-    pub skinning_samples: usize,
+    skinning_samples: usize = 512,
     /// Adam steps fitting the skinning field to the body's weights before training starts (a freshly
     /// initialised field blends all 24 bones almost uniformly, which would pose every human Gaussian
     /// with the mean bone transform until the skinning loss catches up).
-    pub skinning_warmup_steps: usize,
+    skinning_warmup_steps: usize = 400,
     /// Weight of the AIAP loss on human Gaussians' positions.
-    pub aiap_position_weight: f32,
+    aiap_position_weight: f32 = 1.0,
     /// Weight of the AIAP loss on human Gaussians' covariances.
-    pub aiap_covariance_weight: f32,
+    aiap_covariance_weight: f32 = 100.0,
     /// Position learning rate at step 0 (× scene extent), metres per step.
-    pub lr_means: f32,
+    lr_means: f32 = 1.6e-4,
     /// Final position rate as a fraction of the initial one.
-    pub lr_means_final_fraction: f32,
+    lr_means_final_fraction: f32 = 0.01,
     /// Log-scale learning rate.
-    pub lr_log_scales: f32,
+    lr_log_scales: f32 = 5e-3,
     /// Quaternion learning rate.
-    pub lr_quats: f32,
+    lr_quats: f32 = 1e-3,
     /// Opacity-logit learning rate.
-    pub lr_opacity: f32,
+    lr_opacity: f32 = 5e-2,
     /// Colour-feature learning rate.
-    pub lr_features: f32,
+    lr_features: f32 = 1e-3,
     /// Semantic-logit learning rate.
-    pub lr_semantic: f32,
+    lr_semantic: f32 = 1e-2,
     /// Non-rigid network learning rate.
-    pub lr_nonrigid: f32,
+    lr_nonrigid: f32 = 1e-3,
     /// Skinning-field learning rate.
-    pub lr_skinning: f32,
+    lr_skinning: f32 = 1e-3,
     /// Learning rate of both colour networks.
-    pub lr_colour: f32,
+    lr_colour: f32 = 1e-3,
     /// Per-frame latent learning rate.
-    pub lr_latent: f32,
+    lr_latent: f32 = 1e-3,
     /// The non-rigid network is frozen (its zero-initialised output stays zero) before this step.
-    pub nonrigid_from: usize,
+    nonrigid_from: usize = 300,
     /// First step of density control.
-    pub densify_from: usize,
+    densify_from: usize = 200,
     /// Last step of density control.
-    pub densify_until: usize,
+    densify_until: usize = 900,
     /// Steps between density-control passes.
-    pub densify_every: usize,
+    densify_every: usize = 100,
     /// Mean screen-space (NDC) gradient above which a Gaussian is densified (3DGS: 2e-4).
-    pub densify_grad_threshold: f32,
+    densify_grad_threshold: f32 = 2e-4,
     /// Gaussians with opacity below this are pruned (3DGS-Avatar: 0.05, 3DGS: 0.005).
-    pub prune_min_opacity: f32,
+    prune_min_opacity: f32 = 0.005,
     /// Steps between opacity resets (0: never).
-    pub opacity_reset_every: usize,
+    opacity_reset_every: usize = 0,
     /// Steps between checkpoints (0: only at the end).
-    pub checkpoint_every: usize,
+    checkpoint_every: usize = 500,
     /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
     /// between the two renders is pulled towards that flow (see `train::flow_loss`).
-    pub flow_loss: bool,
+    #[arg(value_parser = parse_on_off)]
+    flow_loss: bool = false,
     /// Which flow supervises: a flow of `scene.json` (`ground-truth`, `events`, `file`) or the
     /// network's own flow between the sharp references (`sharp-network`).
-    pub flow_source: FlowSource,
+    flow_source: FlowSource = FlowSource::Events,
     /// λ_flow, the weight of L_flow in the step's loss (default 0.015, chosen by a sweep on the
     /// default benchmark, `quick` preset, with `sharp-network` targets: 0.005 / 0.015 / 0.03 / 0.05
     /// gave +0.12 / +0.20 / +0.03 / −0.30 dB in the human box against no flow loss;
     /// `docs/BENCHMARKS.md`, event supervision). With `ground-truth` or `events` targets every λ
     /// tried lowers PSNR, which is why `flow_loss` is off by default.
-    pub flow_weight: f32,
+    flow_weight: f32 = 0.015,
     /// τ: pixels whose target flow is at most this long (pixels at the network's resolution) are not
     /// supervised (default 0.25 px; not swept).
-    pub flow_tau: f32,
+    flow_tau: f32 = 0.25,
     /// The renders and the flow are resized by this factor before the network (paper: 0.25).
-    pub flow_scale: f32,
+    flow_scale: f32 = 0.25,
     /// Which parameters the flow loss's gradient reaches: `all` (the paper) or `geometry` (only the
     /// posed means and covariances, and through them positions, shapes and the deformation; not
     /// colours, opacities or semantics). `geometry` is a deviation from the paper, for an ablation.
-    pub flow_gradient: FlowGradient,
+    flow_gradient: FlowGradient = FlowGradient::All,
     /// How the renders' flow is compared with the target: `network` (the paper: the frozen flow
     /// network's prediction between the renders) or `warp` (an ideal flow estimator: render k
     /// against render k+1 warped back by the target flow, `train::flow_loss::pair_warp_loss`; an
     /// ablation outside the paper that measures what the flow constraint can give without any
     /// network's error). λ_flow weighs either; their units differ (pixels of flow vs intensity).
-    pub flow_measure: FlowMeasure,
+    flow_measure: FlowMeasure = FlowMeasure::Network,
     /// SPyNet-style weights (safetensors) of the frozen flow network; `None`: the project's shipped
     /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
-    pub flow_network: Option<std::path::PathBuf>,
+    flow_network: Option<std::path::PathBuf> = None,
     /// The event-generation loss of EventNeRF / E-NeRF (the paper's Table 6 alternative to the flow
     /// loss, see `train::event_loss`), on the same pairs of consecutive training frames, from each
     /// frame's `events` file.
-    pub event_loss: bool,
+    #[arg(value_parser = parse_on_off)]
+    event_loss: bool = false,
     /// Weight of the event-generation loss: 3, the best of a sweep over 0.3 / 1 / 3 / 10 on the
     /// default benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 / 25.27 dB;
     /// `docs/BENCHMARKS.md`, event supervision).
-    pub event_weight: f32,
+    event_weight: f32 = 3.0,
     /// Contrast threshold C of the camera (log-intensity units; the benchmark's simulator: 0.2).
-    pub event_threshold: f32,
+    event_threshold: f32 = 0.2,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
-    pub event_log_eps: f32,
+    event_log_eps: f32 = 1e-3,
 }
 
 /// Which parameters the flow loss's gradient reaches (see [`TrainConfig::flow_gradient`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum FlowGradient {
     /// Every parameter the two renders depend on (the paper).
@@ -187,7 +233,7 @@ pub enum FlowGradient {
 
 /// How the flow loss compares the renders' motion with the target (see
 /// [`TrainConfig::flow_measure`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum FlowMeasure {
     /// The frozen flow network's prediction between the two renders, masked L1 against the target
@@ -199,25 +245,12 @@ pub enum FlowMeasure {
     Warp,
 }
 
-impl std::str::FromStr for FlowMeasure {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "network" => Ok(Self::Network),
-            "warp" => Ok(Self::Warp),
-            _ => Err(format!(
-                "unknown flow measure `{s}` (expected network or warp)"
-            )),
-        }
-    }
-}
-
 /// Source of the flow that supervises the flow loss.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum FlowSource {
     /// The generator's exact flow (`ground_truth` in `scene.json`; the paper's "ideal event flow").
+    #[value(alias = "gt")]
     GroundTruth,
     /// Flow from the events alone by contrast maximisation (`events_cm`).
     Events,
@@ -227,6 +260,7 @@ pub enum FlowSource {
     /// the loss's resolution (`train::flow_loss::network_target`): the paper's ZJU-MoCap-Blur
     /// protocol, which infers the target from the sharp frames with a pretrained network (RAFT
     /// there). Needs sharp references, so synthetic or reference data only; reads no flow file.
+    #[value(alias = "sharp-net")]
     SharpNetwork,
 }
 
@@ -243,20 +277,23 @@ impl FlowSource {
     }
 }
 
-impl std::str::FromStr for FlowSource {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "gt" | "ground-truth" => Ok(Self::GroundTruth),
-            "events" => Ok(Self::Events),
-            "file" => Ok(Self::File),
-            "sharp-net" | "sharp-network" => Ok(Self::SharpNetwork),
-            _ => Err(format!(
-                "unknown flow source `{s}` (expected gt, events, file or sharp-net)"
-            )),
-        }
+/// Parses `on` / `off` (the command line's spelling of a switch).
+pub fn parse_on_off(s: &str) -> Result<bool, String> {
+    match s {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("`{s}`: expected on or off")),
     }
+}
+
+/// Parses a linear RGB colour written `r,g,b`.
+pub fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
+    let values: Vec<f32> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e} (expected r,g,b)"))?;
+    <[f32; 3]>::try_from(values).map_err(|_| format!("`{s}`: expected three values r,g,b"))
 }
 
 impl Default for TrainConfig {
@@ -268,63 +305,7 @@ impl Default for TrainConfig {
 impl TrainConfig {
     /// The defaults of a preset.
     pub fn preset(preset: Preset) -> Self {
-        let quick = Self {
-            steps: 1200,
-            seed: 0,
-            semantic: SemanticMode::OneHot,
-            init: InitMode::SmplCube,
-            semantic_init: SemanticInit::OneHot,
-            human_gaussians: 6_000,
-            scene_gaussians: 20_000,
-            max_gaussians: 45_000,
-            logit_magnitude: 3.0,
-            initial_opacity: 0.1,
-            max_initial_scale: 0.03,
-            feature_dim: 32,
-            latent_dim: 16,
-            deform_hidden: 64,
-            semantic_gate: 0.01,
-            background: [0.0; 3],
-            near_plane: 0.2,
-            ssim_weight: 0.2,
-            skinning_weight: 10.0,
-            skinning_until: 500,
-            skinning_samples: 512,
-            skinning_warmup_steps: 400,
-            aiap_position_weight: 1.0,
-            aiap_covariance_weight: 100.0,
-            lr_means: 1.6e-4,
-            lr_means_final_fraction: 0.01,
-            lr_log_scales: 5e-3,
-            lr_quats: 1e-3,
-            lr_opacity: 5e-2,
-            lr_features: 1e-3,
-            lr_semantic: 1e-2,
-            lr_nonrigid: 1e-3,
-            lr_skinning: 1e-3,
-            lr_colour: 1e-3,
-            lr_latent: 1e-3,
-            nonrigid_from: 300,
-            densify_from: 200,
-            densify_until: 900,
-            densify_every: 100,
-            densify_grad_threshold: 2e-4,
-            prune_min_opacity: 0.005,
-            opacity_reset_every: 0,
-            checkpoint_every: 500,
-            flow_loss: false,
-            flow_source: FlowSource::Events,
-            flow_weight: 0.015,
-            flow_tau: 0.25,
-            flow_scale: 0.25,
-            flow_gradient: FlowGradient::All,
-            flow_measure: FlowMeasure::Network,
-            flow_network: None,
-            event_loss: false,
-            event_weight: 3.0,
-            event_threshold: 0.2,
-            event_log_eps: 1e-3,
-        };
+        let quick = Self::quick();
         match preset {
             Preset::Quick => quick,
             Preset::Full => Self {
@@ -342,6 +323,22 @@ impl TrainConfig {
                 ..quick
             },
         }
+    }
+
+    /// The configuration of a run: the preset's defaults, then the fields of the config file `file`
+    /// (TOML or JSON), then the fields `options` sets; validated.
+    pub fn resolve(
+        preset: Preset,
+        file: Option<&Path>,
+        options: &TrainOptions,
+    ) -> Result<Self, TrainError> {
+        let mut config = Self::preset(preset);
+        if let Some(path) = file {
+            config = Self::load_over(path, &config)?;
+        }
+        config.apply(options);
+        config.validate()?;
+        Ok(config)
     }
 
     /// Reads a TOML (`.toml`) or JSON (anything else) file; fields it omits keep `base`'s values.
@@ -479,6 +476,86 @@ mod tests {
         std::fs::write(&j, "{\"ssim_weight\": 2.0}").unwrap();
         let e = TrainConfig::load_over(&j, &base).unwrap_err().to_string();
         assert!(e.contains("ssim_weight"), "{e}");
+    }
+
+    #[test]
+    fn options_override_the_file_which_overrides_the_preset() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(&p, "steps = 7\nevent_weight = 2.0\n").unwrap();
+        let options = TrainOptions {
+            steps: Some(9),
+            semantic: Some(SemanticMode::Scalar),
+            ..TrainOptions::default()
+        };
+        let c = TrainConfig::resolve(Preset::Full, Some(&p), &options).unwrap();
+        assert_eq!(
+            (c.steps, c.semantic, c.event_weight),
+            (9, SemanticMode::Scalar, 2.0)
+        );
+        assert_eq!(
+            c.scene_gaussians,
+            TrainConfig::preset(Preset::Full).scene_gaussians
+        );
+        let bad = TrainOptions {
+            ssim_weight: Some(3.0),
+            ..TrainOptions::default()
+        };
+        let e = TrainConfig::resolve(Preset::Quick, None, &bad)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("ssim_weight"), "{e}");
+        // A later set of options wins field by field.
+        let merged = options.overridden_by(&TrainOptions {
+            steps: Some(3),
+            event_loss: Some(true),
+            ..TrainOptions::default()
+        });
+        assert_eq!(
+            (merged.steps, merged.semantic, merged.event_loss),
+            (Some(3), Some(SemanticMode::Scalar), Some(true))
+        );
+    }
+
+    #[test]
+    fn every_option_is_a_flag_with_the_fields_name() {
+        use clap::{CommandFactory, FromArgMatches};
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            options: TrainOptions,
+        }
+        let cli = Cli::command();
+        let config = serde_json::to_value(TrainConfig::default()).unwrap();
+        for field in config.as_object().unwrap().keys() {
+            let flag = field.replace('_', "-");
+            assert!(
+                cli.get_arguments()
+                    .any(|a| a.get_long() == Some(flag.as_str())),
+                "no --{flag}"
+            );
+        }
+        let m = Cli::command()
+            .try_get_matches_from([
+                "x",
+                "--event-loss",
+                "on",
+                "--flow-source",
+                "gt",
+                "--init",
+                "smpl+cube",
+                "--background",
+                "0.1,0.2,0.3",
+            ])
+            .unwrap();
+        let o = Cli::from_arg_matches(&m).unwrap().options;
+        assert_eq!(o.event_loss, Some(true));
+        assert_eq!(o.flow_source, Some(FlowSource::GroundTruth));
+        assert_eq!(o.init, Some(InitMode::SmplCube));
+        assert_eq!(o.background, Some([0.1, 0.2, 0.3]));
+        assert!(Cli::command()
+            .try_get_matches_from(["x", "--event-loss", "yes"])
+            .is_err());
     }
 
     #[test]

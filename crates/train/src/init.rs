@@ -23,11 +23,14 @@ use rand::{Rng, SeedableRng};
 use rasterize_cpu::Camera;
 
 /// Where the initial Gaussians come from (`--init`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum InitMode {
     /// Body surface samples plus a scene cube (the paper).
     #[serde(rename = "smpl+cube")]
+    #[value(name = "smpl+cube")]
     SmplCube,
     /// Uniform in the scene cube, unlabelled.
     Random,
@@ -36,7 +39,9 @@ pub enum InitMode {
 }
 
 /// Initial semantic logits (`--semantic-init`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum SemanticInit {
     /// ±λ_logit for the labelled class.

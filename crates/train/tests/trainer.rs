@@ -290,7 +290,7 @@ fn sharp_network_targets_make_the_sharp_frames_a_zero_of_the_flow_loss() {
     use train::config::FlowSource;
     use train::flow_loss::pair_flow_loss;
     assert_eq!(
-        "sharp-net".parse::<FlowSource>(),
+        <FlowSource as clap::ValueEnum>::from_str("sharp-net", false),
         Ok(FlowSource::SharpNetwork)
     );
     let data = load_dataset(&fixture()).unwrap();
