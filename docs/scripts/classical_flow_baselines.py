@@ -20,8 +20,8 @@ A diagnostic, not part of the build or the tests; OpenCV is not a project depend
 
 Images go to the estimators as 8-bit luma (float luma for TV-L1). "x4" runs an estimator on the
 pair upsampled 4x (bicubic) and area-averages its flow back, which helps estimators built for
-larger images. Figures and the versions used: docs/BENCHMARKS.md, flow, "Classical estimators on
-the same pairs".
+larger images. Figures and the versions used: docs/notes/benchmarks-history.md, flow, "Classical
+estimators on the same pairs".
 """
 
 import glob
