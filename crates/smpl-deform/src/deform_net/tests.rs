@@ -8,21 +8,15 @@ use super::*;
 use crate::lbs::{lbs_gaussians, lbs_gaussians_backward};
 use crate::math::Affine;
 use crate::skeleton::{NUM_JOINTS, NUM_POSE_FEATURES};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 const N: usize = 1500;
 
-fn lcg(seed: u64, n: usize) -> Vec<f64> {
-    let mut s = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        })
-        .collect()
+/// `n` values uniform in [−1, 1), seeded.
+fn uniform(seed: u64, n: usize) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n).map(|_| rng.gen_range(-1.0..1.0)).collect()
 }
 
 struct Case {
@@ -39,17 +33,17 @@ struct Case {
 fn case() -> Case {
     let verts = [[-0.8f32, -1.0, -0.2], [0.8, 0.8, 0.3]];
     let mut nonrigid = NonRigidNet::<f64>::new(&verts, 16, 3).expect("net");
-    let noise = lcg(9, nonrigid.mlp.params.len());
+    let noise = uniform(9, nonrigid.mlp.params.len());
     for (p, r) in nonrigid.mlp.params.iter_mut().zip(&noise) {
         if *p == 0.0 {
             *p = 0.1 * r;
         }
     }
     let field = SkinningField::<f64>::new(&verts, 16, 4).expect("field");
-    let v = lcg(5, N * 10);
+    let v = uniform(5, N * 10);
     let bones = (0..NUM_JOINTS)
         .map(|b| {
-            let r = lcg(100 + b as u64, 12);
+            let r = uniform(100 + b as u64, 12);
             let mut a = [0.0; 12];
             for k in 0..12 {
                 a[k] = if k % 5 == 0 { 1.0 } else { 0.0 } + 0.2 * r[k];
@@ -67,9 +61,12 @@ fn case() -> Case {
         q: (0..N)
             .map(|i| [1.0, v[10 * i + 7], v[10 * i + 8], v[10 * i + 9]])
             .collect(),
-        code: lcg(7, NUM_POSE_FEATURES).iter().map(|x| 0.3 * x).collect(),
+        code: uniform(7, NUM_POSE_FEATURES)
+            .iter()
+            .map(|x| 0.3 * x)
+            .collect(),
         bones,
-        cot: lcg(11, N * (15 + NR_FEATURE_DIM)),
+        cot: uniform(11, N * (15 + NR_FEATURE_DIM)),
     }
 }
 
@@ -245,7 +242,7 @@ fn run_f32(threads: usize) -> (Vec<u32>, Vec<u32>, Vec<u32>) {
             }
         }
         let field = SkinningField::<f32>::new(&verts, 32, 2).expect("field");
-        let v = lcg(3, 5000 * 3);
+        let v = uniform(3, 5000 * 3);
         let x: Vec<[f32; 3]> = v
             .chunks(3)
             .map(|c| [c[0] as f32, c[1] as f32, 0.2 * c[2] as f32])
@@ -322,7 +319,7 @@ fn reused_weights_backward_equals_two_separate_backwards() {
         rows::<9>(&c.cot, 6),
     );
     let d_f = vec![0.3; N * NR_FEATURE_DIM];
-    let d_w: Vec<f64> = lcg(77, N * NUM_JOINTS);
+    let d_w: Vec<f64> = uniform(77, N * NUM_JOINTS);
     let (mut a_nr, mut a_sf) = (
         vec![0.0; c.nonrigid.mlp.params.len()],
         vec![0.0; c.field.mlp.params.len()],
