@@ -9,7 +9,7 @@ use nn::{gemm, Real};
 use rayon::prelude::*;
 
 use super::nonrigid::{NonRigidNet, NrChunk, NR_FEATURE_DIM, NR_OUT_DIM};
-use super::skinning::{SkinChunk, SkinningField};
+use super::skinning::{SkinChunk, SkinningCache, SkinningField};
 use super::{check_len, grow, rows_per_chunk, ChunkBuffers};
 use crate::batch_mlp;
 use crate::math::{
@@ -63,7 +63,6 @@ struct DeformChunk<T> {
     rows: Range<usize>,
     nr: NrChunk<T>,
     nr_out: Vec<T>,
-    skin: SkinChunk<T>,
     x_nr: Vec<[T; 3]>,
     q_nr: Vec<[T; 4]>,
     /// Blended transforms `Σ_b w_b T_b`, `(rows, 12)`.
@@ -78,30 +77,36 @@ pub struct DeformCache<T: Real> {
     pose_code: Vec<T>,
     quats: Vec<[T; 4]>,
     chunks: Vec<DeformChunk<T>>,
+    /// The skinning field's pass at the moved positions, chunk for chunk with `chunks`.
+    skinning: SkinningCache<T>,
+    /// Whether those chunks are the ones [`SkinningField::forward`] cuts for the same points.
+    skinning_chunks_are_standalone: bool,
 }
 
 impl<T: Real> DeformCache<T> {
-    /// Whether every non-rigid position offset Δx was exactly zero (e.g. before the non-rigid
-    /// network is switched on, its last layer being zero): then the skinning weights of the forward
-    /// pass ([`DeformCache::skinning_weights`]) are the field at the canonical positions themselves,
-    /// and a consumer of those can reuse them, passing its `∂L/∂w` to
-    /// [`deform_gaussians_backward_with_weights`] instead of running the field again.
-    pub fn nonrigid_offsets_are_zero(&self) -> bool {
-        self.chunks.iter().all(|c| {
-            c.nr_out
-                .chunks_exact(NR_OUT_DIM)
-                .all(|o| o[..3].iter().all(|&d| d == T::zero()))
-        })
+    /// The skinning field's pass of this deformation, at the non-rigidly moved positions `x + Δx`:
+    /// its weights `(N, 24)` are [`SkinningCache::weights`], and [`SkinningField::backward`] takes it.
+    pub fn skinning(&self) -> &SkinningCache<T> {
+        &self.skinning
     }
 
-    /// The skinning weights `(N, 24)` the forward pass used (the field at the non-rigidly moved
-    /// positions), a copy.
-    pub fn skinning_weights(&self) -> Vec<T> {
-        let mut w = Vec::with_capacity(self.n * NUM_JOINTS);
-        for c in &self.chunks {
-            w.extend_from_slice(&c.skin.weights);
-        }
-        w
+    /// [`DeformCache::skinning`] if it is bit for bit what [`SkinningField::forward`] of the same
+    /// field returns at `points`, else `None`. That holds when every moved position `x + Δx` equals
+    /// its `points` row bit for bit (the non-rigid offsets are zero, as before the non-rigid network
+    /// is switched on, and `points` are the canonical positions) and the pass was cut into the same
+    /// chunks (it is unless the non-rigid network's hidden layers are wider than every layer of the
+    /// field). A consumer that needs the field at `points` can then reuse this pass, forward and
+    /// backward, instead of evaluating the field a second time, with identical results.
+    pub fn skinning_at(&self, points: &[[T; 3]]) -> Option<&SkinningCache<T>> {
+        let same_bits = |a: T, b: T| a == b && a.is_sign_negative() == b.is_sign_negative();
+        let moved_are_points = points.len() == self.n
+            && self.chunks.iter().all(|c| {
+                c.x_nr
+                    .iter()
+                    .zip(&points[c.rows.clone()])
+                    .all(|(x, p)| (0..3).all(|a| same_bits(x[a], p[a])))
+            });
+        (self.skinning_chunks_are_standalone && moved_are_points).then_some(&self.skinning)
     }
 }
 
@@ -140,7 +145,7 @@ pub fn deform_gaussians<T: Real>(
     let mut mats = vec![[T::zero(); 9]; n];
     let mut features = vec![T::zero(); n * NR_FEATURE_DIM];
     let ranges = batch_mlp::chunks(n, rows);
-    let chunks: Vec<DeformChunk<T>> = positions
+    let (chunks, skin_chunks): (Vec<DeformChunk<T>>, Vec<SkinChunk<T>>) = positions
         .par_chunks_mut(rows)
         .zip(log_scales.par_chunks_mut(rows))
         .zip(mats.par_chunks_mut(rows))
@@ -182,17 +187,17 @@ pub fn deform_gaussians<T: Real>(
                 pos[k] = affine_apply(t, x_nr[k]);
                 ms[k] = mat3_mul(&affine_rot(t), &quat_to_mat3(q_nr[k]));
             }
-            DeformChunk {
+            let chunk = DeformChunk {
                 rows: range.clone(),
                 nr,
                 nr_out,
-                skin,
                 x_nr,
                 q_nr,
                 blended,
-            }
+            };
+            (chunk, skin)
         })
-        .collect();
+        .unzip();
     Ok((
         PosedGaussians {
             positions,
@@ -206,6 +211,8 @@ pub fn deform_gaussians<T: Real>(
             pose_code: pose_code.to_vec(),
             quats: g.quats.to_vec(),
             chunks,
+            skinning: SkinningCache::from_chunks(n, skin_chunks),
+            skinning_chunks_are_standalone: rows == rows_per_chunk(&field.mlp, &field.mlp),
         },
     ))
 }
@@ -250,73 +257,6 @@ pub fn deform_gaussians_backward<T: Real>(
     d_nonrigid: &mut [T],
     d_field: &mut [T],
 ) -> Result<DeformGrad<T>, nn::NnError> {
-    deform_backward_impl(
-        nonrigid,
-        field,
-        bones,
-        cache,
-        d_positions,
-        d_log_scales,
-        d_mats,
-        d_features,
-        None,
-        d_nonrigid,
-        d_field,
-    )
-}
-
-/// [`deform_gaussians_backward`] with an extra cotangent `d_weights` `(N, 24)` on the skinning
-/// weights of the forward pass ([`DeformCache::skinning_weights`]), for a consumer that reuses those
-/// weights instead of evaluating the field again (see [`DeformCache::nonrigid_offsets_are_zero`]).
-/// Equal to [`deform_gaussians_backward`] plus a [`SkinningField::backward`] of `d_weights` at the
-/// non-rigidly moved positions `x + Δx`, at the cost of one field backward instead of two. When
-/// Δx ≡ 0 because the non-rigid net's last layer is zero, the position, field and bone gradients
-/// equal those of a consumer evaluating the field at the canonical positions; the non-rigid
-/// gradient additionally holds the effect of Δx on the reused weights (last layer, Δx rows only).
-#[allow(clippy::too_many_arguments)]
-pub fn deform_gaussians_backward_with_weights<T: Real>(
-    nonrigid: &NonRigidNet<T>,
-    field: &SkinningField<T>,
-    bones: &[Affine<T>],
-    cache: &DeformCache<T>,
-    d_positions: &[[T; 3]],
-    d_log_scales: &[[T; 3]],
-    d_mats: &[Mat3<T>],
-    d_features: &[T],
-    d_weights: &[T],
-    d_nonrigid: &mut [T],
-    d_field: &mut [T],
-) -> Result<DeformGrad<T>, nn::NnError> {
-    check_len("deform d_weights", cache.n * NUM_JOINTS, d_weights.len())?;
-    deform_backward_impl(
-        nonrigid,
-        field,
-        bones,
-        cache,
-        d_positions,
-        d_log_scales,
-        d_mats,
-        d_features,
-        Some(d_weights),
-        d_nonrigid,
-        d_field,
-    )
-}
-
-#[allow(clippy::too_many_arguments)]
-fn deform_backward_impl<T: Real>(
-    nonrigid: &NonRigidNet<T>,
-    field: &SkinningField<T>,
-    bones: &[Affine<T>],
-    cache: &DeformCache<T>,
-    d_positions: &[[T; 3]],
-    d_log_scales: &[[T; 3]],
-    d_mats: &[Mat3<T>],
-    d_features: &[T],
-    d_weights_extra: Option<&[T]>,
-    d_nonrigid: &mut [T],
-    d_field: &mut [T],
-) -> Result<DeformGrad<T>, nn::NnError> {
     let n = cache.n;
     nonrigid.check(&cache.pose_code)?;
     field.check()?;
@@ -344,7 +284,10 @@ fn deform_backward_impl<T: Real>(
             d_x: vec![[T::zero(); 3]; last - first],
             d_q: vec![[T::zero(); 4]; last - first],
         };
-        for c in &cache.chunks[group] {
+        for (c, skin) in cache.chunks[group.clone()]
+            .iter()
+            .zip(&cache.skinning.chunks[group])
+        {
             let r = c.rows.len();
             let off = c.rows.start - first;
             let d_x = &mut out.d_x[off..off + r];
@@ -389,18 +332,12 @@ fn deform_backward_impl<T: Real>(
                 T::zero(),
                 d_w,
             );
-            if let Some(extra) = d_weights_extra {
-                let e = &extra[c.rows.start * NUM_JOINTS..c.rows.end * NUM_JOINTS];
-                for (d, &x) in d_w.iter_mut().zip(e) {
-                    *d = *d + x;
-                }
-            }
             gemm(
                 NUM_JOINTS,
                 r,
                 12,
                 T::one(),
-                &c.skin.weights,
+                &skin.weights,
                 true,
                 d_t,
                 false,
@@ -413,7 +350,7 @@ fn deform_backward_impl<T: Real>(
             let mut d_nr_out = std::mem::take(&mut buf.d_nr_out);
             grow(&mut d_x_field, r);
             field.chunk_backward(
-                &c.skin,
+                skin,
                 &d_w_owned[..r * NUM_JOINTS],
                 &mut out.d_field,
                 &mut d_x_field[..r],

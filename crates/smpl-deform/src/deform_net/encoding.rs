@@ -61,13 +61,6 @@ pub fn encode<T: Real>(xn: [T; 3], out: &mut [T]) {
     }
 }
 
-/// Backward of [`encode`]: `∂L/∂xn` from `∂L/∂encoding`.
-pub fn encode_backward<T: Real>(xn: [T; 3], d_enc: &[T]) -> [T; 3] {
-    let mut enc = [T::zero(); ENC_DIM];
-    encode(xn, &mut enc);
-    encode_backward_from(&enc, d_enc)
-}
-
 /// Backward of [`encode`] from its output `enc` (the sines and cosines it holds are the derivatives'
 /// ingredients, so no trigonometry is evaluated): `∂L/∂xn` from `∂L/∂encoding`.
 pub fn encode_backward_from<T: Real>(enc: &[T], d_enc: &[T]) -> [T; 3] {

@@ -2,14 +2,11 @@
 //! Δlog-scale, Δrotation, feature), its chunk passes with the pose code folded into the first
 //! layer's bias, and the pose code itself.
 
-use std::ops::Range;
-
 use nn::mlp::{Activation, Mlp};
 use nn::Real;
-use rayon::prelude::*;
 
 use super::encoding::{encode_rows, encode_rows_backward, Normalizer, ENC_DIM};
-use super::{check_len, check_mlp, grow, rows_per_chunk, ChunkBuffers, LEAKY_SLOPE};
+use super::{check_len, check_mlp, grow, ChunkBuffers, LEAKY_SLOPE};
 use crate::batch_mlp;
 use crate::math::Mat3;
 use crate::skeleton::NUM_POSE_FEATURES;
@@ -33,17 +30,6 @@ pub struct NonRigidNet<T: Real> {
 pub(super) struct NrChunk<T> {
     enc: Vec<T>,
     pre: Vec<T>,
-}
-
-/// What [`NonRigidNet::backward`] needs from the forward pass.
-#[derive(Clone, Debug)]
-pub struct NonRigidCache<T: Real> {
-    n: usize,
-    rows: Vec<Range<usize>>,
-    chunks: Vec<NrChunk<T>>,
-    /// The network with the pose code folded into the first layer's bias.
-    folded: Mlp<T>,
-    pose_code: Vec<T>,
 }
 
 impl<T: Real> NonRigidNet<T> {
@@ -127,39 +113,10 @@ impl<T: Real> NonRigidNet<T> {
         encode_rows_backward(&self.norm, &c.enc, d_enc, d_points);
     }
 
-    /// Outputs `(N, 25)`: Δx (metres), Δlog-scale, Δrotation (quaternion vector part, w = 1), feature.
-    /// `pose_code` is the 207-value pose feature of the frame.
-    pub fn forward(
-        &self,
-        points: &[[T; 3]],
-        pose_code: &[T],
-    ) -> Result<(Vec<T>, NonRigidCache<T>), nn::NnError> {
-        self.check(pose_code)?;
-        // The pose code is the same for every point, so its share of the first layer is a bias:
-        // fold it once per call (W_pose · code) and run a network whose input is the 27-value
-        // position encoding only (8.7× fewer first-layer multiply-adds).
-        let folded = self.fold(pose_code);
-        let wt = batch_mlp::transposed_weights(&folded);
-        let rows = batch_mlp::chunks(points.len(), rows_per_chunk(&folded, &folded));
-        let mut out = vec![T::zero(); points.len() * NR_OUT_DIM];
-        let per = rows.first().map_or(1, |r| r.len().max(1));
-        let chunks: Vec<NrChunk<T>> = out
-            .par_chunks_mut(per * NR_OUT_DIM)
-            .zip(rows.par_iter())
-            .map(|(o, range)| self.chunk_forward(&folded, &wt, &points[range.clone()], o))
-            .collect();
-        Ok((
-            out,
-            NonRigidCache {
-                n: points.len(),
-                rows,
-                chunks,
-                folded,
-                pose_code: pose_code.to_vec(),
-            },
-        ))
-    }
-
+    /// The network with the pose code folded into the first layer's bias: the code is the same for
+    /// every point, so its share of the first layer (`W_pose · code`) is a bias, computed once per
+    /// frame; the folded network's input is the 27-value position encoding only (8.7× fewer
+    /// first-layer multiply-adds).
     pub(super) fn fold(&self, pose_code: &[T]) -> Mlp<T> {
         let full_in = ENC_DIM + NUM_POSE_FEATURES;
         let h = self.mlp.sizes[1];
@@ -208,46 +165,6 @@ impl<T: Real> NonRigidNet<T> {
         for (dst, src) in d_params[full0..].iter_mut().zip(&d_folded[fold0..]) {
             *dst = *dst + *src;
         }
-    }
-
-    /// Backward: accumulates `∂L/∂params` and returns `∂L/∂points` (the pose code is a constant).
-    pub fn backward(
-        &self,
-        cache: &NonRigidCache<T>,
-        d_out: &[T],
-        d_params: &mut [T],
-    ) -> Result<Vec<[T; 3]>, nn::NnError> {
-        self.check(&cache.pose_code)?;
-        check_len("non-rigid d_out", cache.n * NR_OUT_DIM, d_out.len())?;
-        check_len("non-rigid d_params", self.mlp.params.len(), d_params.len())?;
-        let nf = cache.folded.params.len();
-        let parts = batch_mlp::map_groups(cache.chunks.len(), |group| {
-            let mut buf = ChunkBuffers::default();
-            let mut dp = vec![T::zero(); nf];
-            let first = cache.rows[group.start].start;
-            let last = cache.rows[group.end - 1].end;
-            let mut d_points = vec![[T::zero(); 3]; last - first];
-            for ci in group {
-                let range = cache.rows[ci].clone();
-                self.chunk_backward(
-                    &cache.folded,
-                    &cache.chunks[ci],
-                    &d_out[range.start * NR_OUT_DIM..range.end * NR_OUT_DIM],
-                    &mut dp,
-                    &mut d_points[range.start - first..range.end - first],
-                    &mut buf,
-                );
-            }
-            (dp, d_points)
-        });
-        let mut d_folded = vec![T::zero(); nf];
-        let mut out = Vec::with_capacity(cache.n);
-        for (dp, d_points) in &parts {
-            out.extend_from_slice(d_points);
-            batch_mlp::sum_into(&mut d_folded, [dp]);
-        }
-        self.unfold_grad(&cache.pose_code, &d_folded, d_params);
-        Ok(out)
     }
 }
 

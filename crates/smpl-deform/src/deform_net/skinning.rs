@@ -35,18 +35,13 @@ pub(super) struct SkinChunk<T> {
 #[derive(Clone, Debug)]
 pub struct SkinningCache<T> {
     n: usize,
-    chunks: Vec<SkinChunk<T>>,
+    pub(super) chunks: Vec<SkinChunk<T>>,
 }
 
 impl<T: Real> SkinningCache<T> {
-    /// Number of points of the forward pass.
-    pub fn len(&self) -> usize {
-        self.n
-    }
-
-    /// Whether the forward pass had no points.
-    pub fn is_empty(&self) -> bool {
-        self.n == 0
+    /// The cache of an `n`-point pass made of `chunks` (in row order).
+    pub(super) fn from_chunks(n: usize, chunks: Vec<SkinChunk<T>>) -> Self {
+        Self { n, chunks }
     }
 
     /// The softmax weights `(N, 24)` of the forward pass (a copy).

@@ -13,6 +13,13 @@ use rand_chacha::ChaCha8Rng;
 
 const N: usize = 1500;
 
+/// `∂L/∂xn` of [`encode`] at `xn` from `∂L/∂encoding`.
+fn encode_backward(xn: [f64; 3], d_enc: &[f64]) -> [f64; 3] {
+    let mut enc = [0.0; ENC_DIM];
+    encode(xn, &mut enc);
+    encode_backward_from(&enc, d_enc)
+}
+
 /// `n` values uniform in [−1, 1), seeded.
 fn uniform(seed: u64, n: usize) -> Vec<f64> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -212,7 +219,7 @@ fn chunked_passes_match_the_unfused_oracle() {
     // The standalone field passes agree with the fused ones.
     let (w2, sc) = c.field.forward(&x_nr).expect("field fwd");
     close("field weights", &w2, &w);
-    close("cached weights", &cache.skinning_weights(), &w);
+    close("cached weights", &cache.skinning().weights(), &w);
     let mut d_sf2 = vec![0.0; d_sf.len()];
     let d_x2 = c
         .field
@@ -294,10 +301,9 @@ fn results_are_bit_identical_for_any_thread_count() {
 }
 
 #[test]
-fn reused_weights_backward_equals_two_separate_backwards() {
-    // Identity non-rigid net (zero last layer): the deformation's weights are the field at the
-    // canonical positions, and one backward with the extra weight cotangent equals the plain
-    // backward plus a separate field backward.
+fn skinning_pass_is_reused_bit_for_bit_only_where_nothing_moved() {
+    // Identity non-rigid net (zero last layer): the deformation's skinning pass is, bit for bit,
+    // the field's own pass at the canonical positions, forward and backward.
     let mut c = case();
     let last = NR_OUT_DIM * (c.nonrigid.mlp.sizes[3] + 1);
     let np = c.nonrigid.mlp.params.len();
@@ -310,81 +316,40 @@ fn reused_weights_backward_equals_two_separate_backwards() {
         quats: &c.q,
     };
     let (_, cache) = deform_gaussians(&c.nonrigid, &c.field, &g, &c.code, &c.bones).expect("fwd");
-    assert!(cache.nonrigid_offsets_are_zero());
-    let (w, sc) = c.field.forward(&c.x).expect("field");
-    close("weights at canonical", &cache.skinning_weights(), &w);
-    let (d_pos, d_s, d_m) = (
-        rows::<3>(&c.cot, 0),
-        rows::<3>(&c.cot, 3),
-        rows::<9>(&c.cot, 6),
-    );
-    let d_f = vec![0.3; N * NR_FEATURE_DIM];
-    let d_w: Vec<f64> = uniform(77, N * NUM_JOINTS);
-    let (mut a_nr, mut a_sf) = (
-        vec![0.0; c.nonrigid.mlp.params.len()],
-        vec![0.0; c.field.mlp.params.len()],
-    );
-    let a = deform_gaussians_backward_with_weights(
-        &c.nonrigid,
-        &c.field,
-        &c.bones,
-        &cache,
-        &d_pos,
-        &d_s,
-        &d_m,
-        &d_f,
-        &d_w,
-        &mut a_nr,
-        &mut a_sf,
-    )
-    .expect("bwd with weights");
-    let (mut b_nr, mut b_sf) = (
-        a_nr.iter().map(|_| 0.0).collect::<Vec<f64>>(),
-        a_sf.iter().map(|_| 0.0).collect::<Vec<f64>>(),
-    );
-    let b = deform_gaussians_backward(
-        &c.nonrigid,
-        &c.field,
-        &c.bones,
-        &cache,
-        &d_pos,
-        &d_s,
-        &d_m,
-        &d_f,
-        &mut b_nr,
-        &mut b_sf,
-    )
-    .expect("bwd");
-    let extra = c.field.backward(&sc, &d_w, &mut b_sf).expect("field bwd");
-    let b_pos: Vec<f64> = b
-        .positions
-        .iter()
-        .zip(&extra)
-        .flat_map(|(p, e)| [0, 1, 2].map(|k| p[k] + e[k]))
-        .collect();
-    close("d positions", &a.positions.concat(), &b_pos);
-    close("d field", &a_sf, &b_sf);
-    close("d bones", &a.bones.concat(), &b.bones.concat());
-    // The non-rigid gradient differs only where Δx enters the reused weights: the last layer's
-    // Δx rows (outputs 0..3, weights and biases); every earlier layer sees a zero last layer.
-    let h = c.nonrigid.mlp.sizes[3];
-    let off = np - last;
-    let dx_rows = |k: usize| {
-        let k = k - off;
-        (k < NR_OUT_DIM * h && k / h < 3) || (k >= NR_OUT_DIM * h && k - NR_OUT_DIM * h < 3)
+    let reused = cache
+        .skinning_at(&c.x)
+        .expect("Δx ≡ 0: the pass is at the canonical positions");
+    let (w, own) = c.field.forward(&c.x).expect("field");
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+    assert_eq!(bits(&reused.weights()), bits(&w));
+    let d_w = uniform(77, N * NUM_JOINTS);
+    let backward = |sc: &SkinningCache<f64>| {
+        let mut d_params = vec![0.0; c.field.mlp.params.len()];
+        let d_points = c
+            .field
+            .backward(sc, &d_w, &mut d_params)
+            .expect("field bwd");
+        (bits(&d_params), bits(&d_points.concat()))
     };
-    let same: Vec<usize> = (0..np).filter(|&k| k < off || !dx_rows(k)).collect();
-    close(
-        "d nonrigid outside the Δx rows",
-        &same.iter().map(|&k| a_nr[k]).collect::<Vec<_>>(),
-        &same.iter().map(|&k| b_nr[k]).collect::<Vec<_>>(),
+    assert_eq!(backward(reused), backward(&own));
+
+    // Points one ulp away, or fewer of them, are not where the pass ran.
+    let mut nudged = c.x.clone();
+    nudged[N / 2][1] = f64::from_bits(nudged[N / 2][1].to_bits() + 1);
+    assert!(cache.skinning_at(&nudged).is_none());
+    assert!(cache.skinning_at(&c.x[1..]).is_none());
+    // A non-rigid net that moves the points.
+    let moving = case();
+    let (_, cache) =
+        deform_gaussians(&moving.nonrigid, &c.field, &g, &c.code, &c.bones).expect("fwd");
+    assert!(cache.skinning_at(&c.x).is_none());
+    // An identity net wider than the field: the deformation cuts other chunks than the field alone.
+    let verts = [[-0.8f32, -1.0, -0.2], [0.8, 0.8, 0.3]];
+    let wide = NonRigidNet::<f64>::new(&verts, 64, 3).expect("net");
+    assert_ne!(
+        rows_per_chunk(&wide.fold(&c.code), &c.field.mlp),
+        rows_per_chunk(&c.field.mlp, &c.field.mlp)
     );
-    assert!((off..np)
-        .filter(|&k| dx_rows(k))
-        .any(|k| a_nr[k] != b_nr[k]));
-    // A non-identity net moves the points: the weights are no longer the canonical ones.
-    let c2 = case();
-    let (_, cache2) =
-        deform_gaussians(&c2.nonrigid, &c2.field, &g, &c2.code, &c2.bones).expect("fwd");
-    assert!(!cache2.nonrigid_offsets_are_zero());
+    let (_, cache) = deform_gaussians(&wide, &c.field, &g, &c.code, &c.bones).expect("fwd");
+    assert!(cache.skinning_at(&c.x).is_none());
 }
