@@ -238,9 +238,7 @@ impl BodyModel {
     ///
     /// It has no shape or pose blend shapes: betas are accepted and ignored.
     pub fn builtin_makehuman() -> Result<Self> {
-        let path = builtin_makehuman_path();
-        let mut r = NpzReader::open(&path)?;
-        Self::read_npz(&mut r, false)
+        Self::load_body_npz(&builtin_makehuman_path())
     }
 
     /// Loads a body `.npz` in the built-in layout (`v_template`, `f`, `weights`, `kintree_table`,

@@ -25,13 +25,6 @@ pub fn mat3_identity<T: Float>() -> Mat3<T> {
     [o, z, z, z, o, z, z, z, o]
 }
 
-/// The identity transform.
-#[inline]
-pub fn affine_identity<T: Float>() -> Affine<T> {
-    let (o, z) = (T::one(), T::zero());
-    [o, z, z, z, z, o, z, z, z, z, o, z]
-}
-
 /// `a · b` for 3×3 matrices.
 #[inline]
 pub fn mat3_mul<T: Float>(a: &Mat3<T>, b: &Mat3<T>) -> Mat3<T> {

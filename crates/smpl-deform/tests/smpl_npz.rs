@@ -3,6 +3,8 @@
 
 use std::io::Cursor;
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use smpl_deform::npz::NpzWriter;
 use smpl_deform::{BodyModel, SmplDeformError, SmplParams, NUM_JOINTS, SMPL_PARENTS};
 
@@ -10,18 +12,6 @@ const NV: usize = 6890;
 const NF: usize = 13776;
 const NB: usize = 10;
 const NP: usize = 207;
-
-/// Deterministic pseudo-random numbers in [0, 1).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// Joints whose rotation moves the left forearm: left elbow and its descendants.
 const LEFT_FOREARM: [usize; 3] = [18, 20, 22];
@@ -36,16 +26,18 @@ struct Synthetic {
 }
 
 fn synthetic() -> Synthetic {
-    let mut r = Lcg(42);
-    let v_template: Vec<f64> = (0..NV * 3).map(|_| r.next() - 0.5).collect();
-    let shapedirs: Vec<f64> = (0..NV * 3 * NB).map(|_| 0.01 * (r.next() - 0.5)).collect();
+    let mut r = ChaCha8Rng::seed_from_u64(42);
+    let v_template: Vec<f64> = (0..NV * 3).map(|_| r.gen_range(-0.5..0.5)).collect();
+    let shapedirs: Vec<f64> = (0..NV * 3 * NB)
+        .map(|_| 0.01 * r.gen_range(-0.5..0.5))
+        .collect();
     let mut weights = vec![0.0; NV * NUM_JOINTS];
     let mut posedirs = vec![0.0; NV * 3 * NP];
     for v in 0..NV {
         // Two joints per vertex, convex weights.
-        let a = (r.next() * 24.0) as usize % 24;
-        let b = (r.next() * 24.0) as usize % 24;
-        let t = r.next();
+        let a = r.gen_range(0..NUM_JOINTS);
+        let b = r.gen_range(0..NUM_JOINTS);
+        let t: f64 = r.gen();
         weights[v * NUM_JOINTS + a] += t;
         weights[v * NUM_JOINTS + b] += 1.0 - t;
         let on_forearm = LEFT_FOREARM
@@ -57,7 +49,7 @@ fn synthetic() -> Synthetic {
                 let joint = 1 + p / 9;
                 let local = joint != 18 || on_forearm;
                 if local {
-                    posedirs[(v * 3 + c) * NP + p] = 0.001 * (r.next() - 0.5);
+                    posedirs[(v * 3 + c) * NP + p] = 0.001 * r.gen_range(-0.5..0.5);
                 }
             }
         }

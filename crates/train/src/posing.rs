@@ -20,7 +20,10 @@
 //! direction to the deformed mean rotated back into canonical space by the transpose of the
 //! skinning-blended bone rotation R = Σ_b w_b R_b at the canonical mean (w from the skinning field), as
 //! 3DGS-Avatar canonicalises it. Both are differentiated (into the means, the skinning field and the
-//! bones), so the gradients are those of the function computed.
+//! bones), so the gradients are those of the function computed. While the non-rigid offsets are
+//! exactly zero (before the non-rigid network is switched on) the deformation has already evaluated
+//! the skinning field at the canonical means, and that pass is reused, forward and backward
+//! (`DeformCache::skinning_at`: bit for bit what a second evaluation would give).
 
 use crate::blend::{blend, blend_backward, BlendInputs, Blended, SemanticMode};
 use crate::colour::{ColourInputs, ColourNet};
@@ -98,9 +101,10 @@ pub struct FrameCache<T: Real> {
     human_colour: crate::colour::ColourCache<T>,
     scene_colour: crate::colour::ColourCache<T>,
     inputs: Vec<BlendInputs<T>>,
-    /// Skinning weights at the canonical means (for the canonicalised direction) and their cache.
+    /// Skinning weights at the canonical means (for the canonicalised direction) and their cache;
+    /// `None` when the deformation's own skinning pass is that one (`DeformCache::skinning_at`).
     direction_weights: Vec<T>,
-    direction_skinning: SkinningCache<T>,
+    direction_skinning: Option<SkinningCache<T>>,
     /// World direction x_def − c and the blended rotation R (row-major) per Gaussian.
     human_world_dirs: Vec<[T; 3]>,
     human_rotations: Vec<Mat3<T>>,
@@ -277,7 +281,13 @@ pub fn pose_frame_gated<T: Real>(
         frame.bones,
     )?;
     // Canonicalised view directions for the human colour network: Rᵀ (x_def − c), R = Σ_b w_b R_b.
-    let (direction_weights, direction_skinning) = nets.skinning.forward(&a_means)?;
+    let (direction_weights, direction_skinning) = match deform.skinning_at(&a_means) {
+        Some(reused) => (reused.weights(), None),
+        None => {
+            let (weights, skinning) = nets.skinning.forward(&a_means)?;
+            (weights, Some(skinning))
+        }
+    };
     let c = frame.camera_centre;
     let nb = frame.bones.len();
     let na = active.len();
@@ -467,11 +477,13 @@ pub fn pose_frame_backward<T: Real>(
     }
     let mut d_nonrigid = vec![T::zero(); nets.nonrigid.mlp.num_params()];
     let mut d_skinning = vec![T::zero(); nets.skinning.mlp.num_params()];
-    let d_means_from_weights = nets.skinning.backward(
-        &cache.direction_skinning,
-        &d_direction_weights,
-        &mut d_skinning,
-    )?;
+    let direction_skinning = match &cache.direction_skinning {
+        Some(skinning) => skinning,
+        None => cache.deform.skinning(),
+    };
+    let d_means_from_weights =
+        nets.skinning
+            .backward(direction_skinning, &d_direction_weights, &mut d_skinning)?;
     debug_assert_eq!(human.extra.len(), na * NR_FEATURE_DIM);
     let deform = deform_gaussians_backward(
         &nets.nonrigid,
