@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use npyz::WriterBuilder;
-use rasterize_cpu::{render_sh, render_sh_backward, Camera, Cotangents, RenderSettings, ShSplats};
+use rasterize_cpu::{render_sh, render_sh_backward, Cotangents, RenderSettings, ShSplats};
 
 /// Arguments of `render`.
 #[derive(clap::Args, Debug)]
@@ -46,8 +46,10 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let set = gaussians::ply::read_ply(&args.ply)
         .with_context(|| format!("reading PLY {}", args.ply.display()))?;
-    let cam = Camera::read_any(&args.camera, args.cam_index)
-        .with_context(|| format!("reading camera {}", args.camera.display()))?;
+    let camera_context = || format!("reading camera {}", args.camera.display());
+    let camera =
+        scene::camera_files::read_any(&args.camera, args.cam_index).with_context(camera_context)?;
+    let cam = train::data::camera_of(&camera).with_context(camera_context)?;
     let settings = RenderSettings {
         near_plane: args.near,
         background: args.bg.clone().unwrap_or_default(),

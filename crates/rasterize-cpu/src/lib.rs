@@ -20,7 +20,7 @@ pub mod raster;
 pub mod sh;
 pub mod synthetic;
 
-pub use camera::{Camera, CameraJson, InriaCameraJson, MAX_IMAGE_SIDE};
+pub use camera::{Camera, MAX_IMAGE_SIDE};
 pub use error::RasterError;
 pub use raster::{
     render, render_backward, render_cov, render_cov_backward, Cotangents, CovSplats, Gradients,
