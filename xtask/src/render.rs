@@ -32,7 +32,7 @@ pub struct Args {
     #[arg(long, num_args = 3, value_names = ["R", "G", "B"])]
     pub bg: Option<Vec<f64>>,
     /// Near plane (metres of view depth).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = rasterize_cpu::DEFAULT_NEAR_PLANE)]
     pub near: f64,
     /// float32 .npy of shape (H, W, 3): loss weights W for L = Σ render·W.
     #[arg(long, requires = "grads_out")]

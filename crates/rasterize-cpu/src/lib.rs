@@ -24,7 +24,7 @@ pub use camera::{Camera, MAX_IMAGE_SIDE};
 pub use error::RasterError;
 pub use raster::{
     render, render_backward, render_cov, render_cov_backward, Cotangents, CovSplats, Gradients,
-    RenderOutput, RenderSettings, Splats,
+    RenderOutput, RenderSettings, Splats, DEFAULT_NEAR_PLANE,
 };
 pub use sh::{render_sh, render_sh_backward, ShGradients, ShRender, ShSplats};
 

@@ -154,10 +154,14 @@ impl<'a, T> From<&CovSplats<'a, T>> for Inputs<'a, T> {
     }
 }
 
+/// Default near plane of [`RenderSettings`] (metres of view depth): INRIA 3DGS's 0.2.
+pub const DEFAULT_NEAR_PLANE: f64 = 0.2;
+
 /// Render settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderSettings {
-    /// Near plane: Gaussians with view depth z ≤ near (metres) are culled. INRIA default 0.2.
+    /// Near plane: Gaussians with view depth z ≤ near (metres) are culled. Default
+    /// [`DEFAULT_NEAR_PLANE`] (INRIA's 0.2).
     pub near_plane: f64,
     /// Background value per channel, composited with the final transmittance. Empty = all zeros;
     /// otherwise exactly C values.
@@ -167,7 +171,7 @@ pub struct RenderSettings {
 impl Default for RenderSettings {
     fn default() -> Self {
         Self {
-            near_plane: 0.2,
+            near_plane: DEFAULT_NEAR_PLANE,
             background: Vec::new(),
         }
     }

@@ -39,5 +39,5 @@ pub use backward::{render_backward, render_cov_backward};
 pub use forward::{render, render_cov};
 pub use inputs::{
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats,
-    COVARIANCE_SYMMETRY_TOLERANCE,
+    COVARIANCE_SYMMETRY_TOLERANCE, DEFAULT_NEAR_PLANE,
 };
