@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use npyz::WriterBuilder;
-use rasterize_cpu::{render_sh, render_sh_backward, Camera, Cotangents, RenderSettings, ShSplats};
+use rasterize_cpu::{render_sh, render_sh_backward, Cotangents, RenderSettings, ShSplats};
 
 /// Arguments of `render`.
 #[derive(clap::Args, Debug)]
@@ -32,7 +32,7 @@ pub struct Args {
     #[arg(long, num_args = 3, value_names = ["R", "G", "B"])]
     pub bg: Option<Vec<f64>>,
     /// Near plane (metres of view depth).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = rasterize_cpu::DEFAULT_NEAR_PLANE)]
     pub near: f64,
     /// float32 .npy of shape (H, W, 3): loss weights W for L = Σ render·W.
     #[arg(long, requires = "grads_out")]
@@ -46,8 +46,10 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let set = gaussians::ply::read_ply(&args.ply)
         .with_context(|| format!("reading PLY {}", args.ply.display()))?;
-    let cam = Camera::read_any(&args.camera, args.cam_index)
-        .with_context(|| format!("reading camera {}", args.camera.display()))?;
+    let camera_context = || format!("reading camera {}", args.camera.display());
+    let camera =
+        scene::camera_files::read_any(&args.camera, args.cam_index).with_context(camera_context)?;
+    let cam = train::data::camera_of(&camera).with_context(camera_context)?;
     let settings = RenderSettings {
         near_plane: args.near,
         background: args.bg.clone().unwrap_or_default(),

@@ -1,9 +1,7 @@
-//! The crate's one error type. Every variant names the file, field or value at fault so that a caller
+//! The crate's one error type. Every variant names the field or value at fault so that a caller
 //! can report it without adding context of its own.
 
-use std::path::PathBuf;
-
-/// Errors of camera construction/reading and of render requests.
+/// Errors of camera construction and of render requests.
 #[derive(Debug, thiserror::Error)]
 pub enum RasterError {
     /// Image width or height is zero or larger than [`crate::MAX_IMAGE_SIDE`].
@@ -43,32 +41,6 @@ pub enum RasterError {
     NotAffine {
         /// The last row as given.
         row: [f64; 4],
-    },
-    /// Reading a camera file failed.
-    #[error("reading camera file {path}: {source}")]
-    Io {
-        /// File that could not be read.
-        path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
-    },
-    /// A camera file is not valid JSON of the expected shape.
-    #[error("parsing camera JSON {path}: {source}")]
-    Json {
-        /// File being parsed (`<string>` for in-memory JSON).
-        path: PathBuf,
-        /// Underlying error.
-        source: serde_json::Error,
-    },
-    /// A camera index into an INRIA `cameras.json` list is out of range.
-    #[error("camera index {index} out of range: {path} holds {count} cameras")]
-    CameraIndex {
-        /// File holding the list.
-        path: PathBuf,
-        /// Requested index.
-        index: usize,
-        /// Number of cameras in the file.
-        count: usize,
     },
     /// A per-Gaussian input slice has the wrong length.
     #[error("input {field} has {got} entries, expected {expected}")]

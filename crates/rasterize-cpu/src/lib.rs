@@ -20,11 +20,11 @@ pub mod raster;
 pub mod sh;
 pub mod synthetic;
 
-pub use camera::{Camera, CameraJson, InriaCameraJson, MAX_IMAGE_SIDE};
+pub use camera::{Camera, MAX_IMAGE_SIDE};
 pub use error::RasterError;
 pub use raster::{
     render, render_backward, render_cov, render_cov_backward, Cotangents, CovSplats, Gradients,
-    RenderOutput, RenderSettings, Splats,
+    RenderOutput, RenderSettings, Splats, DEFAULT_NEAR_PLANE,
 };
 pub use sh::{render_sh, render_sh_backward, ShGradients, ShRender, ShSplats};
 

@@ -56,6 +56,25 @@ pub enum SceneError {
         /// What went wrong (decoder message, or the size/format mismatch).
         message: String,
     },
+    /// A camera file (`camera_files`) is not JSON of an accepted camera shape.
+    #[error("parsing camera JSON {path}: {source}")]
+    CameraJson {
+        /// File being parsed (`<string>` or similar for in-memory JSON).
+        path: PathBuf,
+        /// The parser's error (with line and column).
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A camera index into an INRIA `cameras.json` list is out of range.
+    #[error("camera index {index} out of range: {path} holds {count} cameras")]
+    CameraIndex {
+        /// File holding the list.
+        path: PathBuf,
+        /// Requested index.
+        index: usize,
+        /// Number of cameras in the file.
+        count: usize,
+    },
     /// A caller-supplied argument is out of its domain.
     #[error("invalid argument {name}: {message}")]
     Arg {

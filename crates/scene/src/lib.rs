@@ -10,9 +10,12 @@
 //! existence, size and pixel format) and reports *every* problem with its JSON path or file path,
 //! never stopping at the first one; [`Scene::write`] writes `scene.json` after the same checks.
 //! [`image_io`] owns the on-disk pixel encoding so writer and reader can never disagree.
+//! [`camera_files`] reads a lone camera (the project's camera JSON, a `scene.json`'s camera, INRIA
+//! 3DGS `cameras.json`) into the same [`Camera`].
 //!
 //! This crate is generic: it knows nothing of the method, of training or of how a scene was made.
 
+pub mod camera_files;
 pub mod error;
 pub mod image_io;
 pub mod types;

@@ -2,11 +2,11 @@
 //! row is one pass whatever its width (the portable kernels loop over 1–4 groups of four), and 32
 //! vector registers hold the backward's per-pair accumulators without spilling.
 //!
-//! Same bits as [`super::forward_tile`] and [`super::backward_tile`]: every lane runs the same
-//! IEEE operations in the same order (no fused multiply-adds; [`exp`] repeats
+//! Same bits as [`super::kernels::forward_tile`] and [`super::kernels::backward_tile`]: every lane
+//! runs the same IEEE operations in the same order (no fused multiply-adds; [`exp`] repeats
 //! [`crate::fast_exp_f32`]), the backward's per-column accumulators are reduced in column order,
 //! and lanes outside a pair's box add exact zeros to sums that are never −0 (they start at +0, and
-//! a sum that cancels to zero is +0). Unit tests compare the kernels bit for bit.
+//! a sum that cancels to zero is +0). The unit test below compares the kernels bit for bit.
 //!
 //! Selected at run time (`is_x86_feature_detected!("avx512f")`), so the build needs no target flags.
 
@@ -14,11 +14,9 @@
 
 use std::arch::x86_64::*;
 
-use super::{
-    splat_lanes, BackwardScratch, Cotangents, PairSplat, BUF_C, BUF_D, BUF_T, TILE_PIXELS,
-    TILE_SIZE,
-};
-use crate::lit;
+use super::kernels::{centres, splat_lanes, BackwardScratch, PairSplat, BUF_C, BUF_D, BUF_T};
+use super::Cotangents;
+use crate::{lit, TILE_PIXELS, TILE_SIZE};
 
 /// Whether this CPU runs the kernels of this module.
 pub(super) fn available() -> bool {
@@ -98,13 +96,13 @@ fn select(m: __mmask16, a: __m512, b: __m512) -> __m512 {
     _mm512_mask_blend_ps(m, b, a)
 }
 
-/// Sum of the lanes in lane order, starting from zero ([`super::column_sum`]'s order).
+/// Sum of the lanes in lane order, starting from zero ([`super::kernels::column_sum`]'s order).
 #[target_feature(enable = "avx512f")]
 #[inline]
 fn column_sum(v: __m512) -> f32 {
     let mut a = [0.0f32; 16];
     store(v, &mut a);
-    super::column_sum(&a)
+    super::kernels::column_sum(&a)
 }
 
 /// [`crate::fast_exp_f32`] lane by lane, operation for operation.
@@ -131,7 +129,7 @@ fn exp(x: __m512) -> __m512 {
     mul(p, _mm512_castsi512_ps(_mm512_slli_epi32::<23>(bits)))
 }
 
-/// [`super::backward_tile`] for f32, one register per row. Same arguments and output.
+/// [`super::kernels::backward_tile`] for f32, one register per row. Same arguments and output.
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f")]
 fn backward_tile(
@@ -155,7 +153,7 @@ fn backward_tile(
     let c_final = &buf[BUF_C..];
     let ox: f32 = lit(origin[0] as f64);
     let oy: f32 = lit(origin[1] as f64);
-    let centre = super::centres::<f32>();
+    let centre = centres::<f32>();
     let cx = load(&centre);
     let v = _mm512_set1_ps;
     let (add, sub, mul) = (_mm512_add_ps, _mm512_sub_ps, _mm512_mul_ps);
@@ -257,12 +255,12 @@ fn backward_tile(
             .iter_mut()
             .zip(s.acc_channels.chunks_exact(TILE_SIZE))
         {
-            *d = super::column_sum(columns);
+            *d = super::kernels::column_sum(columns);
         }
     }
 }
 
-/// [`super::forward_tile`] for f32, one register per row. Same arguments and output.
+/// [`super::kernels::forward_tile`] for f32, one register per row. Same arguments and output.
 #[target_feature(enable = "avx512f")]
 fn forward_tile(
     list: &[PairSplat<f32>],
@@ -285,7 +283,7 @@ fn forward_tile(
     let n_pixels = (size[0] * size[1]) as u32;
     let ox: f32 = lit(origin[0] as f64);
     let oy: f32 = lit(origin[1] as f64);
-    let centre = super::centres::<f32>();
+    let centre = centres::<f32>();
     let cx = load(&centre);
     let v = _mm512_set1_ps;
     let (add, sub, mul) = (_mm512_add_ps, _mm512_sub_ps, _mm512_mul_ps);
@@ -345,6 +343,144 @@ fn forward_tile(
         if n_done == n_pixels {
             *used = k as u32 + 1;
             break;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{available, try_backward_tile, try_forward_tile};
+    use crate::raster::kernels::{backward_tile, forward_tile, BackwardScratch};
+    use crate::raster::{render, Cotangents, RenderSettings};
+    use crate::synthetic::SyntheticScene;
+    use crate::{TILE_PIXELS, TILE_SIZE};
+
+    /// The AVX-512 kernels give the portable kernels' bits, tile by tile: the image buffers and
+    /// stop counts of the forward, and every pair's gradient slot of the backward with image,
+    /// alpha and depth cotangents, on scenes whose size leaves partial tiles at the borders.
+    #[test]
+    fn avx512_kernels_equal_the_portable_kernels_bit_for_bit() {
+        if !available() {
+            eprintln!("skipped: this CPU has no AVX-512F");
+            return;
+        }
+        for (seed, n, w, h) in [
+            (1u64, 3000usize, 53u32, 37u32),
+            (2, 800, 40, 70),
+            (3, 6000, 64, 48),
+        ] {
+            let scene = SyntheticScene::new(n, w, h, seed).expect("scene");
+            let out =
+                render(&scene.camera, &scene.splats(), &RenderSettings::default()).expect("render");
+            let st = &out.state;
+            let c = 3;
+            let stride = (2 + c) * TILE_PIXELS;
+            let gx = (w as usize).div_ceil(TILE_SIZE);
+            let (width, height) = (w as usize, h as usize);
+            let hw = width * height;
+            let mut state = seed;
+            let mut noise = |len: usize| -> Vec<f32> {
+                (0..len)
+                    .map(|_| {
+                        state = state
+                            .wrapping_mul(6_364_136_223_846_793_005)
+                            .wrapping_add(1_442_695_040_888_963_407);
+                        (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+                    })
+                    .collect()
+            };
+            let (mut d_image, mut d_alpha, mut d_depth) = (noise(c * hw), noise(hw), noise(hw));
+            // Rows 2, 3, 6, 7, ... have no cotangent (as where the flow loss's 1/4 resize reads
+            // nothing), so the kernels' zero-row skip is exercised.
+            for y in (0..height).filter(|y| y % 4 >= 2) {
+                let row = y * width..(y + 1) * width;
+                d_alpha[row.clone()].fill(0.0);
+                d_depth[row.clone()].fill(0.0);
+                for j in 0..c {
+                    d_image[j * hw..][row.clone()].fill(0.0);
+                }
+            }
+            let cot = Cotangents {
+                image: &d_image,
+                alpha: Some(&d_alpha),
+                depth: Some(&d_depth),
+            };
+            let (mut checked_pairs, mut skipped_rows) = (0, 0);
+            for tile in 0..st.used.len() {
+                let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
+                let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
+                let size = [
+                    TILE_SIZE.min(width - origin[0]),
+                    TILE_SIZE.min(height - origin[1]),
+                ];
+                let list = &st.pair_splats[range.clone()];
+                let channels = &st.pair_channels[range.start * c..range.end * c];
+                let (mut buf_p, mut buf_v) = (vec![0.0f32; stride], vec![0.0f32; stride]);
+                let (mut used_p, mut used_v) = (0u32, 0u32);
+                forward_tile(list, channels, c, origin, size, &mut buf_p, &mut used_p);
+                assert!(try_forward_tile(
+                    list,
+                    channels,
+                    c,
+                    origin,
+                    size,
+                    &mut buf_v,
+                    &mut used_v
+                ));
+                assert_eq!(used_p, used_v, "tile {tile}");
+                assert!(buf_p
+                    .iter()
+                    .zip(&buf_v)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()));
+                let slots = range.len() * (7 + c);
+                let (mut out_p, mut out_v) = (vec![0.0f32; slots], vec![0.0f32; slots]);
+                let (mut s_p, mut s_v) = (BackwardScratch::new(c), BackwardScratch::new(c));
+                let args = (&st.background, &buf_p, used_p as usize);
+                backward_tile(
+                    list, channels, args.0, c, origin, size, width, args.1, args.2, &cot, &mut s_p,
+                    &mut out_p,
+                );
+                assert!(try_backward_tile(
+                    list, channels, args.0, c, origin, size, width, args.1, args.2, &cot, &mut s_v,
+                    &mut out_v,
+                ));
+                let same_bits =
+                    |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+                assert!(same_bits(&out_p, &out_v), "tile {tile}");
+                // Skipping the rows without a cotangent gives the bits of replaying every row.
+                let mut out_all = vec![0.0f32; slots];
+                let mut s_all = BackwardScratch::new(c);
+                s_all.skip_zero_rows = false;
+                backward_tile(
+                    list,
+                    channels,
+                    args.0,
+                    c,
+                    origin,
+                    size,
+                    width,
+                    args.1,
+                    args.2,
+                    &cot,
+                    &mut s_all,
+                    &mut out_all,
+                );
+                assert!(
+                    same_bits(&out_p, &out_all),
+                    "tile {tile}: skipping zero rows changed the gradients"
+                );
+                skipped_rows += s_p.live_rows[..size[1]].iter().filter(|&&l| !l).count();
+                checked_pairs += out_p
+                    .chunks(7 + c)
+                    .filter(|g| g.iter().any(|&v| v != 0.0))
+                    .count();
+            }
+            // The comparison is not vacuous: many pairs carry gradients, and rows were skipped.
+            assert!(
+                checked_pairs > n / 4,
+                "{checked_pairs} pairs with gradients"
+            );
+            assert!(skipped_rows > 0, "no row was skipped");
         }
     }
 }

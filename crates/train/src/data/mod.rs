@@ -57,7 +57,8 @@ impl Dataset {
     }
 }
 
-/// The rasterizer camera of a scene camera.
+/// The rasterizer camera of a scene camera (also of a camera file read by `scene::camera_files`):
+/// the workspace's one conversion, validated by `rasterize_cpu::Camera::new`.
 pub fn camera_of(c: &scene::Camera) -> Result<Camera, TrainError> {
     let m = c.world_to_camera;
     let world_to_camera = [m[0], m[1], m[2], [0.0, 0.0, 0.0, 1.0]];

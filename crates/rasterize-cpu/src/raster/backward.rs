@@ -1,0 +1,316 @@
+//! The backward driver: check the request against the forward output, replay every tile's list
+//! (in parallel, one gradient slot per (tile, Gaussian) pair in sorted order), then reduce each
+//! Gaussian's slots in tile order and chain them through the projection (and, for [`Splats`],
+//! through Σ = R S Sᵀ Rᵀ into log-scales and quaternions). The fixed order makes the gradients
+//! bit-identical for any thread count.
+
+use rayon::prelude::*;
+
+use gaussians::covariance::{covariance_3d_backward, Mat3};
+
+use super::forward::ForwardState;
+use super::inputs::{Inputs, Shapes};
+use super::kernels::{backward_tile, BackwardScratch, BUF_T};
+use super::{Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats};
+use crate::project::{project_cov_backward, CameraParams, ProjectedGrad};
+use crate::{Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
+
+#[cfg(target_arch = "x86_64")]
+use super::avx512;
+
+/// One Gaussian's gradients: (mean, Σ, opacity logit, screen mean).
+type GaussianGrad<T> = ([T; 3], Mat3<T>, T, [T; 2]);
+
+/// Analytic backward of [`render`]: gradients of a scalar loss L w.r.t. every input, given
+/// `cot` = dL/d(image, alpha, depth). `forward` must be the output of `render` for the same camera,
+/// splats and settings. `Gradients::covariances` is left empty.
+///
+/// [`render`]: super::render
+pub fn render_backward<T: Real>(
+    camera: &Camera,
+    splats: &Splats<'_, T>,
+    settings: &RenderSettings,
+    forward: &RenderOutput<T>,
+    cot: &Cotangents<'_, T>,
+) -> Result<Gradients<T>, RasterError> {
+    backward_inputs(camera, &Inputs::from(splats), settings, forward, cot)
+}
+
+/// Analytic backward of [`render_cov`]: as [`render_backward`], with dL/dΣ in
+/// `Gradients::covariances` (nine independent entries) and `log_scales`/`quats` left empty.
+/// `forward` must be the output of `render_cov` for the same camera, splats and settings.
+///
+/// [`render_cov`]: super::render_cov
+pub fn render_cov_backward<T: Real>(
+    camera: &Camera,
+    splats: &CovSplats<'_, T>,
+    settings: &RenderSettings,
+    forward: &RenderOutput<T>,
+    cot: &Cotangents<'_, T>,
+) -> Result<Gradients<T>, RasterError> {
+    backward_inputs(camera, &Inputs::from(splats), settings, forward, cot)
+}
+
+fn backward_inputs<T: Real>(
+    camera: &Camera,
+    splats: &Inputs<'_, T>,
+    settings: &RenderSettings,
+    forward: &RenderOutput<T>,
+    cot: &Cotangents<'_, T>,
+) -> Result<Gradients<T>, RasterError> {
+    let c = splats.num_channels;
+    let st = &forward.state;
+    if forward.width != camera.width
+        || forward.height != camera.height
+        || forward.num_channels != c
+        || st.n != splats.len()
+    {
+        return Err(RasterError::ForwardMismatch(format!(
+            "forward was {}x{} with {} channels and {} Gaussians, request is {}x{} with {} and {}",
+            forward.width,
+            forward.height,
+            forward.num_channels,
+            st.n,
+            camera.width,
+            camera.height,
+            c,
+            splats.len()
+        )));
+    }
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let hw = width * height;
+    let check = |field, got: usize, expected: usize| {
+        if got == expected {
+            Ok(())
+        } else {
+            Err(RasterError::LengthMismatch {
+                field,
+                got,
+                expected,
+            })
+        }
+    };
+    check("d_image", cot.image.len(), c * hw)?;
+    if let Some(a) = cot.alpha {
+        check("d_alpha", a.len(), hw)?;
+    }
+    if let Some(d) = cot.depth {
+        check("d_depth", d.len(), hw)?;
+    }
+    let cam = CameraParams::<T>::new(camera, settings.near_plane);
+    let gx = cam.grid[0] as usize;
+    let n_tiles = st.tile_offsets.len() - 1;
+    let stride = (2 + c) * TILE_PIXELS;
+    let slot = 7 + c;
+
+    // 1. Per (tile, Gaussian) pair contributions, in sorted order.
+    let mut pair_grads = vec![T::zero(); st.tile_list.len() * slot];
+    let mut slices = Vec::with_capacity(n_tiles);
+    let mut rest: &mut [T] = &mut pair_grads;
+    for t in 0..n_tiles {
+        let (head, tail) = rest.split_at_mut((st.tile_offsets[t + 1] - st.tile_offsets[t]) * slot);
+        slices.push(head);
+        rest = tail;
+    }
+    slices.into_par_iter().enumerate().for_each_init(
+        || BackwardScratch::new(c),
+        |scratch, (tile, out)| {
+            let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
+            if range.is_empty() {
+                return;
+            }
+            let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
+            let size = [
+                TILE_SIZE.min(width - origin[0]),
+                TILE_SIZE.min(height - origin[1]),
+            ];
+            backward_tile_dispatch(st, tile, c, origin, size, width, cot, scratch, out);
+        },
+    );
+
+    // 2. Per visible Gaussian: its pair positions in tile order (counting sort, deterministic).
+    let nv = st.visible.len();
+    let mut offsets = vec![0usize; nv + 1];
+    for &ci in &st.tile_list {
+        offsets[ci as usize + 1] += 1;
+    }
+    for i in 0..nv {
+        offsets[i + 1] += offsets[i];
+    }
+    let mut cursor = offsets.clone();
+    let mut positions = vec![0u32; st.tile_list.len()];
+    for (pos, &ci) in st.tile_list.iter().enumerate() {
+        positions[cursor[ci as usize]] = pos as u32;
+        cursor[ci as usize] += 1;
+    }
+
+    // 3. Reduce in fixed order and chain through the projection.
+    let mut compact = vec![u32::MAX; st.n];
+    for (ci, &id) in st.visible_ids.iter().enumerate() {
+        compact[id as usize] = ci as u32;
+    }
+    let zero3 = [T::zero(); 3];
+    let zero33 = [zero3; 3];
+    // One pass per Gaussian gathers its pair slots (geometry and channels together) in tile order.
+    let mut per_gaussian: Vec<GaussianGrad<T>> =
+        vec![(zero3, zero33, T::zero(), [T::zero(); 2]); st.n];
+    let mut d_channels = vec![T::zero(); st.n * c];
+    let reduce = |i: usize, out: &mut GaussianGrad<T>, d_ch: &mut [T]| {
+        let ci = compact[i];
+        if ci == u32::MAX {
+            return;
+        }
+        let ci = ci as usize;
+        let mut acc = [T::zero(); 7];
+        for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
+            let s = &pair_grads[pos as usize * slot..(pos as usize + 1) * slot];
+            for j in 0..7 {
+                acc[j] = acc[j] + s[j];
+            }
+            for (d, &g) in d_ch.iter_mut().zip(&s[7..]) {
+                *d = *d + g;
+            }
+        }
+        let g = ProjectedGrad {
+            mean2d: [acc[0], acc[1]],
+            conic: [acc[2], acc[3], acc[4]],
+            opacity: acc[5],
+            depth: acc[6],
+        };
+        let sigma = match splats.shapes {
+            Shapes::ScaleRot { log_scales, quats } => {
+                gaussians::covariance::covariance_3d(log_scales[i], quats[i])
+            }
+            Shapes::Cov(covs) => covs[i],
+        };
+        let (dm, d_sigma, dl) =
+            project_cov_backward(&cam, splats.means[i], &sigma, splats.opacity_logits[i], &g);
+        *out = (dm, d_sigma, dl, g.mean2d);
+    };
+    if c > 0 {
+        per_gaussian
+            .par_iter_mut()
+            .zip(d_channels.par_chunks_mut(c))
+            .enumerate()
+            .for_each(|(i, (out, d_ch))| reduce(i, out, d_ch));
+    } else {
+        per_gaussian
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, out)| reduce(i, out, &mut []));
+    }
+    // dL/d background_c = Σ_pixels dL/dimage_c · T_final, rows in order.
+    let mut d_bg = vec![T::zero(); c];
+    for (ch, d) in d_bg.iter_mut().enumerate() {
+        let mut acc = T::zero();
+        for y in 0..height {
+            for x in 0..width {
+                let tile = (y / TILE_SIZE) * gx + x / TILE_SIZE;
+                let p = (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE;
+                acc = acc
+                    + cot.image[ch * hw + y * width + x] * st.tile_buf[tile * stride + BUF_T + p];
+            }
+        }
+        *d = acc;
+    }
+    let mut out = Gradients {
+        means: Vec::with_capacity(st.n),
+        log_scales: Vec::new(),
+        quats: Vec::new(),
+        covariances: Vec::new(),
+        opacity_logits: Vec::with_capacity(st.n),
+        channels: d_channels,
+        means_2d: Vec::with_capacity(st.n),
+        background: d_bg,
+    };
+    for &(dm, _, dl, d2) in &per_gaussian {
+        out.means.push(dm);
+        out.opacity_logits.push(dl);
+        out.means_2d.push(d2);
+    }
+    match splats.shapes {
+        // Chain dΣ into the log-scales and quaternions (zero for culled Gaussians, like before).
+        Shapes::ScaleRot { log_scales, quats } => {
+            let chained: Vec<([T; 3], [T; 4])> = per_gaussian
+                .par_iter()
+                .enumerate()
+                .map(|(i, g)| {
+                    if compact[i] == u32::MAX {
+                        (zero3, [T::zero(); 4])
+                    } else {
+                        covariance_3d_backward(log_scales[i], quats[i], &g.1)
+                    }
+                })
+                .collect();
+            (out.log_scales, out.quats) = chained.into_iter().unzip();
+        }
+        Shapes::Cov(_) => out.covariances = per_gaussian.iter().map(|g| g.1).collect(),
+    }
+    Ok(out)
+}
+
+/// One tile's backward (`tile`'s pairs of `st`, `out` their gradient slots): the AVX-512 kernel
+/// when the CPU has AVX-512F and `T` is f32 (same bits, faster), else the portable
+/// [`backward_tile`].
+#[allow(clippy::too_many_arguments)]
+fn backward_tile_dispatch<T: Real>(
+    st: &ForwardState<T>,
+    tile: usize,
+    c: usize,
+    origin: [usize; 2],
+    size: [usize; 2],
+    width: usize,
+    cot: &Cotangents<'_, T>,
+    s: &mut BackwardScratch<T>,
+    out: &mut [T],
+) {
+    let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
+    let stride = (2 + c) * TILE_PIXELS;
+    let buf = tile * stride..(tile + 1) * stride;
+    let used = st.used[tile] as usize;
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::any::Any;
+        let st32 = (st as &dyn Any).downcast_ref::<ForwardState<f32>>();
+        let s32 = (&mut *s as &mut dyn Any).downcast_mut::<BackwardScratch<f32>>();
+        if let (Some(st), Some(s), Some(image), Some(out)) =
+            (st32, s32, T::as_f32(cot.image), T::as_f32_mut(&mut *out))
+        {
+            let cot = Cotangents {
+                image,
+                alpha: cot.alpha.and_then(T::as_f32),
+                depth: cot.depth.and_then(T::as_f32),
+            };
+            if avx512::try_backward_tile(
+                &st.pair_splats[range.clone()],
+                &st.pair_channels[range.start * c..range.end * c],
+                &st.background,
+                c,
+                origin,
+                size,
+                width,
+                &st.tile_buf[buf.clone()],
+                used,
+                &cot,
+                s,
+                out,
+            ) {
+                return;
+            }
+        }
+    }
+    backward_tile(
+        &st.pair_splats[range.clone()],
+        &st.pair_channels[range.start * c..range.end * c],
+        &st.background,
+        c,
+        origin,
+        size,
+        width,
+        &st.tile_buf[buf],
+        used,
+        cot,
+        s,
+        out,
+    );
+}

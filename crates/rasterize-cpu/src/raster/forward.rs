@@ -1,0 +1,235 @@
+//! The forward driver: validate, project every Gaussian, bin the visible ones into tile lists,
+//! gather each (tile, Gaussian) pair's data in list order, blend every tile in parallel and lay the
+//! tiles out as planar images. What the backward needs is kept in [`ForwardState`] inside the
+//! returned [`RenderOutput`].
+
+use rayon::prelude::*;
+
+use super::binning::bin_and_sort;
+use super::inputs::{background, validate, Inputs};
+use super::kernels::{forward_tile, PairSplat, BUF_C, BUF_D, BUF_T};
+use super::{CovSplats, RenderOutput, RenderSettings, Splats};
+use crate::project::{CameraParams, Projected};
+use crate::{camera, Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
+
+#[cfg(target_arch = "x86_64")]
+use super::avx512;
+
+/// Everything the backward pass needs from the forward pass.
+#[derive(Clone, Debug)]
+pub(super) struct ForwardState<T> {
+    /// Visible Gaussians (compact order = increasing input index).
+    pub(super) visible: Vec<Projected<T>>,
+    /// Input index of each visible Gaussian.
+    pub(super) visible_ids: Vec<u32>,
+    /// Offsets of each tile's list in `tile_list` (length tiles + 1).
+    pub(super) tile_offsets: Vec<usize>,
+    /// Compact indices, sorted by tile then depth.
+    pub(super) tile_list: Vec<u32>,
+    /// What the tile kernels read of each pair's Gaussian, gathered in `tile_list` order.
+    pub(super) pair_splats: Vec<PairSplat<T>>,
+    /// Each pair's channels, pairs × C, in `tile_list` order.
+    pub(super) pair_channels: Vec<T>,
+    /// Per tile, tile-major pixels: [T_final (256) | depth (256) | channel sums C × 256].
+    pub(super) tile_buf: Vec<T>,
+    /// Per tile: number of list entries the forward blended before every pixel had stopped (the
+    /// list length if some pixel never stopped). The backward replays exactly these.
+    pub(super) used: Vec<u32>,
+    /// Background in working precision (C values).
+    pub(super) background: Vec<T>,
+    /// Number of input Gaussians.
+    pub(super) n: usize,
+}
+
+/// Renders the Gaussians `splats` from `camera` (see the module docs for the rules and outputs).
+pub fn render<T: Real>(
+    camera: &Camera,
+    splats: &Splats<'_, T>,
+    settings: &RenderSettings,
+) -> Result<RenderOutput<T>, RasterError> {
+    render_inputs(camera, &Inputs::from(splats), settings)
+}
+
+/// Renders Gaussians given by precomputed 3D covariances, with exactly the rules and outputs of
+/// [`render`] (which equals this with Σ = `covariance_3d(log_scale, quat)`, bit for bit).
+pub fn render_cov<T: Real>(
+    camera: &Camera,
+    splats: &CovSplats<'_, T>,
+    settings: &RenderSettings,
+) -> Result<RenderOutput<T>, RasterError> {
+    render_inputs(camera, &Inputs::from(splats), settings)
+}
+
+fn render_inputs<T: Real>(
+    camera: &Camera,
+    splats: &Inputs<'_, T>,
+    settings: &RenderSettings,
+) -> Result<RenderOutput<T>, RasterError> {
+    camera::check_image_size(camera.width.into(), camera.height.into())?;
+    validate(splats)?;
+    let c = splats.num_channels;
+    let bg = background::<T>(settings, c)?;
+    let cam = CameraParams::<T>::new(camera, settings.near_plane);
+    let n = splats.len();
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let [gx, gy] = cam.grid;
+    let (gx, gy) = (gx as usize, gy as usize);
+    let n_tiles = gx * gy;
+
+    // 1. Project (parallel, order-preserving).
+    let projected: Vec<Option<Projected<T>>> = (0..n)
+        .into_par_iter()
+        .map(|i| splats.project(&cam, i))
+        .collect();
+    let mut radii = vec![0u32; n];
+    let mut visible = Vec::new();
+    let mut visible_ids = Vec::new();
+    for (i, p) in projected.into_iter().enumerate() {
+        if let Some(p) = p {
+            radii[i] = p.radius;
+            visible.push(p);
+            visible_ids.push(i as u32);
+        }
+    }
+
+    // 2. Bin into tiles: counting sort by tile (stable in input order), then sort each tile by
+    //    (depth, input index), which equals INRIA's stable radix sort on (tile, depth).
+    let (tile_offsets, tile_list) = bin_and_sort(&visible, gx, n_tiles);
+    let num_pairs = tile_list.len();
+    let pair_splats: Vec<PairSplat<T>> = tile_list
+        .par_iter()
+        .map(|&ci| {
+            let p = &visible[ci as usize];
+            PairSplat {
+                mean2d: p.mean2d,
+                conic: p.conic,
+                opacity: p.opacity,
+                depth: p.depth,
+                extent: p.extent,
+            }
+        })
+        .collect();
+    let mut pair_channels = vec![T::zero(); num_pairs * c];
+    if c > 0 {
+        pair_channels
+            .par_chunks_mut(c)
+            .zip(tile_list.par_iter())
+            .for_each(|(dst, &ci)| {
+                let g = visible_ids[ci as usize] as usize;
+                dst.copy_from_slice(&splats.channels[g * c..(g + 1) * c]);
+            });
+    }
+
+    // 3. Blend every tile.
+    let stride = (2 + c) * TILE_PIXELS;
+    let mut tile_buf = vec![T::zero(); n_tiles * stride];
+    let mut used = vec![0u32; n_tiles];
+    tile_buf
+        .par_chunks_mut(stride)
+        .zip(used.par_iter_mut())
+        .enumerate()
+        .for_each(|(tile, (buf, used))| {
+            let range = tile_offsets[tile]..tile_offsets[tile + 1];
+            let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
+            let size = [
+                TILE_SIZE.min(width - origin[0]),
+                TILE_SIZE.min(height - origin[1]),
+            ];
+            forward_tile_dispatch(
+                &pair_splats,
+                &pair_channels,
+                range,
+                c,
+                origin,
+                size,
+                buf,
+                used,
+            );
+        });
+
+    // 4. Planar outputs.
+    let hw = width * height;
+    let mut image = vec![T::zero(); c * hw];
+    let mut alpha = vec![T::zero(); hw];
+    let mut depth = vec![T::zero(); hw];
+    let tile_px = |x: usize, y: usize| {
+        let tile = (y / TILE_SIZE) * gx + x / TILE_SIZE;
+        (tile * stride, (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE)
+    };
+    image
+        .par_chunks_mut(width)
+        .enumerate()
+        .for_each(|(row, out)| {
+            let (ch, y) = (row / height, row % height);
+            for (x, o) in out.iter_mut().enumerate() {
+                let (base, p) = tile_px(x, y);
+                *o = tile_buf[base + BUF_C + ch * TILE_PIXELS + p]
+                    + tile_buf[base + BUF_T + p] * bg[ch];
+            }
+        });
+    alpha
+        .par_chunks_mut(width)
+        .zip(depth.par_chunks_mut(width))
+        .enumerate()
+        .for_each(|(y, (a, d))| {
+            for x in 0..width {
+                let (base, p) = tile_px(x, y);
+                a[x] = T::one() - tile_buf[base + BUF_T + p];
+                d[x] = tile_buf[base + BUF_D + p];
+            }
+        });
+
+    Ok(RenderOutput {
+        width: camera.width,
+        height: camera.height,
+        num_channels: c,
+        image,
+        alpha,
+        depth,
+        radii,
+        num_pairs,
+        state: ForwardState {
+            visible,
+            visible_ids,
+            tile_offsets,
+            tile_list,
+            pair_splats,
+            pair_channels,
+            tile_buf,
+            used,
+            background: bg,
+            n,
+        },
+    })
+}
+
+/// [`forward_tile`] of the pairs `range`: the AVX-512 kernel when the CPU has AVX-512F and `T` is
+/// f32 (same bits, faster), else the portable one. `pair_splats` is a `&Vec`, not a slice, so that it
+/// can be downcast to the f32 kernel's type.
+#[allow(clippy::too_many_arguments, clippy::ptr_arg)]
+fn forward_tile_dispatch<T: Real>(
+    pair_splats: &Vec<PairSplat<T>>,
+    pair_channels: &[T],
+    range: std::ops::Range<usize>,
+    c: usize,
+    origin: [usize; 2],
+    size: [usize; 2],
+    buf: &mut [T],
+    used: &mut u32,
+) {
+    let channels = &pair_channels[range.start * c..range.end * c];
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::any::Any;
+        let splats32 = (pair_splats as &dyn Any).downcast_ref::<Vec<PairSplat<f32>>>();
+        if let (Some(splats), Some(channels), Some(buf)) =
+            (splats32, T::as_f32(channels), T::as_f32_mut(&mut *buf))
+        {
+            let list = &splats[range.clone()];
+            if avx512::try_forward_tile(list, channels, c, origin, size, buf, used) {
+                return;
+            }
+        }
+    }
+    forward_tile(&pair_splats[range], channels, c, origin, size, buf, used);
+}
