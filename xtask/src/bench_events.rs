@@ -11,6 +11,8 @@ use anyhow::{Context, Result};
 use events::io::aedat4::{write_aedat4, Compression};
 use events::io::prophesee::{write_dat, write_raw, PropheseeFormat};
 use events::{Event, EventStream, SensorSize};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 /// Arguments of `bench events`.
 #[derive(clap::Args, Debug)]
@@ -24,21 +26,19 @@ pub struct Args {
     pub only: Vec<String>,
 }
 
+/// `n` events at uniformly random pixels and polarities, 0 or 1 µs apart (seeded, ChaCha8).
 fn synthetic(n: usize, sensor: SensorSize) -> EventStream {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
     let mut s = EventStream::with_capacity(n);
     s.sensor = Some(sensor);
-    let mut st = 0x9E37_79B9u64;
     let mut t = 0i64;
     for _ in 0..n {
-        st = st
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        t += ((st >> 60) & 1) as i64;
+        t += i64::from(rng.gen::<bool>());
         s.push(Event {
             t,
-            x: ((st >> 20) % sensor.width as u64) as u16,
-            y: ((st >> 40) % sensor.height as u64) as u16,
-            p: if (st >> 33) & 1 == 1 { 1 } else { -1 },
+            x: rng.gen_range(0..sensor.width) as u16,
+            y: rng.gen_range(0..sensor.height) as u16,
+            p: if rng.gen::<bool>() { 1 } else { -1 },
         });
     }
     s

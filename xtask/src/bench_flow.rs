@@ -5,6 +5,8 @@
 //! case (null off Linux).
 
 use anyhow::{Context, Result};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
 
 /// Arguments of `bench flow`.
@@ -42,15 +44,9 @@ pub fn run(args: Args) -> Result<()> {
     let net = flow::SpyNet::<f32>::random(args.levels, 1);
     for (name, size) in [("pair_64", 64usize), ("pair_256", 256)] {
         let n = 3 * size * size;
-        let mut rng = 0x1234_5678u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((rng >> 40) as f32) / ((1u64 << 24) as f32)
-        };
-        let a: Vec<f32> = (0..n).map(|_| next()).collect();
-        let b: Vec<f32> = (0..n).map(|_| next()).collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(0x1234_5678);
+        let a: Vec<f32> = (0..n).map(|_| rng.gen()).collect();
+        let b: Vec<f32> = (0..n).map(|_| rng.gen()).collect();
         for &t in &threads {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(t)

@@ -6,24 +6,13 @@ use events::io::prophesee::PropheseeReader;
 use events::io::{read_all, EventReader};
 use events::{read_events, write_events, Event, EventStream, SensorSize};
 
+#[path = "common/random_stream.rs"]
+mod random_stream;
+use random_stream::random_stream;
+
+/// `n` random events on a 346×260 sensor, 0–6 µs apart from 5 ms on.
 fn sample(n: usize) -> EventStream {
-    let mut s = EventStream::new();
-    s.sensor = Some(SensorSize::new(346, 260));
-    let mut st = 7u64;
-    let mut t = 5_000i64;
-    for _ in 0..n {
-        st = st
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        t += ((st >> 50) % 7) as i64;
-        s.push(Event {
-            t,
-            x: ((st >> 10) % 346) as u16,
-            y: ((st >> 30) % 260) as u16,
-            p: if (st >> 45) & 1 == 1 { 1 } else { -1 },
-        });
-    }
-    s
+    random_stream(n, SensorSize::new(346, 260), 5_000, 7, 7)
 }
 
 #[test]

@@ -6,24 +6,13 @@ use events::{
     EventStream, SensorSize,
 };
 
+#[path = "common/random_stream.rs"]
+mod random_stream;
+use random_stream::random_stream;
+
+/// `n` random events on a 40×30 sensor, 0–49 µs apart from 1 s on.
 fn sample_stream(n: usize) -> EventStream {
-    let mut s = EventStream::new();
-    s.sensor = Some(SensorSize::new(40, 30));
-    let mut t = 1_000_000i64;
-    let mut state = 12345u64;
-    for _ in 0..n {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        t += ((state >> 33) % 50) as i64;
-        s.push(Event {
-            t,
-            x: ((state >> 8) % 40) as u16,
-            y: ((state >> 20) % 30) as u16,
-            p: if (state >> 40) & 1 == 1 { 1 } else { -1 },
-        });
-    }
-    s
+    random_stream(n, SensorSize::new(40, 30), 1_000_000, 50, 12345)
 }
 
 #[test]

@@ -258,6 +258,8 @@ pub fn quat_from_rotation(r: &Mat3<f64>) -> [f64; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     #[test]
     fn identity_quaternion_gives_diagonal_covariance() {
@@ -294,13 +296,8 @@ mod tests {
 
     #[test]
     fn decompose_inverts_covariance_3d() {
-        let mut seed = 7u64;
-        let mut r = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut r = || rng.gen_range(-1.0..1.0);
         for _ in 0..200 {
             let s = [r() * 2.0 - 3.0, r() * 2.0 - 3.0, r() * 2.0 - 3.0];
             let q = [r(), r(), r(), r()];

@@ -1,19 +1,12 @@
 //! Fast kernels against slow, obviously-correct oracles (forward and with a random cotangent backward).
 
 use nn::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
-    }
-    fn vec(&mut self, n: usize) -> Vec<f64> {
-        (0..n).map(|_| self.next()).collect()
-    }
+/// `n` values uniform in [-1, 1) from `rng`.
+fn symmetric(rng: &mut impl Rng, n: usize) -> Vec<f64> {
+    (0..n).map(|_| rng.gen_range(-1.0..1.0)).collect()
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -29,7 +22,7 @@ fn max_diff(a: &[f64], b: &[f64]) -> f64 {
 
 #[test]
 fn conv2d_matches_direct_oracle_forward_and_adjoint() {
-    let mut rng = Rng(7);
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
     for &(batch, c_in, c_out, h, w, k, pad) in &[
         (1, 3, 4, 9, 7, 3, 1),
         (2, 2, 3, 6, 11, 7, 3),
@@ -48,16 +41,16 @@ fn conv2d_matches_direct_oracle_forward_and_adjoint() {
             kernel: k,
             pad,
         };
-        let x = rng.vec(s.input_len());
-        let wt = rng.vec(s.weight_len());
-        let b = rng.vec(c_out);
+        let x = symmetric(&mut rng, s.input_len());
+        let wt = symmetric(&mut rng, s.weight_len());
+        let b = symmetric(&mut rng, c_out);
         let mut fast = vec![0.0; s.output_len()];
         let mut slow = vec![0.0; s.output_len()];
         conv2d_forward(s, &x, &wt, Some(&b), &mut fast).expect("shape");
         conv2d_reference(s, &x, &wt, Some(&b), &mut slow).expect("shape");
         assert!(max_diff(&fast, &slow) < 1e-12, "{s:?} forward");
         // Adjoint identities: <g, conv(x)> = <conv_x^T g, x> = <conv_w^T g, w> (+ bias term).
-        let g = rng.vec(s.output_len());
+        let g = symmetric(&mut rng, s.output_len());
         let mut dx = vec![0.0; s.input_len()];
         conv2d_backward_input(s, &g, &wt, &mut dx).expect("shape");
         let mut nobias = vec![0.0; s.output_len()];
@@ -84,7 +77,7 @@ fn conv2d_matches_direct_oracle_forward_and_adjoint() {
 
 #[test]
 fn conv2d_f32_is_identical_for_one_and_two_threads() {
-    let mut rng = Rng(3);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
     let s = Conv2dShape {
         batch: 1,
         c_in: 8,
@@ -94,9 +87,18 @@ fn conv2d_f32_is_identical_for_one_and_two_threads() {
         kernel: 7,
         pad: 3,
     };
-    let x: Vec<f32> = rng.vec(s.input_len()).iter().map(|&v| v as f32).collect();
-    let w: Vec<f32> = rng.vec(s.weight_len()).iter().map(|&v| v as f32).collect();
-    let g: Vec<f32> = rng.vec(s.output_len()).iter().map(|&v| v as f32).collect();
+    let x: Vec<f32> = symmetric(&mut rng, s.input_len())
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let w: Vec<f32> = symmetric(&mut rng, s.weight_len())
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let g: Vec<f32> = symmetric(&mut rng, s.output_len())
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -117,15 +119,15 @@ fn conv2d_f32_is_identical_for_one_and_two_threads() {
 
 #[test]
 fn dense_matches_naive_loops() {
-    let mut rng = Rng(11);
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
     let s = DenseShape {
         batch: 5,
         inputs: 7,
         outputs: 3,
     };
-    let x = rng.vec(35);
-    let w = rng.vec(21);
-    let b = rng.vec(3);
+    let x = symmetric(&mut rng, 35);
+    let w = symmetric(&mut rng, 21);
+    let b = symmetric(&mut rng, 3);
     let mut y = vec![0.0; 15];
     dense_forward(s, &x, &w, Some(&b), &mut y).expect("shape");
     for r in 0..5 {

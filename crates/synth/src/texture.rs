@@ -300,6 +300,9 @@ pub fn mottled(seed: u32, size: usize, base: Vec3, amount: f32, streaks: bool) -
 
 #[cfg(test)]
 mod tests {
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
     #[test]
     fn floor_matches_the_standard_library_bit_for_bit() {
         let mut specials = vec![
@@ -322,11 +325,8 @@ mod tests {
             f32::MIN_POSITIVE,
             -f32::MIN_POSITIVE,
         ];
-        let mut s = 0x1234_5678u32;
-        for _ in 0..100_000 {
-            s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            specials.push(f32::from_bits(s));
-        }
+        let mut rng = ChaCha8Rng::seed_from_u64(0x1234_5678);
+        specials.extend((0..100_000).map(|_| f32::from_bits(rng.gen())));
         for x in specials {
             let (a, b) = (super::floor(x), x.floor());
             assert!(

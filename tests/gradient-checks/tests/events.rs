@@ -8,26 +8,21 @@
 
 use events::cmax::{affine_pullback, affine_tiles};
 use events::{CmaxConfig, CmaxProblem, Event, EventStream, SensorSize};
-use gradient_checks::{central_differences, GradientChecker, Tolerance};
+use gradient_checks::{central_differences, rng, symmetric_from_seed, GradientChecker, Tolerance};
+use rand::Rng;
 
-fn lcg(state: &mut u64) -> f64 {
-    *state = state
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (*state >> 11) as f64 / (1u64 << 53) as f64
-}
-
+/// `n` events at uniformly random pixels and polarities, 1 to 20 µs apart.
 fn stream(n: usize, w: u16, h: u16, seed: u64) -> EventStream {
     let mut s = EventStream::new();
-    let mut st = seed;
+    let mut rng = rng(seed);
     let mut t = 0i64;
     for _ in 0..n {
-        t += 1 + (lcg(&mut st) * 20.0) as i64;
+        t += rng.gen_range(1..=20);
         s.push(Event {
             t,
-            x: (lcg(&mut st) * w as f64) as u16,
-            y: (lcg(&mut st) * h as f64) as u16,
-            p: if lcg(&mut st) < 0.5 { 1 } else { -1 },
+            x: rng.gen_range(0..w),
+            y: rng.gen_range(0..h),
+            p: if rng.gen::<bool>() { 1 } else { -1 },
         });
     }
     s
@@ -64,9 +59,9 @@ fn cmax_objective_gradient_matches_finite_differences() {
             &cfg,
         )
         .expect("problem");
-        let mut st = 99 + case as u64;
-        let v: Vec<f64> = (0..p.num_params())
-            .map(|_| 3.0 * lcg(&mut st) - 1.5)
+        let v: Vec<f64> = symmetric_from_seed(99 + case as u64, p.num_params())
+            .iter()
+            .map(|x| 1.5 * x)
             .collect();
         let (f, ana) = p.objective_and_gradient(&v);
         assert!((f - p.objective(&v)).abs() <= 1e-12 * f.abs().max(1.0));
@@ -108,8 +103,10 @@ fn cmax_affine_objective_gradient_matches_finite_differences() {
             &cfg,
         )
         .expect("problem");
-        let mut st = 7 + case;
-        let theta: Vec<f64> = (0..6).map(|_| 3.0 * lcg(&mut st) - 1.5).collect();
+        let theta: Vec<f64> = symmetric_from_seed(7 + case, 6)
+            .iter()
+            .map(|x| 1.5 * x)
+            .collect();
         let (_, g_tiles) = p.objective_and_gradient(&affine_tiles(&theta));
         let ana = affine_pullback(&g_tiles);
         let num = central_differences(|th| p.objective(&affine_tiles(th)), &theta, 1e-6);

@@ -14,24 +14,13 @@
 //! pooling path, the skip connection) or a zero gradient changes entries by O(0.01–1) and fails.
 
 use flow::SpyNet;
-use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
+use gradient_checks::{central_differences, compare, rng, symmetric, GradientChecker, Tolerance};
 use proptest::prelude::*;
+use rand::Rng;
 use std::cell::RefCell;
 
 const H: f64 = 1e-6;
 const TOL: Tolerance = Tolerance::new(1e-6, 1e-5);
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        ((z >> 11) as f64) / ((1u64 << 53) as f64)
-    }
-}
 
 /// A random f64 network whose last layers are scaled so the predicted flow is O(1) px (so the warp,
 /// its flow path and border clamping are all exercised).
@@ -108,13 +97,11 @@ fn probe_conv(
     net: &SpyNet<f64>,
     (level, i, bias): (usize, usize, bool),
     count: usize,
-    rng: &mut Rng,
+    rng: &mut impl Rng,
     eval: impl Fn(&SpyNet<f64>) -> (f64, u64),
 ) -> (Vec<usize>, Vec<f64>, usize) {
     let x = conv_param(net, level, i, bias);
-    let probe: Vec<usize> = (0..count)
-        .map(|_| (rng.next() * x.len() as f64) as usize % x.len())
-        .collect();
+    let probe: Vec<usize> = (0..count).map(|_| rng.gen_range(0..x.len())).collect();
     probe_numeric(&x, &probe, |p| {
         eval(&with_conv_param(net, level, i, bias, p))
     })
@@ -122,10 +109,10 @@ fn probe_conv(
 
 fn check_case(levels: usize, h: usize, w: usize, seed: u64, probes: Option<usize>) {
     let net = network(levels, seed);
-    let mut rng = Rng(seed ^ 0xF10);
+    let mut rng = rng(seed ^ 0xF10);
     let n = 3 * h * w;
-    let imgs: Vec<f64> = (0..2 * n).map(|_| rng.next()).collect();
-    let g: Vec<f64> = (0..2 * h * w).map(|_| 2.0 * rng.next() - 1.0).collect();
+    let imgs: Vec<f64> = (0..2 * n).map(|_| rng.gen::<f64>()).collect();
+    let g = symmetric(&mut rng, 2 * h * w);
     let eval = |x: &[f64]| {
         let tape = net.forward(&x[..n], &x[n..], h, w).expect("forward");
         let l: f64 = tape.flow.iter().zip(&g).map(|(a, b)| a * b).sum();
@@ -141,9 +128,7 @@ fn check_case(levels: usize, h: usize, w: usize, seed: u64, probes: Option<usize
     let analytic: Vec<f64> = d1.iter().chain(&d2).copied().collect();
     let probe: Vec<usize> = match probes {
         None => (0..2 * n).collect(),
-        Some(k) => (0..k)
-            .map(|_| (rng.next() * (2 * n) as f64) as usize % (2 * n))
-            .collect(),
+        Some(k) => (0..k).map(|_| rng.gen_range(0..2 * n)).collect(),
     };
     let (kept, numeric, dropped) = probe_numeric(&imgs, &probe, eval);
     assert!(
@@ -190,11 +175,11 @@ fn three_level_network_resized_input_sampled_coordinates() {
 fn weight_gradients_of_selected_convolutions() {
     let (levels, h, w) = (2, 6, 8);
     let net = network(levels, 5);
-    let mut rng = Rng(77);
+    let mut rng = rng(77);
     let n = 3 * h * w;
-    let img1: Vec<f64> = (0..n).map(|_| rng.next()).collect();
-    let img2: Vec<f64> = (0..n).map(|_| rng.next()).collect();
-    let g: Vec<f64> = (0..2 * h * w).map(|_| 2.0 * rng.next() - 1.0).collect();
+    let img1: Vec<f64> = (0..n).map(|_| rng.gen::<f64>()).collect();
+    let img2: Vec<f64> = (0..n).map(|_| rng.gen::<f64>()).collect();
+    let g = symmetric(&mut rng, 2 * h * w);
     let tape = net.forward(&img1, &img2, h, w).expect("forward");
     let mut grads = net.zeros_like();
     net.backward(&tape, &g, Some(&mut grads)).expect("backward");
@@ -211,9 +196,7 @@ fn weight_gradients_of_selected_convolutions() {
         } else {
             net.levels[l][i].weight.len()
         };
-        let probe: Vec<usize> = (0..24.min(len))
-            .map(|_| (rng.next() * len as f64) as usize % len)
-            .collect();
+        let probe: Vec<usize> = (0..24.min(len)).map(|_| rng.gen_range(0..len)).collect();
         let params = conv_param(&net, l, i, bias);
         let eval = |p: &[f64]| {
             let m = with_conv_param(&net, l, i, bias, p);
@@ -286,7 +269,7 @@ fn check_trainer_loss(seed: u64) {
             .region_signature();
         (l, sig)
     };
-    let mut rng = Rng(seed ^ 0x7a1);
+    let mut rng = rng(seed ^ 0x7a1);
     let mut checker = GradientChecker::new();
     for i in 0..5 {
         for bias in [false, true] {
@@ -328,20 +311,20 @@ fn trainer_loss_weight_gradient_matches_finite_differences() {
 fn check_multiscale(seed: u64) {
     let (levels, size) = (3, 8);
     let net = network(levels, seed);
-    let mut rng = Rng(seed ^ 0x3c5);
-    let img = |rng: &mut Rng| {
+    let mut rng = rng(seed ^ 0x3c5);
+    let mut img = || {
         (0..3 * size * size)
-            .map(|_| rng.next())
+            .map(|_| rng.gen::<f64>())
             .collect::<Vec<f64>>()
     };
-    let (i1, i2) = (img(&mut rng), img(&mut rng));
+    let (i1, i2) = (img(), img());
     let tape = net
         .forward_to_level(&i1, &i2, size, size, levels - 1)
         .expect("forward");
     let cot: Vec<Vec<f64>> = (0..levels)
         .map(|l| {
             let n = tape.level_flow(l).expect("level").len();
-            (0..n).map(|_| rng.next() * 2.0 - 1.0).collect()
+            symmetric(&mut rng, n)
         })
         .collect();
     let mut grads = net.zeros_like();
@@ -423,9 +406,9 @@ fn multiscale_weight_gradients_match_finite_differences() {
 /// weights (uniform), without the `1/Σw` normalisation or with a wrong sign changes entries by
 /// O(0.01–1) and fails; a 1.5× gradient is checked to fail too.
 fn check_weighted_pixel_loss(seed: u64, hw: usize, kind: flow::train::Loss) {
-    let mut rng = Rng(seed);
+    let mut rng = rng(seed);
     let mut vec_of = |n: usize, lo: f64, hi: f64| -> Vec<f64> {
-        (0..n).map(|_| lo + (hi - lo) * rng.next()).collect()
+        (0..n).map(|_| rng.gen_range(lo..hi)).collect()
     };
     let flow = vec_of(2 * hw, -2.0, 2.0);
     let truth: Vec<f64> = flow

@@ -18,39 +18,20 @@
 //! `n − 1` (positions outside the image are kept ≥ 0.1 px outside, where the gradient is exactly 0 on
 //! both sides).
 
-use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
+use gradient_checks::{central_differences, compare, rng, symmetric, GradientChecker, Tolerance};
 use nn::*;
 use proptest::prelude::*;
+use rand::Rng;
 
 const H: f64 = 1e-6;
 const TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
 
-struct Rng(u64);
-impl Rng {
-    fn new(seed: u64) -> Self {
-        Self(seed ^ 0x9E37_79B9_7F4A_7C15)
-    }
-    /// Uniform in [-1, 1).
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        ((z >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
-    }
-    fn vec(&mut self, n: usize) -> Vec<f64> {
-        (0..n).map(|_| self.next()).collect()
-    }
-    /// Values with |x| in [0.05, 1] (away from the ReLU kink).
-    fn away_from_zero(&mut self, n: usize) -> Vec<f64> {
-        (0..n)
-            .map(|_| {
-                let v = self.next();
-                v.signum() * (0.05 + 0.95 * v.abs())
-            })
-            .collect()
-    }
+/// `n` values with |x| uniform in [0.05, 1) and a random sign (away from the ReLU kink).
+fn away_from_zero(rng: &mut impl Rng, n: usize) -> Vec<f64> {
+    symmetric(rng, n)
+        .into_iter()
+        .map(|v| v.signum() * (0.05 + 0.95 * v.abs()))
+        .collect()
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -87,10 +68,10 @@ proptest! {
 
     #[test]
     fn dense_gradients(seed in any::<u64>(), batch in 1usize..4, inputs in 1usize..6, outputs in 1usize..5) {
-        let mut r = Rng::new(seed);
+        let mut r = rng(seed);
         let s = DenseShape { batch, inputs, outputs };
-        let (x, w, b) = (r.vec(batch * inputs), r.vec(outputs * inputs), r.vec(outputs));
-        let g = r.vec(batch * outputs);
+        let (x, w, b) = (symmetric(&mut r, batch * inputs), symmetric(&mut r, outputs * inputs), symmetric(&mut r, outputs));
+        let g = symmetric(&mut r, batch * outputs);
         let fwd = |x: &[f64], w: &[f64], b: &[f64]| {
             let mut y = vec![0.0; batch * outputs];
             dense_forward(s, x, w, Some(b), &mut y).expect("shape");
@@ -109,10 +90,10 @@ proptest! {
 
     #[test]
     fn activation_gradients(seed in any::<u64>(), n in 1usize..40, slope in 0.01f64..0.3) {
-        let mut r = Rng::new(seed);
-        let x = r.away_from_zero(n);
-        let xs: Vec<f64> = r.vec(n).iter().map(|v| 6.0 * v).collect();
-        let g = r.vec(n);
+        let mut r = rng(seed);
+        let x = away_from_zero(&mut r, n);
+        let xs: Vec<f64> = symmetric(&mut r, n).iter().map(|v| 6.0 * v).collect();
+        let g = symmetric(&mut r, n);
         let mut c = GradientChecker::new();
         let run = |f: &dyn Fn(&[f64], &mut [f64]), p: &[f64]| {
             let mut y = vec![0.0; p.len()];
@@ -144,10 +125,10 @@ proptest! {
     ) {
         let (kernel, pad) = kp;
         prop_assume!(height + 2 * pad >= kernel && width + 2 * pad >= kernel);
-        let mut r = Rng::new(seed);
+        let mut r = rng(seed);
         let s = Conv2dShape { batch, c_in, c_out, height, width, kernel, pad };
-        let (x, w, b) = (r.vec(s.input_len()), r.vec(s.weight_len()), r.vec(c_out));
-        let g = r.vec(s.output_len());
+        let (x, w, b) = (symmetric(&mut r, s.input_len()), symmetric(&mut r, s.weight_len()), symmetric(&mut r, c_out));
+        let g = symmetric(&mut r, s.output_len());
         let fwd = |x: &[f64], w: &[f64], b: &[f64]| {
             let mut y = vec![0.0; s.output_len()];
             conv2d_forward(s, x, w, Some(b), &mut y).expect("shape");
@@ -167,9 +148,9 @@ proptest! {
 
     #[test]
     fn avg_pool_gradients(seed in any::<u64>(), planes in 1usize..4, h in 1usize..8, w in 1usize..8) {
-        let mut r = Rng::new(seed);
-        let x = r.vec(planes * h * w);
-        let g = r.vec(planes * pooled_size(h) * pooled_size(w));
+        let mut r = rng(seed);
+        let x = symmetric(&mut r, planes * h * w);
+        let g = symmetric(&mut r, planes * pooled_size(h) * pooled_size(w));
         let mut dx = vec![f64::NAN; x.len()];
         avg_pool2x2_backward(planes, h, w, &g, &mut dx).expect("shape");
         let mut c = GradientChecker::new();
@@ -191,9 +172,9 @@ proptest! {
         wo in 1usize..12,
         align_corners in any::<bool>(),
     ) {
-        let mut r = Rng::new(seed);
-        let x = r.vec(planes * h * w);
-        let g = r.vec(planes * ho * wo);
+        let mut r = rng(seed);
+        let x = symmetric(&mut r, planes * h * w);
+        let g = symmetric(&mut r, planes * ho * wo);
         let mut dx = vec![f64::NAN; x.len()];
         resize_bilinear_backward(planes, h, w, ho, wo, align_corners, &g, &mut dx).expect("shape");
         let mut c = GradientChecker::new();
@@ -207,9 +188,9 @@ proptest! {
 
     #[test]
     fn warp_gradients(seed in any::<u64>(), batch in 1usize..3, channels in 1usize..4, h in 2usize..7, w in 2usize..7) {
-        let mut r = Rng::new(seed);
-        let img = r.vec(batch * channels * h * w);
-        let g = r.vec(img.len());
+        let mut r = rng(seed);
+        let img = symmetric(&mut r, batch * channels * h * w);
+        let g = symmetric(&mut r, img.len());
         // Sample positions in [-1.5, n + 0.5], then moved ≥ 0.1 px away from integers (cell edges and
         // the clamping borders 0 and n-1 are integers).
         let mut flow = vec![0.0; batch * 2 * h * w];
@@ -217,7 +198,7 @@ proptest! {
             for (axis, n) in [(0usize, w), (1, h)] {
                 for y in 0..h {
                     for x in 0..w {
-                        let mut pos = -1.5 + (r.next() * 0.5 + 0.5) * (n as f64 + 2.0);
+                        let mut pos = -1.5 + r.gen::<f64>() * (n as f64 + 2.0);
                         let frac = pos - pos.floor();
                         if frac < 0.1 {
                             pos += 0.1;

@@ -23,8 +23,9 @@
 //! Proptest case counts (dev profile, ~seconds each): 48 oracle scenes, 24 FD scenes, 12 SH scenes.
 
 use gaussians::covariance::{covariance_3d, covariance_3d_backward, Mat3};
-use gradient_checks::{central_differences, GradientChecker, Tolerance};
+use gradient_checks::{central_differences, rng, GradientChecker, Tolerance};
 use proptest::prelude::*;
+use rand::Rng;
 use rasterize_cpu::{
     render, render_backward, render_cov, render_cov_backward, render_sh, render_sh_backward,
     Camera, Cotangents, CovSplats, RasterError, RenderSettings, ShSplats, Splats,
@@ -37,22 +38,6 @@ const ORACLE_TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
 
 // ---------------------------------------------------------------------------------------------
 // Scenes.
-
-/// A small deterministic generator (SplitMix64) for scene details below the proptest knobs.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 #[derive(Clone, Debug)]
 struct Scene {
@@ -115,23 +100,23 @@ fn rot_from_quat(q: [f64; 4]) -> [[f64; 3]; 3] {
 
 /// A camera with an off-centre principal point and a random pose; image sizes are not multiples of
 /// the tile size so edge tiles are partial.
-fn random_camera(rng: &mut Rng) -> Camera {
-    let w = rng.uniform(20.0, 52.0).floor();
-    let h = rng.uniform(18.0, 44.0).floor();
-    let fx = rng.uniform(25.0, 60.0);
-    let fy = fx * rng.uniform(0.85, 1.15);
-    let cx = w * 0.5 + rng.uniform(-6.0, 6.0);
-    let cy = h * 0.5 + rng.uniform(-6.0, 6.0);
+fn random_camera(rng: &mut impl Rng) -> Camera {
+    let w = rng.gen_range(20.0f64..52.0).floor();
+    let h = rng.gen_range(18.0f64..44.0).floor();
+    let fx = rng.gen_range(25.0..60.0);
+    let fy = fx * rng.gen_range(0.85..1.15);
+    let cx = w * 0.5 + rng.gen_range(-6.0..6.0);
+    let cy = h * 0.5 + rng.gen_range(-6.0..6.0);
     let r = rot_from_quat([
         1.0,
-        rng.uniform(-0.3, 0.3),
-        rng.uniform(-0.3, 0.3),
-        rng.uniform(-0.3, 0.3),
+        rng.gen_range(-0.3..0.3),
+        rng.gen_range(-0.3..0.3),
+        rng.gen_range(-0.3..0.3),
     ]);
     let t = [
-        rng.uniform(-0.5, 0.5),
-        rng.uniform(-0.5, 0.5),
-        rng.uniform(-0.5, 0.5),
+        rng.gen_range(-0.5..0.5),
+        rng.gen_range(-0.5..0.5),
+        rng.gen_range(-0.5..0.5),
     ];
     let mut m = [[0.0; 4]; 4];
     for i in 0..3 {
@@ -165,7 +150,7 @@ const ANCHOR: usize = 100;
 /// clamp and, stacked, the early stop), 6 overlapping the previous one, 7 off-screen or behind,
 /// 8 centred beyond the Jacobian clamp limits but large enough to reach the image.
 fn random_scene(seed: u64, kinds: &[usize], c: usize) -> Scene {
-    let mut rng = Rng(seed);
+    let mut rng = rng(seed);
     let cam = random_camera(&mut rng);
     let (w, h) = (f64::from(cam.width), f64::from(cam.height));
     let mut s = Scene {
@@ -176,64 +161,60 @@ fn random_scene(seed: u64, kinds: &[usize], c: usize) -> Scene {
         logits: vec![],
         channels: vec![],
         c,
-        background: (0..c).map(|_| rng.uniform(0.0, 1.0)).collect(),
+        background: (0..c).map(|_| rng.gen_range(0.0..1.0)).collect(),
         covs: None,
     };
     let mut prev_uvz = (w * 0.5, h * 0.5, 2.0);
     // Kind 8 = an anchor: an ordinary Gaussian in the middle of the image, so every scene has
     // non-zero gradients whatever the drawn kinds.
     for &kind in std::iter::once(&ANCHOR).chain(kinds) {
-        let mut u = rng.uniform(-0.1 * w, 1.1 * w);
-        let mut v = rng.uniform(-0.1 * h, 1.1 * h);
-        let mut z = rng.uniform(1.0, 4.0);
+        let mut u = rng.gen_range(-0.1 * w..1.1 * w);
+        let mut v = rng.gen_range(-0.1 * h..1.1 * h);
+        let mut z: f64 = rng.gen_range(1.0..4.0);
         // Log-scale giving a footprint of `px` pixels: σ_world ≈ px · z / f.
-        let mut px = rng.uniform(1.5, 6.0);
-        let mut logit = rng.uniform(-2.0, 2.5);
+        let mut px = rng.gen_range(1.5..6.0);
+        let mut logit = rng.gen_range(-2.0..2.5);
         match kind {
-            1 => px = rng.uniform(0.05, 0.4),
-            2 => px = rng.uniform(20.0, 60.0),
+            1 => px = rng.gen_range(0.05..0.4),
+            2 => px = rng.gen_range(20.0..60.0),
             3 => {
-                z = rng.uniform(0.25, 0.45);
-                px = rng.uniform(4.0, 20.0);
+                z = rng.gen_range(0.25..0.45);
+                px = rng.gen_range(4.0..20.0);
             }
             4 => {
-                u = 16.0 * (1.0 + (rng.uniform(0.0, w / 16.0 - 1.0)).floor().max(0.0))
-                    + rng.uniform(-1.5, 1.5);
-                v = 16.0 * (rng.uniform(0.0, h / 16.0)).floor() + rng.uniform(-1.5, 1.5);
+                u = 16.0 * (1.0 + (rng.gen_range(0.0..w / 16.0 - 1.0)).floor().max(0.0))
+                    + rng.gen_range(-1.5..1.5);
+                v = 16.0 * (rng.gen_range(0.0..h / 16.0)).floor() + rng.gen_range(-1.5..1.5);
             }
             5 => {
-                logit = rng.uniform(5.0, 9.0);
-                px = rng.uniform(4.0, 10.0);
-                u = rng.uniform(0.2 * w, 0.8 * w);
-                v = rng.uniform(0.2 * h, 0.8 * h);
+                logit = rng.gen_range(5.0..9.0);
+                px = rng.gen_range(4.0..10.0);
+                u = rng.gen_range(0.2 * w..0.8 * w);
+                v = rng.gen_range(0.2 * h..0.8 * h);
             }
             6 => {
-                u = prev_uvz.0 + rng.uniform(-2.0, 2.0);
-                v = prev_uvz.1 + rng.uniform(-2.0, 2.0);
-                z = prev_uvz.2 + rng.uniform(0.05, 0.5);
+                u = prev_uvz.0 + rng.gen_range(-2.0..2.0);
+                v = prev_uvz.1 + rng.gen_range(-2.0..2.0);
+                z = prev_uvz.2 + rng.gen_range(0.05..0.5);
             }
             8 => {
                 // Limits are at −0.15·W and 1.15·W for a centred principal point.
-                u = if rng.uniform(0.0, 1.0) < 0.5 {
+                u = if rng.gen_bool(0.5) {
                     -0.35 * w
                 } else {
                     1.35 * w
                 };
-                px = rng.uniform(0.3 * w, 0.6 * w);
+                px = rng.gen_range(0.3 * w..0.6 * w);
             }
             ANCHOR => {
-                u = rng.uniform(0.3 * w, 0.7 * w);
-                v = rng.uniform(0.3 * h, 0.7 * h);
+                u = rng.gen_range(0.3 * w..0.7 * w);
+                v = rng.gen_range(0.3 * h..0.7 * h);
             }
             7 => {
-                if rng.uniform(0.0, 1.0) < 0.5 {
-                    z = rng.uniform(-2.0, 0.15);
+                if rng.gen_bool(0.5) {
+                    z = rng.gen_range(-2.0..0.15);
                 } else {
-                    u = if rng.uniform(0.0, 1.0) < 0.5 {
-                        -300.0
-                    } else {
-                        w + 300.0
-                    };
+                    u = if rng.gen_bool(0.5) { -300.0 } else { w + 300.0 };
                 }
             }
             _ => {}
@@ -243,19 +224,19 @@ fn random_scene(seed: u64, kinds: &[usize], c: usize) -> Scene {
         let means = unproject(&cam, u, v, z);
         s.means.push(means);
         s.log_scales.push([
-            base + rng.uniform(-0.7, 0.7),
-            base + rng.uniform(-0.7, 0.7),
-            base + rng.uniform(-0.7, 0.7),
+            base + rng.gen_range(-0.7..0.7),
+            base + rng.gen_range(-0.7..0.7),
+            base + rng.gen_range(-0.7..0.7),
         ]);
         s.quats.push([
-            rng.uniform(-1.0, 1.0),
-            rng.uniform(-1.0, 1.0),
-            rng.uniform(-1.0, 1.0),
-            rng.uniform(-1.0, 1.0),
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
         ]);
         s.logits.push(logit);
         for _ in 0..c {
-            s.channels.push(rng.uniform(-0.5, 1.5));
+            s.channels.push(rng.gen_range(-0.5..1.5));
         }
     }
     s
@@ -530,11 +511,11 @@ fn oracle_param_grad(s: &Scene, i: usize, d_proj: &[f64; 7]) -> Vec<f64> {
 /// loss that reads some rows only, as the flow loss's resize does), which the rasterizer's
 /// backward skips.
 fn random_cotangent(s: &Scene, seed: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let mut rng = Rng(seed ^ 0xC0FFEE);
+    let mut rng = rng(seed ^ 0xC0FFEE);
     let (w, hw) = (s.cam.width as usize, (s.cam.width * s.cam.height) as usize);
-    let mut ci: Vec<f64> = (0..s.c * hw).map(|_| rng.uniform(-1.0, 1.0)).collect();
-    let mut ca: Vec<f64> = (0..hw).map(|_| rng.uniform(-1.0, 1.0)).collect();
-    let mut cd: Vec<f64> = (0..hw).map(|_| rng.uniform(-0.3, 0.3)).collect();
+    let mut ci: Vec<f64> = (0..s.c * hw).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let mut ca: Vec<f64> = (0..hw).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let mut cd: Vec<f64> = (0..hw).map(|_| rng.gen_range(-0.3..0.3)).collect();
     if seed % 2 == 1 {
         let dead = |p: usize| (p % hw) / w % 4 >= 2;
         for (p, v) in ci.iter_mut().enumerate() {
@@ -728,10 +709,10 @@ proptest! {
         // Colours from SH (view dependent): the means also get the view-direction gradient.
         let s = random_scene(seed, &kinds, 0);
         let k = gaussians::sh::num_sh_coeffs(degree);
-        let mut rng = Rng(seed ^ 0x5151);
+        let mut rng = rng(seed ^ 0x5151);
         // DC keeps colours near 0.5 and higher bands small, away from the clamp at 0.
         let sh: Vec<f64> = (0..s.n() * k * 3)
-            .map(|j| if (j / 3) % k == 0 { rng.uniform(-0.3, 0.3) } else { rng.uniform(-0.1, 0.1) })
+            .map(|j| if (j / 3) % k == 0 { rng.gen_range(-0.3..0.3) } else { rng.gen_range(-0.1..0.1) })
             .collect();
         let (ci, _, _) = random_cotangent(&s, seed);
         let hw = (s.cam.width * s.cam.height) as usize;
@@ -1073,27 +1054,27 @@ fn f32_scene(
 ) {
     let cam = Camera::looking_down_z(w, h, f64::from(w) * 0.9, f64::from(w) * 0.9)
         .unwrap_or_else(|e| panic!("{e}"));
-    let mut rng = Rng(seed);
+    let mut rng = rng(seed);
     let mut means = Vec::new();
     let mut ls = Vec::new();
     let mut q = Vec::new();
     let mut op = Vec::new();
     let mut ch = Vec::new();
     for _ in 0..n {
-        let z = rng.uniform(1.0, 5.0);
+        let z = rng.gen_range(1.0..5.0);
         let p = unproject(
             &cam,
-            rng.uniform(-5.0, f64::from(w) + 5.0),
-            rng.uniform(-5.0, f64::from(h) + 5.0),
+            rng.gen_range(-5.0..f64::from(w) + 5.0),
+            rng.gen_range(-5.0..f64::from(h) + 5.0),
             z,
         );
         means.push(p.map(|v| v as f32));
-        let base = (rng.uniform(0.5, 8.0) * z / cam.fx).ln();
-        ls.push([0, 1, 2].map(|_| (base + rng.uniform(-0.5, 0.5)) as f32));
-        q.push([0, 1, 2, 3].map(|_| rng.uniform(-1.0, 1.0) as f32));
-        op.push(rng.uniform(-2.0, 6.0) as f32);
+        let base = (rng.gen_range(0.5..8.0) * z / cam.fx).ln();
+        ls.push([0, 1, 2].map(|_| (base + rng.gen_range(-0.5..0.5)) as f32));
+        q.push([0, 1, 2, 3].map(|_| rng.gen_range(-1.0..1.0) as f32));
+        op.push(rng.gen_range(-2.0..6.0) as f32);
         for _ in 0..3 {
-            ch.push(rng.uniform(0.0, 1.0) as f32);
+            ch.push(rng.gen_range(0.0..1.0) as f32);
         }
     }
     (cam, means, ls, q, op, ch)

@@ -11,7 +11,7 @@
 //! Rodrigues is also checked at tiny angles (|r| ≤ 1e-3), the Taylor branch, with h = 1e-7 so that the
 //! probe stays on that branch for most coordinates; the branches agree to ~1e-13 at the switch.
 
-use gradient_checks::{central_differences, GradientChecker, Tolerance};
+use gradient_checks::{central_differences, symmetric_from_seed, GradientChecker, Tolerance};
 use proptest::prelude::*;
 use smpl_deform::fk::{forward_kinematics, forward_kinematics_backward};
 use smpl_deform::lbs::{lbs_point, lbs_point_backward, lbs_rotation, lbs_rotation_backward};
@@ -25,21 +25,6 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// A deterministic pseudo-random vector in [-1, 1] from a seed (cotangents, joint positions).
-fn lcg_vec(seed: u64, n: usize) -> Vec<f64> {
-    let mut s = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        })
-        .collect()
-}
-
 fn quat_strategy() -> impl Strategy<Value = [f64; 4]> {
     prop::array::uniform4(-1.0f64..1.0).prop_filter("quaternion norm >= 0.3", |q| {
         q.iter().map(|v| v * v).sum::<f64>() > 0.09
@@ -49,7 +34,7 @@ fn quat_strategy() -> impl Strategy<Value = [f64; 4]> {
 fn rigidish_bones(seed: u64, nb: usize) -> Vec<Affine<f64>> {
     // Rotations from random axis-angles plus random translations (bone transforms in LBS are rigid,
     // but the backward must not assume it, so add a small non-rigid perturbation too).
-    let v = lcg_vec(seed, nb * 18);
+    let v = symmetric_from_seed(seed, nb * 18);
     (0..nb)
         .map(|b| {
             let r = rodrigues([2.0 * v[18 * b], 2.0 * v[18 * b + 1], 2.0 * v[18 * b + 2]]);
@@ -66,7 +51,7 @@ fn rigidish_bones(seed: u64, nb: usize) -> Vec<Affine<f64>> {
 }
 
 fn convex_weights(seed: u64, nb: usize) -> Vec<f64> {
-    let v = lcg_vec(seed, nb);
+    let v = symmetric_from_seed(seed, nb);
     let e: Vec<f64> = v.iter().map(|x| (3.0 * x).exp()).collect();
     let s: f64 = e.iter().sum();
     e.iter().map(|x| x / s).collect()
@@ -80,7 +65,7 @@ proptest! {
         r in prop::array::uniform3(-3.0f64..3.0),
         seed in any::<u64>(),
     ) {
-        let g = lcg_vec(seed, 9);
+        let g = symmetric_from_seed(seed, 9);
         let loss = |x: &[f64]| dot(&rodrigues([x[0], x[1], x[2]]), &g);
         let mut gm = [0.0; 9];
         gm.copy_from_slice(&g);
@@ -96,7 +81,7 @@ proptest! {
         r in prop::array::uniform3(-1e-3f64..1e-3),
         seed in any::<u64>(),
     ) {
-        let g = lcg_vec(seed, 9);
+        let g = symmetric_from_seed(seed, 9);
         let loss = |x: &[f64]| dot(&rodrigues([x[0], x[1], x[2]]), &g);
         let mut gm = [0.0; 9];
         gm.copy_from_slice(&g);
@@ -114,16 +99,16 @@ proptest! {
         scale in 0.1f64..1.5,
     ) {
         let nj = SMPL_PARENTS.len();
-        let pose: Vec<f64> = lcg_vec(seed, 3 * nj).iter().map(|x| scale * x).collect();
+        let pose: Vec<f64> = symmetric_from_seed(seed, 3 * nj).iter().map(|x| scale * x).collect();
         let transl = {
-            let t = lcg_vec(seed ^ 1, 3);
+            let t = symmetric_from_seed(seed ^ 1, 3);
             [t[0], t[1], t[2]]
         };
-        let joints: Vec<[f64; 3]> = lcg_vec(seed ^ 2, 3 * nj)
+        let joints: Vec<[f64; 3]> = symmetric_from_seed(seed ^ 2, 3 * nj)
             .chunks(3)
             .map(|c| [c[0], c[1], c[2]])
             .collect();
-        let d_a: Vec<Affine<f64>> = lcg_vec(seed ^ 3, 12 * nj)
+        let d_a: Vec<Affine<f64>> = symmetric_from_seed(seed ^ 3, 12 * nj)
             .chunks(12)
             .map(|c| {
                 let mut a = [0.0; 12];
@@ -131,7 +116,7 @@ proptest! {
                 a
             })
             .collect();
-        let d_j: Vec<[f64; 3]> = lcg_vec(seed ^ 4, 3 * nj)
+        let d_j: Vec<[f64; 3]> = symmetric_from_seed(seed ^ 4, 3 * nj)
             .chunks(3)
             .map(|c| [c[0], c[1], c[2]])
             .collect();
@@ -162,7 +147,7 @@ proptest! {
         let nb = 24;
         let bones = rigidish_bones(seed, nb);
         let w = convex_weights(seed ^ 7, nb);
-        let g = lcg_vec(seed ^ 9, 3);
+        let g = symmetric_from_seed(seed ^ 9, 3);
         let d_out = [g[0], g[1], g[2]];
         let mut d_w = vec![0.0; nb];
         let mut d_b = vec![[0.0; 12]; nb];
@@ -198,7 +183,7 @@ proptest! {
         let nb = 24;
         let bones = rigidish_bones(seed, nb);
         let w = convex_weights(seed ^ 7, nb);
-        let g = lcg_vec(seed ^ 11, 9);
+        let g = symmetric_from_seed(seed ^ 11, 9);
         let mut gm = [0.0; 9];
         gm.copy_from_slice(&g);
         let mut d_w = vec![0.0; nb];
@@ -288,14 +273,14 @@ mod deformation_networks {
         let mut nonrigid = NonRigidNet::<f64>::new(&box_vertices, 8, seed).expect("net");
         // The real init zeroes the last layer; perturb it so every layer gets a gradient.
         let np = nonrigid.mlp.params.len();
-        let noise = lcg_vec(seed ^ 21, np);
+        let noise = symmetric_from_seed(seed ^ 21, np);
         for (p, r) in nonrigid.mlp.params.iter_mut().zip(&noise) {
             if *p == 0.0 {
                 *p = 0.2 * r;
             }
         }
         let field = SkinningField::<f64>::new(&box_vertices, 8, seed ^ 5).expect("field");
-        let v = lcg_vec(seed ^ 31, N * 10);
+        let v = symmetric_from_seed(seed ^ 31, N * 10);
         Setup {
             nonrigid,
             field,
@@ -322,11 +307,11 @@ mod deformation_networks {
                 })
                 .collect(),
             bones: rigidish_bones(seed ^ 41, 24),
-            pose_code: lcg_vec(seed ^ 51, NUM_POSE_FEATURES)
+            pose_code: symmetric_from_seed(seed ^ 51, NUM_POSE_FEATURES)
                 .iter()
                 .map(|x| 0.3 * x)
                 .collect(),
-            cot: lcg_vec(seed ^ 61, N * (3 + 3 + 9 + NR_FEATURE_DIM)),
+            cot: symmetric_from_seed(seed ^ 61, N * (3 + 3 + 9 + NR_FEATURE_DIM)),
         }
     }
 
@@ -448,7 +433,7 @@ mod pose_blend_shapes {
     }
 
     fn body(seed: u64) -> Body {
-        let v = lcg_vec(seed, NV * 3 + NUM_JOINTS * 3);
+        let v = symmetric_from_seed(seed, NV * 3 + NUM_JOINTS * 3);
         let mut weights = Vec::with_capacity(NV * NUM_JOINTS);
         for k in 0..NV {
             weights.extend(
@@ -464,7 +449,7 @@ mod pose_blend_shapes {
                 .map(|c| [0.5 * c[0], c[1], 0.3 * c[2]])
                 .collect(),
             weights,
-            posedirs: lcg_vec(seed ^ 99, NV * 3 * NUM_POSE_FEATURES)
+            posedirs: symmetric_from_seed(seed ^ 99, NV * 3 * NUM_POSE_FEATURES)
                 .iter()
                 .map(|&x| (0.05 * x) as f32)
                 .collect(),
@@ -487,9 +472,9 @@ mod pose_blend_shapes {
                 weights: &b.weights,
                 posedirs: Some(&b.posedirs),
             };
-            let pose: Vec<f64> = lcg_vec(seed ^ 5, 3 * NUM_JOINTS).iter().map(|x| scale * x).collect();
+            let pose: Vec<f64> = symmetric_from_seed(seed ^ 5, 3 * NUM_JOINTS).iter().map(|x| scale * x).collect();
             let transl = [0.1, -0.2, 0.3];
-            let cot: Vec<[f64; 3]> = lcg_vec(seed ^ 6, NV * 3).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let cot: Vec<[f64; 3]> = symmetric_from_seed(seed ^ 6, NV * 3).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
             let loss = |p: &[f64], t: [f64; 3]| {
                 let (v, _) = pose_vertices(&posing, p, t);
                 v.iter().zip(&cot).map(|(a, c)| dot(a, c)).sum::<f64>()
