@@ -182,7 +182,7 @@ pub fn run(args: Args) -> Result<()> {
                 speed,
                 ..::synth::SynthConfig::preset(::synth::Preset::Default)
             };
-            let data = crate::reconstruct::benchmark(&cfg, &format!("default-{label}"))?;
+            let data = crate::common::benchmark(&cfg, &format!("default-{label}"))?;
             for r in selected(&[
                 "one-hot",
                 "event-loss",
@@ -196,7 +196,7 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         let data = match &args.data {
             Some(d) => d.clone(),
-            None => crate::reconstruct::default_benchmark()?,
+            None => crate::common::default_benchmark()?,
         };
         scene_name = data
             .file_name()
@@ -206,7 +206,7 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let out = args.out.clone().unwrap_or_else(|| {
-        crate::reconstruct::target_dir()
+        crate::common::target_dir()
             .join("ablate")
             .join(format!("{scene_name}-{preset_name}"))
     });

@@ -133,7 +133,7 @@ pub fn run(args: Args) -> Result<()> {
         .with_context(|| format!("loading the model {}", args.model.display()))?;
     let data_dir = match &args.data {
         Some(d) => d.clone(),
-        None => crate::reconstruct::default_benchmark()?,
+        None => crate::common::default_benchmark()?,
     };
     let data = train::data::load_dataset(&data_dir)
         .with_context(|| format!("loading the scene {}", data_dir.display()))?;

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use events::io::EventReader;
 use events::{EventStream, SensorSize};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 
 /// Arguments of `events`.
 #[derive(clap::Args, Debug)]
@@ -103,19 +103,14 @@ enum Sub {
     },
 }
 
-fn progress(r: &dyn EventReader) -> ProgressBar {
-    let pb = ProgressBar::new(r.total_bytes().unwrap_or(0));
-    pb.set_style(
-        ProgressStyle::with_template("{bar:40} {bytes}/{total_bytes} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    pb
+fn progress(r: &dyn EventReader) -> Result<ProgressBar> {
+    crate::common::byte_progress_bar(r.total_bytes().unwrap_or(0), "read")
 }
 
 /// Reads a whole file with a progress bar on stderr (hidden for small files).
 fn read_with_progress(path: &Path) -> Result<(EventStream, &'static str)> {
     let mut r = events::open_events(path).with_context(|| format!("opening {}", path.display()))?;
-    let pb = progress(r.as_ref());
+    let pb = progress(r.as_ref())?;
     if r.total_bytes().unwrap_or(0) < (64 << 20) {
         pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
@@ -254,7 +249,7 @@ pub fn run(args: Args) -> Result<()> {
             };
             let mut sim: Option<events::EventSimulator> = None;
             let mut all = EventStream::new();
-            let pb = ProgressBar::new(paths.len() as u64);
+            let pb = crate::common::progress_bar(paths.len() as u64, "simulate frames")?;
             for (k, p) in paths.iter().enumerate() {
                 let img = image::open(p)
                     .with_context(|| format!("reading {}", p.display()))?

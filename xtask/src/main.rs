@@ -11,6 +11,7 @@ mod bench_flow;
 mod bench_raster;
 mod body;
 mod body_convert;
+mod common;
 mod curve;
 mod eval_cmd;
 mod events_cmd;
@@ -109,16 +110,4 @@ fn main() -> Result<()> {
         Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
         Command::Render(args) => render::run(args),
     }
-}
-
-/// A progress bar with elapsed time, ETA and a message slot, in the project's one style.
-pub fn progress_bar(len: u64, label: &str) -> Result<indicatif::ProgressBar> {
-    let bar = indicatif::ProgressBar::new(len);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(&format!(
-            "{{spinner}} {label} [{{bar:30}}] {{pos}}/{{len}} {{elapsed}} elapsed, ETA {{eta}}  {{msg}}"
-        ))?
-        .progress_chars("=> "),
-    );
-    Ok(bar)
 }

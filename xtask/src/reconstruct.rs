@@ -7,6 +7,7 @@
 //! `model/` (see `train::export`), `model/posed_frame_NNNNNN.ply` (a standard 3DGS PLY of the first
 //! training frame, colours baked to SH degree 0), `eval/strip_NNNNNN.png`, `metrics.json`, `curve.png`.
 
+use crate::common::{default_benchmark, shipped_flow_network, target_dir};
 use crate::eval_cmd::{write_evaluation, EvalSummary};
 use anyhow::{bail, Context, Result};
 use std::io::Write;
@@ -49,11 +50,6 @@ pub struct Args {
     pub stop_after: Option<usize>,
 }
 
-/// The project's own flow-network weights (`cargo xtask train-flow` writes them there).
-pub fn shipped_flow_network() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data-fixtures/flow/spynet-synthetic.safetensors")
-}
-
 /// Loads the frozen flow network of `config` and prepares the flow pairs of `ctx`.
 fn enable_flow(
     ctx: &mut TrainingData,
@@ -89,52 +85,11 @@ fn enable_flow(
         && config.flow_measure == FlowMeasure::Network
     {
         eprintln!(
-            "note: the shipped flow weights are weak (held-out EPE ratio 0.56, 0.45 on the \
-             benchmark's moving pixels); with them, flow targets from the generator or the events \
-             lower PSNR (ground-truth flow: -0.57 dB in the human box at λ 0.015, -2.5 dB at 0.05, \
-             quick preset), while targets from the same network on the sharp frames \
-             (--flow-source sharp-net) gain 0.2 dB (docs/BENCHMARKS.md, event supervision)."
+            "note: the shipped flow weights are weak, and with targets from the generator or the \
+             events the flow loss lowers PSNR; see docs/BENCHMARKS.md, \"Flow loss\"."
         );
     }
     Ok(())
-}
-
-/// The workspace's `target/` directory.
-pub fn target_dir() -> PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target"))
-}
-
-/// Generates the default synthetic benchmark under `target/benchmark/default` unless a complete copy
-/// made with the same generator settings is already there.
-pub fn default_benchmark() -> Result<PathBuf> {
-    benchmark(
-        &::synth::SynthConfig::preset(::synth::Preset::Default),
-        "default",
-    )
-}
-
-/// Generates the synthetic benchmark `cfg` under `target/benchmark/<name>` unless a complete copy made
-/// with the same generator settings and [`synth::GENERATOR_VERSION`] is already there (a `.complete`
-/// stamp holds both).
-pub fn benchmark(cfg: &::synth::SynthConfig, name: &str) -> Result<PathBuf> {
-    let dir = target_dir().join("benchmark").join(name);
-    if crate::synth::is_complete(&dir, cfg)? {
-        return Ok(dir);
-    }
-    eprintln!(
-        "generating the synthetic benchmark `{name}` into {} (once)",
-        dir.display()
-    );
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    crate::synth::remove_stamp(&dir)?;
-    let bar = crate::progress_bar(u64::from(cfg.frames), "synth")?;
-    ::synth::generate(cfg, &dir, &mut |done, _| bar.set_position(u64::from(done)))
-        .with_context(|| format!("generating the benchmark into {}", dir.display()))?;
-    bar.finish_and_clear();
-    crate::synth::write_stamp(&dir, cfg)?;
-    Ok(dir)
 }
 
 /// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).
@@ -278,7 +233,7 @@ pub fn run(args: Args) -> Result<()> {
             .open(&log_path)
             .with_context(|| format!("opening {}", log_path.display()))?,
     );
-    let bar = crate::progress_bar(config.steps as u64, "train")?;
+    let bar = crate::common::progress_bar(config.steps as u64, "train")?;
     bar.set_position(trainer.step as u64);
     let until = match args.stop_after {
         Some(n) => (trainer.step + n).min(config.steps),
@@ -374,36 +329,51 @@ pub fn run(args: Args) -> Result<()> {
             "event_threshold": config.event_threshold,
             "seed": config.seed,
             "threads": rayon::current_num_threads(),
-            "step_seconds_breakdown": breakdown,
+            "step_seconds_breakdown": breakdown
+                .iter()
+                .map(|&(name, seconds)| (name.to_string(), serde_json::json!(seconds)))
+                .collect::<serde_json::Map<_, _>>(),
         }),
     };
     write_evaluation(model, &ctx.body, &data, &out, &summary)?;
     crate::curve::write_curve(&log_path, &out.join("curve.png"))?;
     println!("model: {}", model_dir.display());
     println!(
-        "step time (mean of the last {} steps): {}",
+        "step time, mean of the last {} steps (ms):\n{}",
         recent.len(),
-        serde_json::to_string(&breakdown)?
+        step_time_table(&breakdown)
     );
     Ok(())
 }
 
-fn mean_times(recent: &[StepReport]) -> serde_json::Value {
+/// Mean seconds per step stage over `recent`, in the step's order, with their total.
+fn mean_times(recent: &[StepReport]) -> Vec<(&'static str, f64)> {
     let n = recent.len().max(1) as f64;
     let sum = |f: fn(&StepReport) -> f64| recent.iter().map(f).sum::<f64>() / n;
-    serde_json::json!({
-        "pose": sum(|r| r.times.pose),
-        "render": sum(|r| r.times.render),
-        "loss": sum(|r| r.times.loss),
-        "render_backward": sum(|r| r.times.render_backward),
-        "model_backward": sum(|r| r.times.model_backward),
-        "adam": sum(|r| r.times.adam),
-        "density": sum(|r| r.times.density),
-        "flow": sum(|r| r.times.flow),
-        "flow_network": sum(|r| r.times.flow_network),
-        "total": sum(|r| r.times.pose + r.times.render + r.times.loss + r.times.render_backward
-            + r.times.model_backward + r.times.adam + r.times.density + r.times.flow),
-    })
+    vec![
+        ("pose", sum(|r| r.times.pose)),
+        ("render", sum(|r| r.times.render)),
+        ("loss", sum(|r| r.times.loss)),
+        ("render_backward", sum(|r| r.times.render_backward)),
+        ("model_backward", sum(|r| r.times.model_backward)),
+        ("adam", sum(|r| r.times.adam)),
+        ("density", sum(|r| r.times.density)),
+        ("flow", sum(|r| r.times.flow)),
+        ("flow_network", sum(|r| r.times.flow_network)),
+        ("total", sum(|r| r.times.total())),
+    ]
+}
+
+/// The step-time breakdown of [`mean_times`] as a two-row text table in milliseconds.
+fn step_time_table(breakdown: &[(&str, f64)]) -> String {
+    let (mut names, mut values) = (String::new(), String::new());
+    for (name, seconds) in breakdown {
+        let ms = format!("{:.1}", seconds * 1e3);
+        let width = name.len().max(ms.len());
+        names.push_str(&format!("  {name:>width$}"));
+        values.push_str(&format!("  {ms:>width$}"));
+    }
+    format!("{names}\n{values}")
 }
 
 #[cfg(test)]

@@ -134,15 +134,8 @@ pub fn run(args: Args) -> Result<()> {
     cfg.validate().context("refusing the settings")?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    remove_stamp(&args.out)?;
-    let bar = indicatif::ProgressBar::new(u64::from(cfg.frames));
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} synth [{bar:40}] {pos}/{len} frames, {elapsed} elapsed, ETA {eta}",
-        )
-        .context("progress bar template")?
-        .progress_chars("=> "),
-    );
+    crate::common::remove_stamp(&args.out)?;
+    let bar = crate::common::progress_bar(u64::from(cfg.frames), "synth frames")?;
     let start = Instant::now();
     let stats = ::synth::generate(&cfg, &args.out, &mut |done, _| {
         bar.set_position(u64::from(done))
@@ -151,7 +144,7 @@ pub fn run(args: Args) -> Result<()> {
     bar.finish_and_clear();
     // The stamp `reconstruct` and `ablate` check, so that a benchmark generated here under
     // target/benchmark/<preset> with a preset's settings is not generated again by them.
-    write_stamp(&args.out, &cfg)?;
+    crate::common::write_stamp(&args.out, &cfg)?;
     let secs = start.elapsed().as_secs_f64();
     let p = &stats.psnr_blurred_vs_sharp;
     let f = &stats.flow;
@@ -206,40 +199,4 @@ fn rayon_threads() -> usize {
         .and_then(|v| v.parse().ok())
         .filter(|&n: &usize| n > 0)
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-}
-
-/// Name of the stamp file that marks a generated benchmark directory as complete.
-const COMPLETE_STAMP: &str = ".complete";
-
-/// The content of the [`COMPLETE_STAMP`] of a benchmark generated with `cfg`: the generator
-/// version and its settings, so that any change regenerates.
-fn stamp(cfg: &::synth::SynthConfig) -> Result<String> {
-    Ok(format!(
-        "generator {} {}",
-        ::synth::GENERATOR_VERSION,
-        serde_json::to_string(cfg).context("serialising the generator settings")?
-    ))
-}
-
-/// True if `dir` holds a complete benchmark generated with `cfg` by this generator version.
-pub fn is_complete(dir: &std::path::Path, cfg: &::synth::SynthConfig) -> Result<bool> {
-    let want = stamp(cfg)?;
-    Ok(std::fs::read_to_string(dir.join(COMPLETE_STAMP)).is_ok_and(|s| s == want))
-}
-
-/// Marks `dir` as a complete benchmark generated with `cfg` (after a successful generation).
-pub fn write_stamp(dir: &std::path::Path, cfg: &::synth::SynthConfig) -> Result<()> {
-    let marker = dir.join(COMPLETE_STAMP);
-    std::fs::write(&marker, stamp(cfg)?).with_context(|| format!("writing {}", marker.display()))
-}
-
-/// Removes `dir`'s [`COMPLETE_STAMP`] before (re)generating into it, so that an interrupted
-/// generation never leaves a stamp claiming the directory complete.
-pub fn remove_stamp(dir: &std::path::Path) -> Result<()> {
-    let marker = dir.join(COMPLETE_STAMP);
-    match std::fs::remove_file(&marker) {
-        Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e).with_context(|| format!("removing {}", marker.display())),
-    }
 }

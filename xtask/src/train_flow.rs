@@ -25,7 +25,6 @@ use flow::synthetic::PairConfig;
 use flow::train::{
     evaluate, evaluate_pairs, replicate_level, ExtraPairs, Optimizer, TrainConfig, Trainer,
 };
-use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 
 /// Optimiser choice on the command line.
@@ -279,15 +278,6 @@ fn save(net: &flow::SpyNet<f32>, out: &Path) -> Result<()> {
     flow::save_safetensors(net, out).with_context(|| format!("writing {}", out.display()))
 }
 
-fn progress_bar(total: usize) -> Result<ProgressBar> {
-    let bar = ProgressBar::new(total as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} eta {eta} {msg}")
-            .context("progress style")?,
-    );
-    Ok(bar)
-}
-
 /// Appends `value` to the window `recent`, keeps its last `len` values and returns their mean.
 fn running_mean(recent: &mut Vec<f64>, value: f64, len: usize) -> f64 {
     recent.push(value);
@@ -366,7 +356,7 @@ pub fn run(args: Args) -> Result<()> {
         extra_pairs: extra_pairs.clone(),
     };
     let start = std::time::Instant::now();
-    let log = |bar: &ProgressBar, line: String| bar.suspend(|| eprintln!("{line}"));
+    let log = |bar: &indicatif::ProgressBar, line: String| bar.suspend(|| eprintln!("{line}"));
     let net = match &args.init {
         Some(p) => {
             let net =
@@ -392,7 +382,7 @@ pub fn run(args: Args) -> Result<()> {
                 ..PairConfig::default()
             };
             let mut t = Trainer::new(config(1, pre, args.pretrain_batch, args.pretrain_lr));
-            let bar = progress_bar(args.pretrain_steps)?;
+            let bar = crate::common::progress_bar(args.pretrain_steps as u64, "pretrain")?;
             let mut recent = Vec::new();
             for s in 0..args.pretrain_steps {
                 let r = t.step_report(0)?;
@@ -432,7 +422,7 @@ pub fn run(args: Args) -> Result<()> {
     let steps: Vec<usize> = (0..args.levels)
         .map(|l| *args.steps.get(l).or(args.steps.last()).unwrap_or(&0))
         .collect();
-    let bar = progress_bar(steps.iter().sum())?;
+    let bar = crate::common::progress_bar(steps.iter().sum::<usize>() as u64, "train")?;
     let validation = |net: &flow::SpyNet<f32>| -> Result<f64> {
         if scene_validation.is_empty() {
             Ok(evaluate(net, args.eval_seed + 1, args.validation_pairs, &pairs)?.0)
@@ -491,7 +481,7 @@ pub fn run(args: Args) -> Result<()> {
                 ..config(args.levels, pairs, args.joint_batch, args.joint_lr)
             },
         );
-        let bar = progress_bar(args.joint_steps)?;
+        let bar = crate::common::progress_bar(args.joint_steps as u64, "joint")?;
         let mut best = validation(&joint.net)?;
         log(
             &bar,

@@ -117,7 +117,7 @@ training_options! {
     #[arg(value_parser = parse_rgb)]
     background: [f32; 3] = [0.0; 3],
     /// Near clipping plane of the rasterizer (m): Gaussians closer to the camera are not drawn.
-    near_plane: f64 = 0.2,
+    near_plane: f64 = rasterize_cpu::DEFAULT_NEAR_PLANE,
     /// Weight λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
     ssim_weight: f32 = 0.2,
     /// Weight of the skinning loss (learned weights vs the body's, on surface samples).

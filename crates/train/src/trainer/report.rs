@@ -57,3 +57,17 @@ pub struct StepReport {
     /// Stage timings.
     pub times: StageTimes,
 }
+
+impl StageTimes {
+    /// The step's wall time: every stage (`flow_network` is part of `flow`).
+    pub fn total(&self) -> f64 {
+        self.pose
+            + self.render
+            + self.loss
+            + self.render_backward
+            + self.model_backward
+            + self.adam
+            + self.density
+            + self.flow
+    }
+}
