@@ -14,7 +14,7 @@ use image::{Rgb, RgbImage};
 use std::path::Path;
 use std::path::PathBuf;
 use train::blend::SemanticMode;
-use train::config::{FlowSource, Preset, TrainOptions};
+use train::config::{FlowSource, TrainOptions};
 
 /// Arguments of `ablate`.
 #[derive(clap::Args, Debug)]
@@ -25,15 +25,10 @@ pub struct Args {
     /// Output directory (default: target/ablate/<data name>-<preset>).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Hyper-parameter preset of every run.
-    #[arg(long, default_value = "quick")]
-    pub preset: Preset,
-    /// TOML or JSON file overriding preset values for every run.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Training options of every run (each run then sets its own, e.g. --semantic, --event-loss).
-    #[command(flatten, next_help_heading = "Training options of every run")]
-    pub options: TrainOptions,
+    /// How every run is configured (each run then sets its own options, e.g. --semantic,
+    /// --event-loss, over these).
+    #[command(flatten)]
+    pub training: crate::reconstruct::TrainingArgs,
     /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
     /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net).
     #[arg(long, value_delimiter = ',')]
@@ -154,10 +149,7 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
-    let preset_name = match args.preset {
-        Preset::Quick => "quick",
-        Preset::Full => "full",
-    };
+    let preset_name = args.training.preset_name();
     // (row label, scene directory, run) in table order.
     let mut jobs: Vec<(String, PathBuf, &Run)> = Vec::new();
     let selected = |names: &[&str]| -> Vec<&'static Run> {
@@ -224,9 +216,10 @@ pub fn run(args: Args) -> Result<()> {
         let run_args = crate::reconstruct::Args {
             data: Some(data.clone()),
             out: Some(run_out.clone()),
-            preset: args.preset,
-            config: args.config.clone(),
-            options: args.options.overridden_by(&(r.options)()),
+            training: crate::reconstruct::TrainingArgs {
+                options: args.training.options.overridden_by(&(r.options)()),
+                ..args.training.clone()
+            },
             resume: false,
             stop_after: None,
         };

@@ -19,6 +19,43 @@ use train::data::TrainingData;
 use train::trainer::{StepReport, Trainer};
 use train::TrainError;
 
+/// How a run is configured — a preset, a config file over it and options over both — shared by
+/// `reconstruct` and `ablate` (where it applies to every run).
+#[derive(clap::Args, Clone, Debug)]
+pub struct TrainingArgs {
+    /// Hyper-parameter preset: quick (minutes on 2 cores) or full.
+    #[arg(long, default_value = "quick")]
+    pub preset: Preset,
+    /// TOML or JSON file overriding preset values (any training option below, in snake_case).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Training options: each overrides the preset and the --config file.
+    #[command(
+        flatten,
+        next_help_heading = "Training options (override the preset and --config)"
+    )]
+    pub options: TrainOptions,
+}
+
+impl TrainingArgs {
+    /// The preset's name as typed on the command line.
+    pub fn preset_name(&self) -> &'static str {
+        match self.preset {
+            Preset::Quick => "quick",
+            Preset::Full => "full",
+        }
+    }
+
+    /// The resolved configuration: preset, then the file, then the options.
+    pub fn resolve(&self) -> Result<TrainConfig> {
+        Ok(TrainConfig::resolve(
+            self.preset,
+            self.config.as_deref(),
+            &self.options,
+        )?)
+    }
+}
+
 /// Arguments of `reconstruct`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -29,19 +66,9 @@ pub struct Args {
     /// Output directory (default: target/reconstruct/<data name>-<preset>).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Hyper-parameter preset: quick (minutes on 2 cores) or full.
-    #[arg(long, default_value = "quick")]
-    pub preset: Preset,
-    /// TOML or JSON file overriding preset values (any field of the training options below, in
-    /// snake_case).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Training options: each overrides the preset and the --config file.
-    #[command(
-        flatten,
-        next_help_heading = "Training options (override the preset and --config)"
-    )]
-    pub options: TrainOptions,
+    /// How to train: preset, config file, options.
+    #[command(flatten)]
+    pub training: TrainingArgs,
     /// Continue from OUT/checkpoint.safetensors (same bits as an uninterrupted run).
     #[arg(long)]
     pub resume: bool,
@@ -103,15 +130,6 @@ pub fn scene_body(data: &train::data::Dataset) -> Result<Body> {
     })
 }
 
-/// The resolved configuration: preset, then the file, then the flags.
-fn resolve_config(args: &Args) -> Result<TrainConfig> {
-    Ok(TrainConfig::resolve(
-        args.preset,
-        args.config.as_deref(),
-        &args.options,
-    )?)
-}
-
 /// Keeps the log lines of steps before `step` and returns their summed wall time.
 ///
 /// An unterminated last line that does not parse is the torn write of an interrupted run
@@ -165,11 +183,8 @@ pub fn run(args: Args) -> Result<()> {
         Some(d) => d.clone(),
         None => default_benchmark()?,
     };
-    let config = resolve_config(&args)?;
-    let preset_name = match args.preset {
-        Preset::Quick => "quick",
-        Preset::Full => "full",
-    };
+    let config = args.training.resolve()?;
+    let preset_name = args.training.preset_name();
     let out = args.out.clone().unwrap_or_else(|| {
         let name = data_dir
             .file_name()

@@ -16,8 +16,7 @@
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
-use train::data::read_pair_flow;
-use train::flow_loss::prepare_target;
+use train::data::sharp_flow_pairs;
 
 /// Seed and size of the `train-flow` held-out set (`xtask train-flow --eval-seed`, `--eval-pairs`).
 const HELD_OUT_SEED: u64 = 1_000_003;
@@ -62,18 +61,10 @@ fn main() -> Result<(), Error> {
         let (w, h) = (data.camera.width as usize, data.camera.height as usize);
         let (wo, ho) = (w / 4, h / 4);
         let mut n = 0usize;
-        for k in 0..data.frames.len().saturating_sub(1) {
-            let Some(pair) = read_pair_flow(&data, k, scene::FlowKind::GroundTruth)? else {
-                continue;
-            };
-            let target = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, TAU)?;
-            let all = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, -1.0)?;
-            let (a, b) = (&data.frames[k], &data.frames[k + 1]);
-            let (Some(sharp_a), Some(sharp_b)) = (&a.sharp, &b.sharp) else {
-                return Err(
-                    format!("frame {} or {} has no sharp reference", a.index, b.index).into(),
-                );
-            };
+        for pair in sharp_flow_pairs(&data, (ho, wo), TAU)? {
+            let (a, b) = pair.frames;
+            let (sharp_a, sharp_b) = pair.sharp;
+            let target = &pair.target;
             for (tag, img_a, img_b) in [("sharp", sharp_a, sharp_b), ("blur", &a.image, &b.image)] {
                 for (j, img) in [img_a, img_b].into_iter().enumerate() {
                     let mut small = vec![0.0f32; 3 * ho * wo];
@@ -86,7 +77,7 @@ fn main() -> Result<(), Error> {
             write_f32(&bench, format!("{n:03}_fullflow.f32"), &pair.flow)?;
             write_f32(&bench, format!("{n:03}_flow.f32"), &target.flow)?;
             write_f32(&bench, format!("{n:03}_mask.f32"), &as_f32(&target.mask))?;
-            write_f32(&bench, format!("{n:03}_valid.f32"), &as_f32(&all.mask))?;
+            write_f32(&bench, format!("{n:03}_valid.f32"), &as_f32(&pair.all.mask))?;
             n += 1;
         }
         sizes["bench"] = serde_json::json!({

@@ -20,7 +20,7 @@
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
-use train::data::read_pair_flow;
+use train::data::{read_pair_flow, sharp_flow_pairs};
 use train::flow_loss::prepare_target;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -48,16 +48,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Sharp frames, over M: the network's EPE with level l's output replaced by the pooled truth.
     let levels = net.num_levels();
     let mut substituted = vec![0.0f64; levels.saturating_sub(1)];
-    for k in 0..data.frames.len().saturating_sub(1) {
-        let Some(pair) = read_pair_flow(&data, k, scene::FlowKind::GroundTruth)? else {
-            continue;
-        };
-        let target = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, tau)?;
-        let all = prepare_target(&pair.flow, pair.valid.as_deref(), h, w, ho, wo, -1.0)?;
-        let (a, b) = (&data.frames[k], &data.frames[k + 1]);
-        let (Some(sharp_a), Some(sharp_b)) = (&a.sharp, &b.sharp) else {
-            return Err(format!("frame {} or {} has no sharp reference", a.index, b.index).into());
-        };
+    for pair in sharp_flow_pairs(&data, (ho, wo), tau)? {
+        let (a, b) = pair.frames;
+        let (sharp_a, sharp_b) = pair.sharp;
+        let (target, all) = (&pair.target, &pair.all);
         for (which, (ia, ib)) in [(sharp_a, sharp_b), (&a.image, &b.image)]
             .into_iter()
             .enumerate()

@@ -8,8 +8,8 @@
 mod training;
 
 pub use training::{
-    consecutive_training_pairs, read_pair_flow, EventPair, FlowPair, PairFlow, TrainingData,
-    TrainingFrame,
+    consecutive_training_pairs, read_pair_flow, sharp_flow_pairs, EventPair, FlowPair, PairFlow,
+    SharpFlowPair, TrainingData, TrainingFrame,
 };
 
 use crate::TrainError;

@@ -295,3 +295,59 @@ pub fn read_pair_flow(
         valid,
     }))
 }
+
+/// A pair of consecutive frames with sharp references and their ground-truth flow, prepared for the
+/// flow diagnostics (the examples scoring flow networks on the benchmark).
+#[derive(Clone, Debug)]
+pub struct SharpFlowPair<'a> {
+    /// Position of frame k in `Dataset::frames`.
+    pub position: usize,
+    /// Frames k and k+1.
+    pub frames: (&'a super::TrainFrame, &'a super::TrainFrame),
+    /// Their sharp references, planar (3, H, W).
+    pub sharp: (&'a [f32], &'a [f32]),
+    /// The ground-truth flow at full resolution, planar (2, H, W).
+    pub flow: Vec<f32>,
+    /// The target at the requested size with τ applied (the flow loss's mask M).
+    pub target: FlowTarget<f32>,
+    /// The target at the requested size over every valid pixel (no τ).
+    pub all: FlowTarget<f32>,
+}
+
+/// Every pair (k, k+1) of `data` whose frame k names a ground-truth flow, with both sharp references
+/// and the flow resized to `(h_out, w_out)` (τ = `tau` for [`SharpFlowPair::target`]). A pair without
+/// sharp references is an error naming the frames.
+pub fn sharp_flow_pairs(
+    data: &Dataset,
+    (h_out, w_out): (usize, usize),
+    tau: f32,
+) -> Result<Vec<SharpFlowPair<'_>>, TrainError> {
+    let (w, h) = (data.camera.width as usize, data.camera.height as usize);
+    let mut out = Vec::new();
+    for k in 0..data.frames.len().saturating_sub(1) {
+        let Some(pair) = read_pair_flow(data, k, scene::FlowKind::GroundTruth)? else {
+            continue;
+        };
+        let valid = pair.valid.as_deref();
+        let target = prepare_target(&pair.flow, valid, h, w, h_out, w_out, tau)?;
+        let all = prepare_target(&pair.flow, valid, h, w, h_out, w_out, -1.0)?;
+        let (a, b) = (&data.frames[k], &data.frames[k + 1]);
+        let (Some(sharp_a), Some(sharp_b)) = (&a.sharp, &b.sharp) else {
+            return Err(TrainError::Config(format!(
+                "{}: frame {} or {} has no sharp reference",
+                data.dir.display(),
+                a.index,
+                b.index
+            )));
+        };
+        out.push(SharpFlowPair {
+            position: k,
+            frames: (a, b),
+            sharp: (sharp_a, sharp_b),
+            flow: pair.flow,
+            target,
+            all,
+        });
+    }
+    Ok(out)
+}
