@@ -28,7 +28,7 @@ mod train_flow;
 /// mimalloc instead of glibc malloc: the training step, the deformation networks and the flow
 /// network allocate and free many multi-megabyte buffers per call; with glibc, page faults and
 /// kernel page clearing were ≈ 16% of the `bench deform` profile, and mimalloc's reuse of freed
-/// pages makes that benchmark ≈ 15% faster (docs/BENCHMARKS.md, deformation section).
+/// pages makes that benchmark ≈ 15% faster (docs/notes/benchmarks-history.md, deformation, "Third pass").
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

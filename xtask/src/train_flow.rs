@@ -4,7 +4,7 @@
 //! 1. **Pre-training** of a single level on small pairs of pure background translation (no
 //!    brightness jitter, textures resolved at that size) with a squared-error loss, from the
 //!    motion-aware initialisation ([`flow::SpyNet::random_init`]). This is the phase that leaves the
-//!    zero-flow plateau every earlier recipe stayed on (`docs/BENCHMARKS.md`, flow).
+//!    zero-flow plateau every earlier recipe stayed on (`docs/notes/benchmarks-history.md`, flow, "Leaving the plateau").
 //! 2. The pre-trained level copied into every level ([`flow::train::replicate_level`]) and each level
 //!    fine-tuned coarse to fine on the full generator at `--size` (lower levels frozen).
 //! 3. `--joint-steps`: all levels trained together on a multi-scale loss

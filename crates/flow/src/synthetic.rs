@@ -76,7 +76,7 @@ impl Default for PairConfig {
 
 impl PairConfig {
     /// The original generator (before the texture-frequency limit and area sampling) at `size`:
-    /// draws the same pairs as the first trainer's runs recorded in `docs/BENCHMARKS.md`.
+    /// draws the same pairs as the first trainer's runs recorded in `docs/notes/benchmarks-history.md` (flow).
     pub fn original(size: usize) -> Self {
         Self {
             size,

@@ -1,5 +1,5 @@
 //! Sustained single-thread f32 fused multiply-add rate of this machine, 512- and 256-bit: the
-//! ceiling that `docs/BENCHMARKS.md` holds the GEMM kernels and the deformation target against.
+//! ceiling that `docs/notes/benchmarks-history.md` (deformation, "Third pass") holds the GEMM kernels and the deformation target against.
 //! Sixteen independent accumulator chains per width, so the rate is throughput- not latency-bound.
 //!
 //! `cargo run --release -p nn --example fma_peak`

@@ -3,7 +3,7 @@
 //!
 //! im2col + GEMM was chosen over a direct kernel so that the inner products run in the GEMM crate's
 //! packed micro-kernels; a direct kernel has not been written or measured against it yet (open work,
-//! together with the flow network's speed targets in docs/BENCHMARKS.md, section "flow"). Chunks of
+//! together with the flow network's speed targets in docs/BENCHMARKS.md, "Flow network"). Chunks of
 //! output rows (a fixed number of rows, independent of the thread count) keep the im2col buffer in
 //! cache and give parallelism even for a batch of one; each chunk writes its own part of one scratch
 //! buffer; im2col blocks and that scratch are recycled per thread (see `BUFFERS`).
@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 /// Target number of output pixels per im2col chunk of the forward and input-gradient passes. 128
 /// keeps the largest im2col block of the flow network (64 channels × 7 × 7 × 128 px × 4 B = 1.6 MB)
-/// near L2 size; measured against 32–2048 (docs/BENCHMARKS.md, section "flow"): 30 % less CPU time
+/// near L2 size; measured against 32–2048 (docs/notes/benchmarks-history.md, section "flow"): 30 % less CPU time
 /// than 512 for the SPyNet forward + input gradient.
 const CHUNK_PIXELS: usize = 128;
 /// Target output pixels per chunk of the weight-gradient pass, where the chunk is the GEMM's inner

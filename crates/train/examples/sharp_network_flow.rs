@@ -12,7 +12,7 @@
 //! to 1/4 then returns the prediction exactly, up to rounding), writes it to
 //! `DIR/flow_network/NNNNNN.flo` and names it in `scene.json` as the frame's `external` flow
 //! (replacing any). Then `cargo xtask reconstruct --data DIR --flow-loss on --flow-source file`
-//! trains with it. Figures: docs/BENCHMARKS.md, event supervision.
+//! trains with it. Figures: docs/BENCHMARKS.md, flow loss; details in docs/notes/benchmarks-history.md, "Flow targets from the network on the sharp frames".
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};

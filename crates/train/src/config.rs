@@ -183,7 +183,7 @@ training_options! {
     /// λ_flow, the weight of L_flow in the step's loss (default 0.015, chosen by a sweep on the
     /// default benchmark, `quick` preset, with `sharp-network` targets: 0.005 / 0.015 / 0.03 / 0.05
     /// gave +0.12 / +0.20 / +0.03 / −0.30 dB in the human box against no flow loss;
-    /// `docs/BENCHMARKS.md`, event supervision). With `ground-truth` or `events` targets every λ
+    /// `docs/notes/benchmarks-history.md`, "Flow targets from the network on the sharp frames"). With `ground-truth` or `events` targets every λ
     /// tried lowers PSNR, which is why `flow_loss` is off by default.
     flow_weight: f32 = 0.015,
     /// τ: pixels whose target flow is at most this long (pixels at the network's resolution) are not
@@ -211,7 +211,7 @@ training_options! {
     event_loss: bool = false,
     /// Weight of the event-generation loss: 3, the best of a sweep over 0.3 / 1 / 3 / 10 on the
     /// default benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 / 25.27 dB;
-    /// `docs/BENCHMARKS.md`, event supervision).
+    /// `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick` preset").
     event_weight: f32 = 3.0,
     /// Contrast threshold C of the camera (log-intensity units; the benchmark's simulator: 0.2).
     event_threshold: f32 = 0.2,

@@ -48,7 +48,7 @@ pub use skinning::{skinning_loss, SkinningCache, SkinningField};
 pub const LEAKY_SLOPE: f64 = 0.01;
 /// Hidden width the project uses for both networks: 64, half of 3DGS-Avatar's 128, because at 128
 /// the two MLPs alone cost ≈ 28 GFLOP per forward + backward of 50k Gaussians, beyond the CPU
-/// budget (see docs/BENCHMARKS.md, "deformation"). The constructors take any width.
+/// budget (see docs/notes/benchmarks-history.md, "deformation"). The constructors take any width.
 pub const DEFAULT_HIDDEN: usize = 64;
 
 /// Rows per chunk of the chunked passes of both networks (a function of their widths only).
