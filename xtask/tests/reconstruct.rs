@@ -333,7 +333,7 @@ fn the_flow_loss_runs_from_the_command_line_and_is_recorded() {
                 "--flow-network",
                 weights.to_str().unwrap(),
             ],
-            "expected all or geometry",
+            "[possible values: all, geometry]",
         ),
     ] {
         let mut args = vec!["--flow-loss", "on"];

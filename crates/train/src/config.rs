@@ -114,7 +114,7 @@ training_options! {
     /// Gaussians with human probability below this skip the human branch (see `train::posing`).
     semantic_gate: f32 = 0.01,
     /// Background colour (linear RGB) composited behind the Gaussians.
-    #[arg(value_parser = parse_rgb)]
+    #[arg(value_parser = parse_rgb, value_name = "R,G,B")]
     background: [f32; 3] = [0.0; 3],
     /// Near clipping plane of the rasterizer (m): Gaussians closer to the camera are not drawn.
     near_plane: f64 = rasterize_cpu::DEFAULT_NEAR_PLANE,
@@ -175,7 +175,7 @@ training_options! {
     /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
     /// between the two renders is pulled towards that flow (see `train::flow_loss`).
-    #[arg(value_parser = parse_on_off)]
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
     flow_loss: bool = false,
     /// Which flow supervises: a flow of `scene.json` (`ground-truth`, `events`, `file`) or the
     /// network's own flow between the sharp references (`sharp-network`).
@@ -201,13 +201,13 @@ training_options! {
     /// ablation outside the paper that measures what the flow constraint can give without any
     /// network's error). λ_flow weighs either; their units differ (pixels of flow vs intensity).
     flow_measure: FlowMeasure = FlowMeasure::Network,
-    /// SPyNet-style weights (safetensors) of the frozen flow network; `None`: the project's shipped
+    /// SPyNet-style weights (safetensors) of the frozen flow network; unset: the project's shipped
     /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
     flow_network: Option<std::path::PathBuf> = None,
     /// The event-generation loss of EventNeRF / E-NeRF (the paper's Table 6 alternative to the flow
     /// loss, see `train::event_loss`), on the same pairs of consecutive training frames, from each
     /// frame's `events` file.
-    #[arg(value_parser = parse_on_off)]
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_loss: bool = false,
     /// Weight of the event-generation loss: 3, the best of a sweep over 0.3 / 1 / 3 / 10 on the
     /// default benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 / 25.27 dB;

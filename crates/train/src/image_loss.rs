@@ -284,6 +284,7 @@ pub fn mask_iou(pred: &[f32], target: &[f32]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
 
     /// Slow oracle: SSIM with a direct 2D window sum and explicit zero padding.
     /// The direct loops `blur_plane` replaced (per output, in-range taps in increasing order).
@@ -316,13 +317,8 @@ mod tests {
     #[test]
     fn blur_is_bit_identical_to_the_direct_loops() {
         for (h, w) in [(1, 1), (3, 17), (23, 5), (40, 33)] {
-            let mut s = 0x2545_f491u32;
-            let src: Vec<f32> = (0..h * w)
-                .map(|_| {
-                    s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    (s >> 8) as f32 / (1u32 << 24) as f32 - 0.3
-                })
-                .collect();
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64((h * 100 + w) as u64);
+            let src: Vec<f32> = (0..h * w).map(|_| rng.gen_range(-0.3..0.7)).collect();
             let (mut dst, mut tmp) = (vec![0.0f32; h * w], vec![0.0f32; h * w]);
             blur_plane(&src, &mut dst, &mut tmp, h, w, &gaussian_window::<f32>());
             let direct = blur_plane_direct(&src, h, w);
