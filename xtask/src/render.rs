@@ -47,9 +47,9 @@ pub fn run(args: Args) -> Result<()> {
     let set = gaussians::ply::read_ply(&args.ply)
         .with_context(|| format!("reading PLY {}", args.ply.display()))?;
     let camera_context = || format!("reading camera {}", args.camera.display());
-    let camera =
+    let cam =
         scene::camera_files::read_any(&args.camera, args.cam_index).with_context(camera_context)?;
-    let cam = train::data::camera_of(&camera).with_context(camera_context)?;
+    cam.validate().with_context(camera_context)?;
     let settings = RenderSettings {
         near_plane: args.near,
         background: args.bg.clone().unwrap_or_default(),

@@ -1,47 +1,12 @@
 //! The crate's one error type. Every variant names the field or value at fault so that a caller
 //! can report it without adding context of its own.
 
-/// Errors of camera construction and of render requests.
+/// Errors of render requests (a camera that cannot be rendered from is [`RasterError::Camera`]).
 #[derive(Debug, thiserror::Error)]
 pub enum RasterError {
-    /// Image width or height is zero or larger than [`crate::MAX_IMAGE_SIDE`].
-    #[error("image size {width}x{height} is invalid: each side must be in 1..={max}")]
-    InvalidImageSize {
-        /// Requested width (pixels).
-        width: u64,
-        /// Requested height (pixels).
-        height: u64,
-        /// Largest allowed side (pixels).
-        max: u32,
-    },
-    /// A camera field is NaN or infinite.
-    #[error("camera field {field} is not finite ({value})")]
-    NonFiniteCamera {
-        /// Field name, e.g. `fx` or `world_to_camera[1][2]`.
-        field: String,
-        /// Offending value.
-        value: f64,
-    },
-    /// A focal length is zero or negative.
-    #[error("camera focal length {field} = {value} must be positive")]
-    NonPositiveFocal {
-        /// `fx` or `fy`.
-        field: &'static str,
-        /// Offending value (pixels).
-        value: f64,
-    },
-    /// The rotation part of the world-to-camera matrix is singular (|det| below 1e-9).
-    #[error("camera world_to_camera is singular: det of its 3x3 part is {det}")]
-    SingularMatrix {
-        /// Determinant of the upper-left 3×3 block.
-        det: f64,
-    },
-    /// The last row of the world-to-camera matrix is not (0, 0, 0, 1).
-    #[error("camera world_to_camera last row must be [0, 0, 0, 1], got {row:?}")]
-    NotAffine {
-        /// The last row as given.
-        row: [f64; 4],
-    },
+    /// The camera cannot be rendered from (its image size, focal lengths or matrix).
+    #[error(transparent)]
+    Camera(#[from] pinhole::CameraError),
     /// A per-Gaussian input slice has the wrong length.
     #[error("input {field} has {got} entries, expected {expected}")]
     LengthMismatch {

@@ -12,7 +12,6 @@
 //! bit-identical whatever the number of rayon threads: every floating-point reduction runs in a fixed
 //! order (per tile in depth order, then per Gaussian in tile order).
 
-pub mod camera;
 pub mod error;
 pub mod lanes;
 pub mod project;
@@ -20,8 +19,9 @@ pub mod raster;
 pub mod sh;
 pub mod synthetic;
 
-pub use camera::{Camera, MAX_IMAGE_SIDE};
 pub use error::RasterError;
+/// The pinhole camera renders are made from (the workspace's one camera type, `pinhole`'s).
+pub use pinhole::{Camera, CameraError, MAX_IMAGE_SIDE};
 pub use raster::{
     render, render_backward, render_cov, render_cov_backward, Cotangents, CovSplats, Gradients,
     RenderOutput, RenderSettings, Splats, DEFAULT_NEAR_PLANE,

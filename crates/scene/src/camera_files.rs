@@ -1,11 +1,12 @@
-//! Camera files outside a scene directory, read into the scene format's [`Camera`]: the project's
+//! Camera files outside a scene directory, read into the workspace's one [`Camera`]: the project's
 //! camera JSON (also a whole `scene.json`, whose `camera` is taken) and the INRIA 3DGS
 //! `cameras.json` list. `docs/FORMATS.md`, "Cameras for `cargo xtask render`", specifies them.
 //!
 //! Reading checks the file's shape only (JSON syntax, field types, 3 or 4 matrix rows, a 4th row of
 //! `[0, 0, 0, 1]`, the list index). Whether a camera can be rendered from (positive focal lengths, a
-//! non-singular rotation, the image size) is checked where the renderer's camera is built from it
-//! (`train::data::camera_of`). This module must never know the renderer, and reads no images.
+//! non-singular rotation, the image size) is [`Camera::validate`]'s, called by its users before
+//! rendering (`train::data`, `xtask render`). This module must never know the renderer, and reads
+//! no images.
 
 use std::path::{Path, PathBuf};
 
@@ -28,17 +29,18 @@ struct CameraFile {
     cx: f64,
     cy: f64,
     #[serde(deserialize_with = "affine_rows")]
-    world_to_camera: [[f64; 4]; 3],
+    world_to_camera: [[f64; 4]; 4],
 }
 
 /// Deserialises a row-major world-to-camera matrix given as its top 3 rows, or as all 4 rows of an
-/// affine map (the last one must then be `[0, 0, 0, 1]`).
-fn affine_rows<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<[[f64; 4]; 3], D::Error> {
+/// affine map (the last one must then be `[0, 0, 0, 1]`); the result's last row is `[0, 0, 0, 1]`.
+fn affine_rows<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<[[f64; 4]; 4], D::Error> {
     use serde::de::Error;
+    const LAST: [f64; 4] = [0.0, 0.0, 0.0, 1.0];
     let rows: Vec<[f64; 4]> = Vec::deserialize(d)?;
     match rows[..] {
-        [a, b, c] => Ok([a, b, c]),
-        [a, b, c, [0.0, 0.0, 0.0, 1.0]] => Ok([a, b, c]),
+        [a, b, c] => Ok([a, b, c, LAST]),
+        [a, b, c, [0.0, 0.0, 0.0, 1.0]] => Ok([a, b, c, LAST]),
         [_, _, _, last] => Err(D::Error::custom(format!(
             "camera world_to_camera last row must be [0, 0, 0, 1], got {last:?}"
         ))),
@@ -73,7 +75,8 @@ impl InriaCamera {
     /// R = camera-to-world rotation and c = camera centre; principal point at the image centre.
     fn to_camera(&self) -> Camera {
         let r = &self.rotation;
-        let mut m = [[0.0; 4]; 3];
+        let mut m = [[0.0; 4]; 4];
+        m[3][3] = 1.0;
         for i in 0..3 {
             for k in 0..3 {
                 m[i][k] = r[k][i];
@@ -180,7 +183,7 @@ mod tests {
             "fx": 50.0, "fy": 50.0}]"#;
         let cams = inria_list_from_str(text, Path::new("<test>")).expect("valid list");
         let cam = &cams[0];
-        let c = cam.centre_world();
+        let c = cam.center_world();
         for (i, want) in [1.0, 2.0, 3.0].into_iter().enumerate() {
             assert!((c[i] - want).abs() < 1e-12, "{c:?}");
         }

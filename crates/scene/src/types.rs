@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::error::{Result, SceneError};
 
@@ -24,6 +24,7 @@ pub struct Scene {
     /// Always [`FORMAT_VERSION`].
     pub format_version: u32,
     /// The fixed camera.
+    #[serde(with = "camera_json")]
     pub camera: Camera,
     /// The body model and its shape.
     pub body: BodySpec,
@@ -42,24 +43,58 @@ pub struct Scene {
     pub generator: Option<serde_json::Value>,
 }
 
-/// OpenCV pinhole camera, fixed for the whole scene.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Camera {
-    /// Image width (pixels).
-    pub width: u32,
-    /// Image height (pixels).
-    pub height: u32,
-    /// Focal length along x (pixels).
-    pub fx: f64,
-    /// Focal length along y (pixels).
-    pub fy: f64,
-    /// Principal point x (pixels; the image's left edge is 0, the first pixel centre 0.5).
-    pub cx: f64,
-    /// Principal point y (pixels; the top edge is 0).
-    pub cy: f64,
-    /// `[R | t]` rows: `p_cam = R · p_world + t` (metres), R a rotation.
-    pub world_to_camera: [[f64; 4]; 3],
+/// OpenCV pinhole camera, fixed for the whole scene: the workspace's one camera type
+/// (`pinhole::Camera`, also `rasterize_cpu::Camera`). In `scene.json` its `world_to_camera` is the 3
+/// rows of `[R | t]` (`p_cam = R · p_world + t`, metres, R a rotation); in memory it is 4×4, the
+/// last row `[0, 0, 0, 1]`.
+pub use pinhole::Camera;
+
+/// The camera as `scene.json` stores it, for `#[serde(with = "scene::camera_json")]` (also used by
+/// the trained model's `model.json`): the fields of [`Camera`] with `world_to_camera` as its top 3
+/// rows (the 4th is `[0, 0, 0, 1]` when read, and not written); unknown fields are an error.
+pub mod camera_json {
+    use super::{Camera, Deserialize, Deserializer, Serialize, Serializer};
+
+    /// Serde's view of [`Camera`] in `scene.json` (a serde remote definition: the compiler keeps its
+    /// fields identical to [`Camera`]'s).
+    #[derive(Serialize, Deserialize)]
+    #[serde(remote = "Camera", deny_unknown_fields)]
+    struct SceneCamera {
+        width: u32,
+        height: u32,
+        fx: f64,
+        fy: f64,
+        cx: f64,
+        cy: f64,
+        #[serde(with = "rigid_rows")]
+        world_to_camera: [[f64; 4]; 4],
+    }
+
+    /// Writes `camera` in the `scene.json` layout.
+    pub fn serialize<S: Serializer>(camera: &Camera, s: S) -> Result<S::Ok, S::Error> {
+        SceneCamera::serialize(camera, s)
+    }
+
+    /// Reads a camera in the `scene.json` layout.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Camera, D::Error> {
+        SceneCamera::deserialize(d)
+    }
+
+    /// A 4×4 affine world-to-camera matrix as its top 3 rows.
+    mod rigid_rows {
+        use super::{Deserialize, Deserializer, Serialize, Serializer};
+
+        pub(super) fn serialize<S: Serializer>(m: &[[f64; 4]; 4], s: S) -> Result<S::Ok, S::Error> {
+            [m[0], m[1], m[2]].serialize(s)
+        }
+
+        pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+            d: D,
+        ) -> Result<[[f64; 4]; 4], D::Error> {
+            let [r0, r1, r2] = <[[f64; 4]; 3]>::deserialize(d)?;
+            Ok([r0, r1, r2, [0.0, 0.0, 0.0, 1.0]])
+        }
+    }
 }
 
 /// Body model reference and shape.
@@ -195,27 +230,6 @@ impl Frame {
     }
 }
 
-impl Camera {
-    /// Projects a world point (metres) to pixel coordinates `(u, v)` and camera depth `z` (metres).
-    pub fn project(&self, p_world: [f64; 3]) -> [f64; 3] {
-        let m = &self.world_to_camera;
-        let p_cam: [f64; 3] = std::array::from_fn(|r| {
-            m[r][0] * p_world[0] + m[r][1] * p_world[1] + m[r][2] * p_world[2] + m[r][3]
-        });
-        [
-            self.fx * p_cam[0] / p_cam[2] + self.cx,
-            self.fy * p_cam[1] / p_cam[2] + self.cy,
-            p_cam[2],
-        ]
-    }
-
-    /// Camera centre in world coordinates (metres): `−Rᵀ t`.
-    pub fn centre_world(&self) -> [f64; 3] {
-        let m = &self.world_to_camera;
-        std::array::from_fn(|c| -(m[0][c] * m[0][3] + m[1][c] * m[1][3] + m[2][c] * m[2][3]))
-    }
-}
-
 impl Scene {
     /// Indices (into `frames`) of the frames of a split.
     pub fn split_indices(&self, split: Split) -> Vec<usize> {
@@ -259,5 +273,31 @@ impl Scene {
         std::fs::write(&tmp, text).map_err(io(&tmp))?;
         std::fs::rename(&tmp, &path).map_err(io(&path))?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `scene.json`'s camera: 3 rows in, 3 rows out, the 4th `[0, 0, 0, 1]` in memory; 4 rows or
+    /// an unknown field are errors.
+    #[test]
+    fn scene_camera_is_three_rows_of_r_t() {
+        #[derive(Debug, PartialEq, Serialize, Deserialize)]
+        struct Holder {
+            #[serde(with = "camera_json")]
+            camera: Camera,
+        }
+        let text = r#"{"camera":{"width":8,"height":6,"fx":10.0,"fy":11.0,"cx":4.0,"cy":3.0,"world_to_camera":[[1.0,0.0,0.0,0.5],[0.0,1.0,0.0,0.0],[0.0,0.0,1.0,2.0]]}}"#;
+        let held: Holder = serde_json::from_str(text).expect("a scene camera");
+        assert_eq!(held.camera.world_to_camera[3], [0.0, 0.0, 0.0, 1.0]);
+        assert_eq!(held.camera.world_to_camera[2], [0.0, 0.0, 1.0, 2.0]);
+        assert_eq!(serde_json::to_string(&held).expect("serialisable"), text);
+        let four_rows = text.replace("2.0]]", "2.0],[0.0,0.0,0.0,1.0]]");
+        assert!(serde_json::from_str::<Holder>(&four_rows).is_err());
+        let unknown = text.replace("\"cy\"", "\"skew\":0.0,\"cy\"");
+        let err = serde_json::from_str::<Holder>(&unknown).expect_err("unknown field");
+        assert!(err.to_string().contains("unknown field `skew`"), "{err}");
     }
 }

@@ -82,6 +82,7 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
                 [1.0, 0.0, 0.0, 0.0],
                 [0.0, -1.0, 0.0, 1.0],
                 [0.0, 0.0, -1.0, 3.0],
+                [0.0, 0.0, 0.0, 1.0],
             ],
         },
         body: BodySpec {

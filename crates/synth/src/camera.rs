@@ -87,7 +87,7 @@ impl PinholeCamera {
             fy: f64::from(self.fy),
             cx: f64::from(self.cx),
             cy: f64::from(self.cy),
-            world_to_camera: [row(0), row(1), row(2)],
+            world_to_camera: [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]],
         }
     }
 }

@@ -36,7 +36,8 @@ pub struct ModelManifest {
     pub body_model: String,
     /// Shape parameters.
     pub betas: Vec<f32>,
-    /// The training camera (scene format v1 conventions).
+    /// The training camera, stored as `scene.json` stores it (`scene::camera_json`).
+    #[serde(with = "scene::camera_json")]
     pub camera: scene::Camera,
     /// Frame number of each latent slot.
     pub frame_indices: Vec<u32>,
@@ -54,7 +55,7 @@ pub struct LoadedModel {
     pub model: Model,
     /// The canonical body.
     pub body: Body,
-    /// The camera as the rasterizer takes it.
+    /// The manifest's camera, checked for rendering (`Camera::validate`).
     pub camera: rasterize_cpu::Camera,
 }
 
@@ -130,7 +131,8 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
         manifest.scene_extent,
     )?;
     model.read_networks(&CheckpointReader::open(&dir.join("networks.safetensors"))?)?;
-    let camera = crate::data::camera_of(&manifest.camera)?;
+    manifest.camera.validate()?;
+    let camera = manifest.camera.clone();
     Ok(LoadedModel {
         manifest,
         model,

@@ -36,6 +36,9 @@ pub enum TrainError {
     /// The rasterizer rejected its inputs.
     #[error(transparent)]
     Raster(#[from] rasterize_cpu::RasterError),
+    /// A camera (the scene's, the model's) cannot be rendered from.
+    #[error(transparent)]
+    Camera(#[from] rasterize_cpu::CameraError),
     /// The flow network rejected its inputs or weights.
     #[error("flow network: {0}")]
     Flow(#[from] flow::FlowError),

@@ -58,6 +58,7 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
                 [1.0, 0.0, 0.0, 0.0],
                 [0.0, 1.0, 0.0, 0.0],
                 [0.0, 0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0, 1.0],
             ],
         },
         body: BodySpec {

@@ -28,7 +28,7 @@ use proptest::prelude::*;
 use rand::Rng;
 use rasterize_cpu::{
     render, render_backward, render_cov, render_cov_backward, render_sh, render_sh_backward,
-    Camera, Cotangents, CovSplats, RasterError, RenderSettings, ShSplats, Splats,
+    Camera, CameraError, Cotangents, CovSplats, RasterError, RenderSettings, ShSplats, Splats,
 };
 
 const NEAR: f64 = 0.2;
@@ -1269,29 +1269,29 @@ fn bad_cameras_and_requests_give_typed_errors() {
     singular[2][2] = 0.0;
     assert!(matches!(
         Camera::new(64, 48, 50.0, 50.0, 32.0, 24.0, singular),
-        Err(RasterError::SingularMatrix { .. })
+        Err(CameraError::SingularMatrix { .. })
     ));
     assert!(matches!(
         Camera::new(0, 48, 50.0, 50.0, 32.0, 24.0, eye),
-        Err(RasterError::InvalidImageSize { .. })
+        Err(CameraError::InvalidImageSize { .. })
     ));
     assert!(matches!(
         Camera::new(64, 48, f64::NAN, 50.0, 32.0, 24.0, eye),
-        Err(RasterError::NonFiniteCamera { .. })
+        Err(CameraError::NonFinite { .. })
     ));
     let mut nan_m = eye;
     nan_m[1][3] = f64::NAN;
     assert!(matches!(
         Camera::new(64, 48, 50.0, 50.0, 32.0, 24.0, nan_m),
-        Err(RasterError::NonFiniteCamera { .. })
+        Err(CameraError::NonFinite { .. })
     ));
     assert!(matches!(
         Camera::new(20000, 48, 50.0, 50.0, 32.0, 24.0, eye),
-        Err(RasterError::InvalidImageSize { .. })
+        Err(CameraError::InvalidImageSize { .. })
     ));
     assert!(matches!(
         Camera::new(16385, 16385, 50.0, 50.0, 32.0, 24.0, eye),
-        Err(RasterError::InvalidImageSize { .. })
+        Err(CameraError::InvalidImageSize { .. })
     ));
     let mut too_big = match Camera::new(64, 48, 50.0, 50.0, 32.0, 24.0, eye) {
         Ok(c) => c,
@@ -1309,7 +1309,7 @@ fn bad_cameras_and_requests_give_typed_errors() {
     };
     assert!(matches!(
         render(&too_big, &splats, &RenderSettings::default()),
-        Err(RasterError::InvalidImageSize { .. })
+        Err(RasterError::Camera(CameraError::InvalidImageSize { .. }))
     ));
     let cam = match Camera::new(64, 48, 50.0, 50.0, 32.0, 24.0, eye) {
         Ok(c) => c,

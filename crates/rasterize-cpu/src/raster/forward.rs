@@ -10,7 +10,7 @@ use super::inputs::{background, validate, Inputs};
 use super::kernels::{forward_tile, PairSplat, BUF_C, BUF_D, BUF_T};
 use super::{CovSplats, RenderOutput, RenderSettings, Splats};
 use crate::project::{CameraParams, Projected};
-use crate::{camera, Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
+use crate::{Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
 
 #[cfg(target_arch = "x86_64")]
 use super::avx512;
@@ -65,7 +65,7 @@ fn render_inputs<T: Real>(
     splats: &Inputs<'_, T>,
     settings: &RenderSettings,
 ) -> Result<RenderOutput<T>, RasterError> {
-    camera::check_image_size(camera.width.into(), camera.height.into())?;
+    pinhole::check_image_size(camera.width.into(), camera.height.into())?;
     validate(splats)?;
     let c = splats.num_channels;
     let bg = background::<T>(settings, c)?;

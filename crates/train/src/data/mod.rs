@@ -44,7 +44,7 @@ pub struct Dataset {
     pub dir: PathBuf,
     /// The validated description.
     pub scene: Scene,
-    /// The fixed camera as the rasterizer takes it.
+    /// The fixed camera (the scene's), checked for rendering (`Camera::validate`).
     pub camera: Camera,
     /// Every frame, in time order.
     pub frames: Vec<TrainFrame>,
@@ -57,26 +57,11 @@ impl Dataset {
     }
 }
 
-/// The rasterizer camera of a scene camera (also of a camera file read by `scene::camera_files`):
-/// the workspace's one conversion, validated by `rasterize_cpu::Camera::new`.
-pub fn camera_of(c: &scene::Camera) -> Result<Camera, TrainError> {
-    let m = c.world_to_camera;
-    let world_to_camera = [m[0], m[1], m[2], [0.0, 0.0, 0.0, 1.0]];
-    Ok(Camera::new(
-        c.width.into(),
-        c.height.into(),
-        c.fx,
-        c.fy,
-        c.cx,
-        c.cy,
-        world_to_camera,
-    )?)
-}
-
 /// Loads and validates `dir` (see `scene::load`) and decodes every frame.
 pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
     let scene = scene::load(dir)?;
-    let camera = camera_of(&scene.camera)?;
+    scene.camera.validate()?;
+    let camera = scene.camera.clone();
     let (w, h) = (scene.camera.width, scene.camera.height);
     let mut frames = Vec::with_capacity(scene.frames.len());
     for f in &scene.frames {
