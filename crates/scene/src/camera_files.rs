@@ -10,52 +10,44 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Deserializer};
+use serde::Deserialize;
 
 use crate::error::{Result, SceneError};
 use crate::types::Camera;
 
-/// The project's camera JSON as serde reads it into [`Camera`] (a serde remote definition: the
-/// compiler keeps its fields identical to [`Camera`]'s). Unlike `scene.json`'s camera,
-/// `world_to_camera` may be given as 4 rows (the last one `[0, 0, 0, 1]`) and unknown fields are
-/// ignored.
-#[derive(Deserialize)]
-#[serde(remote = "Camera")]
-struct CameraFile {
-    width: u32,
-    height: u32,
-    fx: f64,
-    fy: f64,
-    cx: f64,
-    cy: f64,
-    #[serde(deserialize_with = "affine_rows")]
-    world_to_camera: [[f64; 4]; 4],
-}
+/// The fields of a camera in the project's camera JSON (those of `scene.json`'s camera).
+const CAMERA_FIELDS: [&str; 7] = ["width", "height", "fx", "fy", "cx", "cy", "world_to_camera"];
 
-/// Deserialises a row-major world-to-camera matrix given as its top 3 rows, or as all 4 rows of an
-/// affine map (the last one must then be `[0, 0, 0, 1]`); the result's last row is `[0, 0, 0, 1]`.
-fn affine_rows<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<[[f64; 4]; 4], D::Error> {
+/// The project's camera JSON is `scene.json`'s camera read leniently: fields other than
+/// [`CAMERA_FIELDS`] are ignored and `world_to_camera` may have a 4th row, which must be
+/// `[0, 0, 0, 1]`. Normalises `camera` to the strict form that [`crate::camera_json`] reads.
+fn normalise_camera_json(
+    camera: &mut serde_json::Value,
+) -> std::result::Result<(), serde_json::Error> {
     use serde::de::Error;
-    const LAST: [f64; 4] = [0.0, 0.0, 0.0, 1.0];
-    let rows: Vec<[f64; 4]> = Vec::deserialize(d)?;
-    match rows[..] {
-        [a, b, c] => Ok([a, b, c, LAST]),
-        [a, b, c, [0.0, 0.0, 0.0, 1.0]] => Ok([a, b, c, LAST]),
-        [_, _, _, last] => Err(D::Error::custom(format!(
-            "camera world_to_camera last row must be [0, 0, 0, 1], got {last:?}"
-        ))),
-        _ => Err(D::Error::invalid_length(
-            rows.len(),
-            &"3 or 4 rows of 4 numbers (row-major world-to-camera)",
-        )),
+    let Some(fields) = camera.as_object_mut() else {
+        return Ok(());
+    };
+    fields.retain(|k, _| CAMERA_FIELDS.contains(&k.as_str()));
+    if let Some(serde_json::Value::Array(rows)) = fields.get_mut("world_to_camera") {
+        if !(3..=4).contains(&rows.len()) {
+            return Err(serde_json::Error::custom(format!(
+                "camera world_to_camera: expected 3 or 4 rows of 4 numbers (row-major \
+                 world-to-camera), found {}",
+                rows.len()
+            )));
+        }
+        if rows.len() == 4 {
+            let last: [f64; 4] = serde_json::from_value(rows[3].clone())?;
+            if last != [0.0, 0.0, 0.0, 1.0] {
+                return Err(serde_json::Error::custom(format!(
+                    "camera world_to_camera last row must be [0, 0, 0, 1], got {last:?}"
+                )));
+            }
+            rows.truncate(3);
+        }
     }
-}
-
-/// A scene format v1 `scene.json` as far as a camera reader needs it: its `camera` object.
-#[derive(Deserialize)]
-struct SceneFileCamera {
-    #[serde(with = "CameraFile")]
-    camera: Camera,
+    Ok(())
 }
 
 /// One entry of the INRIA 3DGS `cameras.json` list. `rotation` is camera-to-world (3×3, rows),
@@ -104,24 +96,18 @@ fn json_error(source: &Path) -> impl Fn(serde_json::Error) -> SceneError + '_ {
 
 /// Parses the project's camera JSON from a string (`source` names it in errors). A scene format v1
 /// `scene.json` (an object whose `camera` field holds the camera, and which has no `fx`) is accepted
-/// too; its other fields are not read.
+/// too; its other fields are not read. Syntax errors carry their line and column; field errors name
+/// the field.
 pub fn from_json_str(text: &str, source: &Path) -> Result<Camera> {
-    // Decide the shape first, then deserialise from the text so that errors keep their line and
-    // column.
-    let value: serde_json::Value = serde_json::from_str(text).map_err(json_error(source))?;
+    let mut value: serde_json::Value = serde_json::from_str(text).map_err(json_error(source))?;
     let is_scene = value
         .as_object()
         .is_some_and(|o| o.contains_key("camera") && !o.contains_key("fx"));
     if is_scene {
-        Ok(serde_json::from_str::<SceneFileCamera>(text)
-            .map_err(json_error(source))?
-            .camera)
-    } else {
-        let mut de = serde_json::Deserializer::from_str(text);
-        let camera = CameraFile::deserialize(&mut de).map_err(json_error(source))?;
-        de.end().map_err(json_error(source))?;
-        Ok(camera)
+        value = value["camera"].take();
     }
+    normalise_camera_json(&mut value).map_err(json_error(source))?;
+    crate::camera_json::deserialize(value).map_err(json_error(source))
 }
 
 /// Reads the project's camera JSON file (or a `scene.json`, see [`from_json_str`]).
