@@ -14,7 +14,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::body::Body;
-use train::config::{FlowMeasure, FlowSource, Preset, TrainConfig, TrainOptions};
+use train::config::{BlurModel, FlowMeasure, FlowSource, Preset, TrainConfig, TrainOptions};
 use train::data::TrainingData;
 use train::trainer::{StepReport, Trainer};
 use train::TrainError;
@@ -226,6 +226,16 @@ pub fn run(args: Args) -> Result<()> {
             config.event_threshold
         );
     }
+    if config.blur_model == BlurModel::Exposure {
+        ctx.enable_exposure(&data, config.subframes)
+            .context("preparing the exposure model")?;
+        println!(
+            "exposure model: each training frame is the mean of {} renders over its {:.1} ms \
+             exposure",
+            config.subframes,
+            1e3 * data.scene.exposure_s
+        );
+    }
     let config_path = out.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
@@ -339,6 +349,8 @@ pub fn run(args: Args) -> Result<()> {
             "flow_tau": config.flow_tau,
             "flow_gradient": config.flow_gradient,
             "flow_measure": config.flow_measure,
+            "blur_model": config.blur_model,
+            "subframes": config.subframes,
             "event_loss": config.event_loss,
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,

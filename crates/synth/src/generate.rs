@@ -233,6 +233,28 @@ pub fn generate(
     generate_with_body(cfg, model, out, progress)
 }
 
+/// The motion of the benchmark `cfg` with the body `body`: the generator's true SMPL parameters at
+/// any time (`Motion::at`), which the scene records at mid exposure only. Tests of pose interpolation
+/// compare against it.
+pub fn benchmark_motion(cfg: &SynthConfig, body: &DressedBody) -> Result<Motion> {
+    motion_from(cfg, body, &mut ChaCha8Rng::seed_from_u64(cfg.seed))
+}
+
+/// [`benchmark_motion`] drawing its phases from `rng` (the generator's own stream, first draws).
+fn motion_from(cfg: &SynthConfig, body: &DressedBody, rng: &mut ChaCha8Rng) -> Result<Motion> {
+    let phases: [f32; 4] = std::array::from_fn(|_| rng.gen_range(0.0..std::f32::consts::TAU));
+    let rest_joints = body
+        .model
+        .rest_joints(&body.model.shaped_vertices(&body.betas)?);
+    Ok(Motion {
+        speed: cfg.speed,
+        phases,
+        base: [0.0, 0.0],
+        floor_offset: body.floor_offset,
+        arm_rest_elevation: Motion::arm_rest_elevation(&rest_joints),
+    })
+}
+
 /// Like [`generate`] with an already loaded body model (`cfg.body` is only recorded).
 pub fn generate_with_body(
     cfg: &SynthConfig,
@@ -250,15 +272,7 @@ pub fn generate_with_body(
     let betas = vec![0.0f32; 10];
     let body = DressedBody::new(model, betas.clone())?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let phases: [f32; 4] = std::array::from_fn(|_| rng.gen_range(0.0..std::f32::consts::TAU));
-    let rest_joints = body.model.rest_joints(&body.model.shaped_vertices(&betas)?);
-    let motion = Motion {
-        speed: cfg.speed,
-        phases,
-        base: [0.0, 0.0],
-        floor_offset: body.floor_offset,
-        arm_rest_elevation: Motion::arm_rest_elevation(&rest_joints),
-    };
+    let motion = motion_from(cfg, &body, &mut rng)?;
     // Camera: looks at the middle of the standing body, slightly from the right.
     let (pose0, transl0) = motion.at(0.0);
     let v0 = body.posed_vertices(&pose0, transl0)?;

@@ -172,6 +172,12 @@ training_options! {
     opacity_reset_every: usize = 0,
     /// Steps between checkpoints (0: only at the end).
     checkpoint_every: usize = 500,
+    /// How a training frame's prediction is formed: `none` (one render at mid exposure, the paper) or
+    /// `exposure` (the mean, in linear intensity, of `subframes` renders at poses spread over the
+    /// frame's exposure; `train::exposure`).
+    blur_model: BlurModel = BlurModel::None,
+    /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure).
+    subframes: usize = 5,
     /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
     /// between the two renders is pulled towards that flow (see `train::flow_loss`).
@@ -217,6 +223,17 @@ training_options! {
     event_threshold: f32 = 0.2,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
     event_log_eps: f32 = 1e-3,
+}
+
+/// How a training frame's prediction is formed (see [`TrainConfig::blur_model`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum BlurModel {
+    /// One render at the frame's mid-exposure pose (the paper).
+    #[default]
+    None,
+    /// The mean of renders at sub-exposure poses: the physical model of motion blur.
+    Exposure,
 }
 
 /// Which parameters the flow loss's gradient reaches (see [`TrainConfig::flow_gradient`]).
@@ -440,6 +457,9 @@ impl TrainConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(name, "must be a finite non-negative number");
             }
+        }
+        if self.subframes == 0 || self.subframes > 64 {
+            return bad("subframes", "must be in 1..=64");
         }
         if !(self.near_plane > 0.0 && self.near_plane.is_finite()) {
             return bad("near_plane", "must be a finite number > 0 (metres)");

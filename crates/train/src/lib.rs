@@ -12,6 +12,7 @@ pub mod data;
 pub mod eval;
 pub mod event_loss;
 pub mod export;
+pub mod exposure;
 pub mod flow_loss;
 pub mod image_loss;
 pub mod init;

@@ -73,6 +73,9 @@ pub struct TrainingData {
     /// Per training slot, the event supervision of the pair (k, k+1) (empty unless
     /// [`TrainingData::enable_events`] was called).
     pub event_pairs: Vec<Option<EventPair>>,
+    /// Per training slot, the poses at the sub-exposure times of the exposure model (empty unless
+    /// [`TrainingData::enable_exposure`] was called).
+    pub exposure_poses: Vec<Vec<PreparedPose>>,
 }
 
 impl TrainingData {
@@ -108,7 +111,38 @@ impl TrainingData {
             flow_pairs: Vec::new(),
             flow_net: None,
             event_pairs: Vec::new(),
+            exposure_poses: Vec::new(),
         })
+    }
+
+    /// Prepares the exposure model: for every training frame, the body poses at `subframes`
+    /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the scene's
+    /// `exposure_s`), interpolated from the SMPL parameters of every frame of the scene
+    /// ([`crate::exposure::PoseTrack`]).
+    pub fn enable_exposure(&mut self, data: &Dataset, subframes: usize) -> Result<(), TrainError> {
+        let exposure = data.scene.exposure_s;
+        if !(exposure.is_finite() && exposure > 0.0) {
+            return Err(TrainError::Config(format!(
+                "{}: scene.json exposure_s = {exposure}: the exposure model needs a positive \
+                 exposure time",
+                data.dir.display()
+            )));
+        }
+        let keys: Vec<(f64, &smpl_deform::SmplParams)> =
+            data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
+        let track = crate::exposure::PoseTrack::new(&keys);
+        let mut poses = Vec::with_capacity(self.frames.len());
+        for frame in data.frames.iter().filter(|f| f.split == Split::Train) {
+            let times = crate::exposure::subframe_times(frame.time_s, exposure, subframes);
+            poses.push(
+                times
+                    .iter()
+                    .map(|&t| self.body.prepare(&track.at(t)))
+                    .collect::<Result<Vec<_>, _>>()?,
+            );
+        }
+        self.exposure_poses = poses;
+        Ok(())
     }
 
     /// Number of pixels per channel.

@@ -17,11 +17,12 @@ pub use checkpoint::CHECKPOINT_FORMAT;
 pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
-use crate::config::TrainConfig;
+use crate::body::PreparedPose;
+use crate::config::{BlurModel, TrainConfig};
 use crate::data::TrainingData;
 use crate::image_loss::{psnr, ImageShape};
 use crate::init::{initialise, InitConfig};
-use crate::model::Model;
+use crate::model::{FramePass, Model};
 use crate::optimisers::Optimisers;
 use crate::posing::ModelGradients;
 use crate::schedule::{accumulate_screen_stats, exponential_rate, on_schedule};
@@ -159,19 +160,41 @@ impl Trainer {
         let mut times = StageTimes::default();
         let model = &self.model;
 
-        // Frame k: forward and photometric loss.
-        let first = model.forward(camera, &frame.pose, model.latent(slot))?;
-        times.pose = first.timing.pose;
-        times.render = first.timing.render;
+        // Frame k: its passes (one at mid exposure, or one per sub-exposure pose with the exposure
+        // model) and the photometric loss of their mean.
+        let poses: Vec<&PreparedPose> = match data.exposure_poses.get(slot) {
+            Some(sub) if config.blur_model == BlurModel::Exposure && !sub.is_empty() => {
+                sub.iter().collect()
+            }
+            _ => vec![&frame.pose],
+        };
+        let passes = poses
+            .iter()
+            .map(|pose| model.forward(camera, pose, model.latent(slot)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mid = passes.len() / 2;
+        for pass in &passes {
+            times.pose += pass.timing.pose;
+            times.render += pass.timing.render;
+        }
         let t0 = Instant::now();
         let shape = ImageShape {
             channels: 3,
             height,
             width,
         };
-        let photo = photometric(first.rgb(), &frame.image, shape, config.ssim_weight);
-        let mut d_image = photo.d_image;
+        let prediction = mean_rgb(&passes);
+        let photo = photometric(&prediction, &frame.image, shape, config.ssim_weight);
+        // The mean's cotangent reaches every pass scaled by 1/S (one pass: unchanged).
+        let mut d_images = if passes.len() == 1 {
+            vec![photo.d_image]
+        } else {
+            let scale = 1.0 / passes.len() as f32;
+            let d: Vec<f32> = photo.d_image.iter().map(|&v| v * scale).collect();
+            vec![d; passes.len()]
+        };
         times.loss = t0.elapsed().as_secs_f64();
+        let first = &passes[mid];
 
         // Frame k+1 when a pair loss applies: its forward and the pair losses of both renders.
         let t_pair = Instant::now();
@@ -186,7 +209,7 @@ impl Trainer {
                     first.rgb(),
                     pass.rgb(),
                     (height, width),
-                    &mut d_image,
+                    &mut d_images[mid],
                 )?;
                 times.flow_network = terms.flow_network_seconds;
                 Some((pair.next_slot, pass, terms))
@@ -202,9 +225,10 @@ impl Trainer {
             None => (None, None),
         };
 
-        // Frame k: backward, with the AIAP regulariser on its posed human Gaussians.
+        // Frame k: backward of the mid pass, with the AIAP regulariser on its posed human Gaussians,
+        // then of the other sub-exposure passes, accumulated.
         let t0 = Instant::now();
-        let mut posed_grads = first.render_backward(&d_image, d_geometric_first)?;
+        let mut posed_grads = first.render_backward(&d_images[mid], d_geometric_first)?;
         times.render_backward = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         let (aiap_value, aiap_canonical) =
@@ -212,6 +236,19 @@ impl Trainer {
         let mut grads = first.model_backward(&posed_grads)?;
         add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
         let mut opacity_grads = posed_grads.opacity_logits;
+        let mut means_2d = posed_grads.means_2d;
+        let mut sub_render_backward_seconds = 0.0;
+        for (s, pass) in passes.iter().enumerate().filter(|&(s, _)| s != mid) {
+            let t = Instant::now();
+            let sub = pass.render_backward(&d_images[s], None)?;
+            sub_render_backward_seconds += t.elapsed().as_secs_f64();
+            let g = pass.model_backward(&sub)?;
+            grads.add_shared(&g);
+            add_to(&mut grads.latent, &g.latent);
+            add_to(&mut opacity_grads, &sub.opacity_logits);
+            add_to(means_2d.as_flattened_mut(), sub.means_2d.as_flattened());
+        }
+        times.render_backward += sub_render_backward_seconds;
 
         // Frame k+1: backward, accumulated into the shared gradients.
         let (mut flow_value, mut event_value) = (0.0f32, 0.0f32);
@@ -238,7 +275,8 @@ impl Trainer {
             &mut grads.skinning,
         )?;
         // (Frame k+1's backward ran inside this interval; it is counted under `flow`.)
-        times.model_backward = t0.elapsed().as_secs_f64() - second_backward_seconds;
+        times.model_backward =
+            t0.elapsed().as_secs_f64() - second_backward_seconds - sub_render_backward_seconds;
 
         let loss = photo.value + aiap_value + skinning_value + flow_value + event_value;
         let finite = loss.is_finite()
@@ -250,14 +288,14 @@ impl Trainer {
         if !finite {
             return Err(TrainError::NonFinite { step });
         }
-        let psnr_value = psnr(first.rgb(), &frame.image);
+        let psnr_value = psnr(&prediction, &frame.image);
         let active = first.active().len();
         let refine_inputs = RefineInputs {
-            means_2d: posed_grads.means_2d,
+            means_2d,
             radii: first.out.radii.clone(),
         };
         drop(second);
-        drop(first);
+        drop(passes);
 
         let t0 = Instant::now();
         self.apply_gradients(slot, grads, opacity_grads, second_latent)?;
@@ -385,6 +423,26 @@ impl Trainer {
             reset_opacity(&mut self.model.set, &mut self.optimisers.gaussians, 0.01);
         }
         self.step = done;
+    }
+}
+
+/// The mean of the passes' RGB renders (the render itself for one pass).
+fn mean_rgb<'a>(passes: &'a [FramePass<'_>]) -> std::borrow::Cow<'a, [f32]> {
+    if let [pass] = passes {
+        return std::borrow::Cow::Borrowed(pass.rgb());
+    }
+    let mut sum = vec![0.0f32; passes.first().map_or(0, |p| p.rgb().len())];
+    for pass in passes {
+        add_to(&mut sum, pass.rgb());
+    }
+    let scale = 1.0 / passes.len() as f32;
+    std::borrow::Cow::Owned(sum.iter().map(|&v| v * scale).collect())
+}
+
+/// `a += b`, element by element.
+fn add_to(a: &mut [f32], b: &[f32]) {
+    for (x, &y) in a.iter_mut().zip(b) {
+        *x += y;
     }
 }
 
