@@ -14,7 +14,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::body::Body;
-use train::config::{BlurModel, FlowMeasure, FlowSource, Preset, TrainConfig, TrainOptions};
+use train::config::{
+    BlurModel, EventPairs, FlowMeasure, FlowSource, Preset, TrainConfig, TrainOptions,
+};
 use train::data::TrainingData;
 use train::trainer::{StepReport, Trainer};
 use train::TrainError;
@@ -216,16 +218,6 @@ pub fn run(args: Args) -> Result<()> {
     if config.flow_loss {
         enable_flow(&mut ctx, &data, &config)?;
     }
-    if config.event_loss {
-        ctx.enable_events(&data, &config)
-            .context("preparing the event-generation loss")?;
-        println!(
-            "event loss: {} pairs of consecutive training frames, weight {}, C {}",
-            ctx.event_pairs.iter().flatten().count(),
-            config.event_weight,
-            config.event_threshold
-        );
-    }
     if config.blur_model == BlurModel::Exposure {
         ctx.enable_exposure(&data, config.subframes)
             .context("preparing the exposure model")?;
@@ -235,6 +227,30 @@ pub fn run(args: Args) -> Result<()> {
             config.subframes,
             1e3 * data.scene.exposure_s
         );
+    }
+    if config.event_loss {
+        match config.event_pairs {
+            EventPairs::Frames => {
+                ctx.enable_events(&data, &config)
+                    .context("preparing the event-generation loss")?;
+                println!(
+                    "event loss: {} pairs of consecutive training frames, weight {}, C {}",
+                    ctx.event_pairs.iter().flatten().count(),
+                    config.event_weight,
+                    config.event_threshold
+                );
+            }
+            EventPairs::Exposure => {
+                ctx.enable_exposure_events(&data, &config)
+                    .context("preparing the event-generation loss inside exposures")?;
+                println!(
+                    "event loss: {} pairs of consecutive sub-exposure renders, weight {}, C {}",
+                    ctx.exposure_events.iter().flatten().flatten().count(),
+                    config.event_weight,
+                    config.event_threshold
+                );
+            }
+        }
     }
     let config_path = out.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)
@@ -352,6 +368,7 @@ pub fn run(args: Args) -> Result<()> {
             "blur_model": config.blur_model,
             "subframes": config.subframes,
             "event_loss": config.event_loss,
+            "event_pairs": config.event_pairs,
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,
             "seed": config.seed,

@@ -215,6 +215,11 @@ training_options! {
     /// frame's `events` file.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_loss: bool = false,
+    /// Which renders the event-generation loss compares: `frames` (the renders of consecutive
+    /// training frames against the events of [t_k, t_{k+1}), EventNeRF's pairing) or `exposure`
+    /// (consecutive sub-exposure renders of each frame against the events between their times;
+    /// needs `blur_model = exposure`).
+    event_pairs: EventPairs = EventPairs::Frames,
     /// Weight of the event-generation loss: 3, the best of a sweep over 0.3 / 1 / 3 / 10 on the
     /// default benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 / 25.27 dB;
     /// `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick` preset").
@@ -233,6 +238,17 @@ pub enum BlurModel {
     #[default]
     None,
     /// The mean of renders at sub-exposure poses: the physical model of motion blur.
+    Exposure,
+}
+
+/// Which renders the event-generation loss compares (see [`TrainConfig::event_pairs`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum EventPairs {
+    /// Renders of consecutive training frames.
+    #[default]
+    Frames,
+    /// Consecutive sub-exposure renders of one frame.
     Exposure,
 }
 
@@ -457,6 +473,12 @@ impl TrainConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(name, "must be a finite non-negative number");
             }
+        }
+        if self.event_pairs == EventPairs::Exposure && self.blur_model != BlurModel::Exposure {
+            return bad(
+                "event_pairs",
+                "`exposure` compares sub-exposure renders: it needs blur_model = exposure",
+            );
         }
         if self.subframes == 0 || self.subframes > 64 {
             return bad("subframes", "must be in 1..=64");

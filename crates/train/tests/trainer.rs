@@ -412,3 +412,68 @@ fn the_event_generation_loss_trains_pairs_from_the_event_files() {
     off.run(&ctx, 6, |_, _| Ok(())).unwrap();
     assert_ne!(bits(&off), bits(&on));
 }
+
+#[test]
+fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread_count() {
+    let data = load_dataset(&fixture()).unwrap();
+    let config = TrainConfig {
+        blur_model: train::config::BlurModel::Exposure,
+        subframes: 3,
+        event_loss: true,
+        event_pairs: train::config::EventPairs::Exposure,
+        ..tiny_config(8)
+    };
+    let mut ctx = context();
+    ctx.enable_exposure(&data, config.subframes).unwrap();
+    ctx.enable_exposure_events(&data, &config).unwrap();
+    assert_eq!(ctx.exposure_poses.len(), ctx.frames.len());
+    assert!(ctx.exposure_poses.iter().all(|p| p.len() == 3));
+    // The sub-exposure poses differ from each other and bracket the mid-exposure pose.
+    let slot = 1;
+    assert_eq!(
+        ctx.exposure_poses[slot][1].pose_code,
+        ctx.frames[slot].pose.pose_code
+    );
+    assert_ne!(
+        ctx.exposure_poses[slot][0].bones,
+        ctx.exposure_poses[slot][2].bones
+    );
+    // Frame 0's exposure starts before the first event file: its first interval is unsupervised;
+    // every other interval has events.
+    assert!(ctx.exposure_events[0][0].is_none());
+    assert!(ctx.exposure_events[1].iter().all(Option::is_some));
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+                let mut events = 0.0f32;
+                t.run(&ctx, 8, |_, r| {
+                    assert!(r.loss.is_finite());
+                    events += r.event;
+                    Ok(())
+                })
+                .unwrap();
+                (bits(&t), events)
+            })
+    };
+    let (one, events) = run(1);
+    assert!(events > 0.0, "the event loss never applied");
+    assert_same_bits(&one, &run(2).0);
+    // Without the exposure model the same run ends elsewhere.
+    let mut plain = Trainer::new(&ctx, tiny_config(8)).unwrap();
+    plain.run(&ctx, 8, |_, _| Ok(())).unwrap();
+    assert_ne!(bits(&plain), one);
+}
+
+#[test]
+fn event_pairs_inside_exposures_need_the_exposure_model() {
+    let config = TrainConfig {
+        event_pairs: train::config::EventPairs::Exposure,
+        ..tiny_config(8)
+    };
+    let e = config.validate().unwrap_err().to_string();
+    assert!(e.contains("event_pairs") && e.contains("blur_model"), "{e}");
+}

@@ -76,6 +76,11 @@ pub struct TrainingData {
     /// Per training slot, the poses at the sub-exposure times of the exposure model (empty unless
     /// [`TrainingData::enable_exposure`] was called).
     pub exposure_poses: Vec<Vec<PreparedPose>>,
+    /// Per training slot, per pair of consecutive sub-exposure times (s, s+1), C·E per pixel for the
+    /// events of [t_s, t_{s+1}) (row-major H × W), `None` where no event file covers the interval
+    /// (before the first frame's time); empty unless [`TrainingData::enable_exposure_events`] was
+    /// called.
+    pub exposure_events: Vec<Vec<Option<Vec<f32>>>>,
 }
 
 impl TrainingData {
@@ -112,6 +117,7 @@ impl TrainingData {
             flow_net: None,
             event_pairs: Vec::new(),
             exposure_poses: Vec::new(),
+            exposure_events: Vec::new(),
         })
     }
 
@@ -189,6 +195,81 @@ impl TrainingData {
             )));
         }
         self.event_pairs = pairs;
+        Ok(())
+    }
+
+    /// Prepares the event-generation loss inside exposures: for every training frame k and every
+    /// pair of consecutive sub-exposure times (s, s+1) of `subframes` midpoint-rule times, C·E per
+    /// pixel (C = `config.event_threshold`, E the signed count of the events with t_s ≤ t < t_{s+1}).
+    /// An exposure spans the event files of frames k−1 ([t_{k−1}, t_k)) and k ([t_k, t_{k+1})),
+    /// which are joined; a frame whose exposure needs a file that `scene.json` does not name is an
+    /// error naming the frame and the field. Intervals before the first frame's time are covered by
+    /// no file and get no supervision.
+    pub fn enable_exposure_events(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+    ) -> Result<(), TrainError> {
+        let sensor = events::SensorSize::new(self.camera.width, self.camera.height);
+        let exposure = data.scene.exposure_s;
+        let read = |p: usize| -> Result<events::EventStream, TrainError> {
+            let Some(rel) = &data.scene.frames[p].events else {
+                return Err(TrainError::Config(format!(
+                    "{}: frame {}: no `events` file, but the exposure of frame {} reaches into \
+                     its interval (needed by the event loss inside exposures)",
+                    data.dir.display(),
+                    data.frames[p].index,
+                    data.frames[p].index
+                )));
+            };
+            let path = scene::Scene::resolve(&data.dir, rel);
+            events::read_events(&path)
+                .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))
+        };
+        let us = |t: f64| (t * 1e6).round() as i64;
+        let mut all = Vec::with_capacity(self.frames.len());
+        for (p, frame) in data.frames.iter().enumerate() {
+            if frame.split != Split::Train {
+                continue;
+            }
+            let times = crate::exposure::subframe_times(frame.time_s, exposure, config.subframes);
+            // The files this exposure reaches into, joined in time order, and the span they cover.
+            let (first, last) = (times[0], times[times.len() - 1]);
+            let mut files = Vec::new();
+            let mut covered_from = frame.time_s;
+            if p > 0 && first < frame.time_s {
+                files.push(p - 1);
+                covered_from = data.frames[p - 1].time_s;
+            }
+            files.push(p);
+            let covered_to = match data.frames.get(p + 1) {
+                Some(next) if last >= next.time_s => {
+                    files.push(p + 1);
+                    data.frames.get(p + 2).map_or(f64::INFINITY, |f| f.time_s)
+                }
+                Some(next) => next.time_s,
+                None => f64::INFINITY,
+            };
+            let mut stream = events::EventStream::new();
+            for q in files {
+                stream.extend_from(&read(q)?.as_slice());
+            }
+            let slice = stream.as_slice();
+            let pairs = times
+                .windows(2)
+                .map(|w| {
+                    (w[0] >= covered_from && w[1] <= covered_to).then(|| {
+                        let window = slice.window(us(w[0]), us(w[1]));
+                        events::count_frame(&window, sensor, events::CountMode::Signed)
+                            .iter()
+                            .map(|c| c * config.event_threshold)
+                            .collect()
+                    })
+                })
+                .collect();
+            all.push(pairs);
+        }
+        self.exposure_events = all;
         Ok(())
     }
 

@@ -34,8 +34,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
 use terms::{
-    add_aiap_canonical, aiap_terms, pair_terms, photometric, skinning_term, AiapNeighbours,
-    PairSupervision,
+    add_aiap_canonical, aiap_terms, exposure_event_terms, pair_terms, photometric, skinning_term,
+    AiapNeighbours, PairSupervision,
 };
 
 /// All state of a reconstruction: the model, its optimisers, density statistics, the frame-order
@@ -193,6 +193,14 @@ impl Trainer {
             let d: Vec<f32> = photo.d_image.iter().map(|&v| v * scale).collect();
             vec![d; passes.len()]
         };
+        // Events inside the exposure: between consecutive sub-exposure renders.
+        let exposure_events = match data.exposure_events.get(slot) {
+            Some(expected) if config.event_loss && passes.len() > 1 => {
+                let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
+                exposure_event_terms(&renders, expected, &config, &mut d_images)
+            }
+            _ => 0.0,
+        };
         times.loss = t0.elapsed().as_secs_f64();
         let first = &passes[mid];
 
@@ -278,6 +286,7 @@ impl Trainer {
         times.model_backward =
             t0.elapsed().as_secs_f64() - second_backward_seconds - sub_render_backward_seconds;
 
+        let event_value = event_value + exposure_events;
         let loss = photo.value + aiap_value + skinning_value + flow_value + event_value;
         let finite = loss.is_finite()
             && opacity_grads.iter().all(|v| v.is_finite())

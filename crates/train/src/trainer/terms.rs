@@ -3,7 +3,7 @@
 //! the AIAP regulariser on the human Gaussians and the skinning loss on canonical surface samples.
 
 use crate::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP_NEIGHBOURS};
-use crate::config::{FlowGradient, FlowMeasure, TrainConfig};
+use crate::config::{EventPairs, FlowGradient, FlowMeasure, TrainConfig};
 use crate::data::{EventPair, FlowPair, TrainingData};
 use crate::event_loss::pair_event_loss;
 use crate::flow_loss::{pair_flow_loss, pair_warp_loss};
@@ -75,7 +75,7 @@ impl<'a> PairSupervision<'a> {
                 .map(|p| (net, p)),
             _ => None,
         };
-        let events = if config.event_loss {
+        let events = if config.event_loss && config.event_pairs == EventPairs::Frames {
             data.event_pairs.get(slot).and_then(Option::as_ref)
         } else {
             None
@@ -166,6 +166,34 @@ pub(super) fn pair_terms(
         }
     }
     Ok(terms)
+}
+
+/// The event-generation loss inside one exposure: between each pair of consecutive sub-exposure
+/// renders `renders[s]`, `renders[s + 1]` ((3, H, W) each) with events (`expected[s]` = C·E), weighted
+/// by `config.event_weight`; the cotangents are added to `d_images[s]` and `d_images[s + 1]`
+/// ((C, H, W) each). Returns the weighted loss.
+pub(super) fn exposure_event_terms(
+    renders: &[&[f32]],
+    expected: &[Option<Vec<f32>>],
+    config: &TrainConfig,
+    d_images: &mut [Vec<f32>],
+) -> f32 {
+    let lambda = config.event_weight;
+    let mut value = 0.0f32;
+    for (s, expected) in expected.iter().enumerate() {
+        let (Some(expected), Some(&second)) = (expected, renders.get(s + 1)) else {
+            continue;
+        };
+        let el = pair_event_loss(renders[s], second, expected, config.event_log_eps);
+        value += lambda * el.loss;
+        for (o, &g) in d_images[s].iter_mut().zip(&el.d_first) {
+            *o += lambda * g;
+        }
+        for (o, &g) in d_images[s + 1].iter_mut().zip(&el.d_second) {
+            *o += lambda * g;
+        }
+    }
+    value
 }
 
 /// The AIAP neighbourhoods: the human Gaussians (probability ≥ 0.5) and their K nearest human
