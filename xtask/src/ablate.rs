@@ -1,20 +1,21 @@
 //! `cargo xtask ablate`: the paper's ablation set on one scene — semantic none / scalar / one-hot
 //! without events, one-hot + the event-generation loss, one-hot + the flow loss with ground-truth flow
-//! and with event-only flow — each a full `reconstruct` run in `OUT/<run>/`, then `OUT/ablation.md`
+//! and with event-only flow, and beyond the paper the exposure model alone, the exposure model with
+//! events between its sub-exposure renders and the sharp-trained ceiling — each a full `reconstruct` run in `OUT/<run>/`, then `OUT/ablation.md`
 //! (a Markdown table), `OUT/ablation.json` and `OUT/ablation_grid.png` (the strip of the first test
 //! frame of every run, one row per run, numbered as in the table). A run that fails (e.g. no flow
 //! network weights, or a scene without event-only flow) is recorded with its error and the others go
 //! on. With `--blur-levels` it runs the paper's Figure 5 study instead: one-hot without events, with
-//! the event-generation loss and with the flow loss (ground-truth and event-only flow) on the `slow`,
-//! `medium` and `fast` variants of the default benchmark (each generated once under
-//! `target/benchmark/default-<speed>`); `--only` picks among those four.
+//! the event-generation loss, with the flow loss (ground-truth and event-only flow), and the exposure
+//! rows on the `slow`, `medium` and `fast` variants of the default benchmark (each generated once
+//! under `target/benchmark/default-<speed>`); `--only` picks among them.
 
 use anyhow::{Context, Result};
 use image::{Rgb, RgbImage};
 use std::path::Path;
 use std::path::PathBuf;
 use train::blend::SemanticMode;
-use train::config::{FlowSource, TrainOptions};
+use train::config::{BlurModel, EventPairs, FlowSource, TrainOn, TrainOptions};
 
 /// Arguments of `ablate`.
 #[derive(clap::Args, Debug)]
@@ -30,11 +31,13 @@ pub struct Args {
     #[command(flatten)]
     pub training: crate::reconstruct::TrainingArgs,
     /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
-    /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net).
+    /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net, exposure, exposure-events,
+    /// sharp-ceiling).
     #[arg(long, value_delimiter = ',')]
     pub only: Option<Vec<String>>,
     /// Run the blur-level study (paper Figure 5) instead of the ablation set: one-hot, event-loss,
-    /// flow-gt, flow-events and flow-sharp-net on the slow, medium and fast variants of the default
+    /// flow-gt, flow-events, flow-sharp-net, exposure, exposure-events and sharp-ceiling on the
+    /// slow, medium and fast variants of the default
     /// benchmark (ignores --data).
     #[arg(long)]
     pub blur_levels: bool,
@@ -48,7 +51,7 @@ struct Run {
     options: fn() -> TrainOptions,
 }
 
-const RUNS: [Run; 7] = [
+const RUNS: [Run; 10] = [
     Run {
         name: "semantic-none",
         what: "no semantics (every Gaussian deformed), no events",
@@ -124,6 +127,41 @@ const RUNS: [Run; 7] = [
             ..TrainOptions::default()
         },
     },
+    Run {
+        name: "exposure",
+        what: "one-hot + exposure model (mean of sub-exposure renders at interpolated poses)",
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            blur_model: Some(BlurModel::Exposure),
+            event_loss: Some(false),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
+    },
+    Run {
+        name: "exposure-events",
+        what: "one-hot + exposure model + event-generation loss between sub-exposure renders",
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            blur_model: Some(BlurModel::Exposure),
+            event_loss: Some(true),
+            event_pairs: Some(EventPairs::Exposure),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
+    },
+    Run {
+        name: "sharp-ceiling",
+        what: "one-hot trained on the sharp references: the ceiling a blur model chases",
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            train_on: Some(TrainOn::Sharp),
+            blur_model: Some(BlurModel::None),
+            event_loss: Some(false),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
+    },
 ];
 
 /// The metrics of `metrics.json` shown in the table, in order.
@@ -181,6 +219,9 @@ pub fn run(args: Args) -> Result<()> {
                 "flow-gt",
                 "flow-events",
                 "flow-sharp-net",
+                "exposure",
+                "exposure-events",
+                "sharp-ceiling",
             ]) {
                 jobs.push((format!("{label}/{}", r.name), data.clone(), r));
             }

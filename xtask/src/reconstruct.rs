@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use train::body::Body;
 use train::config::{
-    BlurModel, EventPairs, FlowMeasure, FlowSource, Preset, TrainConfig, TrainOptions,
+    BlurModel, EventPairs, FlowMeasure, FlowSource, Preset, TrainConfig, TrainOn, TrainOptions,
 };
 use train::data::TrainingData;
 use train::trainer::{StepReport, Trainer};
@@ -218,6 +218,11 @@ pub fn run(args: Args) -> Result<()> {
     if config.flow_loss {
         enable_flow(&mut ctx, &data, &config)?;
     }
+    if config.train_on == TrainOn::Sharp {
+        ctx.use_sharp_images(&data)
+            .context("training on the sharp references")?;
+        println!("training on the sharp references (the benchmark's ceiling, not a method)");
+    }
     if config.blur_model == BlurModel::Exposure {
         ctx.enable_exposure(&data, config.subframes)
             .context("preparing the exposure model")?;
@@ -365,6 +370,7 @@ pub fn run(args: Args) -> Result<()> {
             "flow_tau": config.flow_tau,
             "flow_gradient": config.flow_gradient,
             "flow_measure": config.flow_measure,
+            "train_on": config.train_on,
             "blur_model": config.blur_model,
             "subframes": config.subframes,
             "event_loss": config.event_loss,

@@ -172,6 +172,9 @@ training_options! {
     opacity_reset_every: usize = 0,
     /// Steps between checkpoints (0: only at the end).
     checkpoint_every: usize = 500,
+    /// Which images are trained on: `blurred` (the observed frames) or `sharp` (the sharp references
+    /// of a synthetic benchmark: the ceiling a model of the blur can chase; not for real data).
+    train_on: TrainOn = TrainOn::Blurred,
     /// How a training frame's prediction is formed: `none` (one render at mid exposure, the paper) or
     /// `exposure` (the mean, in linear intensity, of `subframes` renders at poses spread over the
     /// frame's exposure; `train::exposure`).
@@ -228,6 +231,17 @@ training_options! {
     event_threshold: f32 = 0.2,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
     event_log_eps: f32 = 1e-3,
+}
+
+/// Which images are trained on (see [`TrainConfig::train_on`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum TrainOn {
+    /// The observed (blurred) frames.
+    #[default]
+    Blurred,
+    /// The sharp references (benchmarks only).
+    Sharp,
 }
 
 /// How a training frame's prediction is formed (see [`TrainConfig::blur_model`]).

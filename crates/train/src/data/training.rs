@@ -121,6 +121,23 @@ impl TrainingData {
         })
     }
 
+    /// Trains on the sharp references instead of the observed frames (the ceiling of a benchmark);
+    /// a training frame without a sharp reference is an error naming it.
+    pub fn use_sharp_images(&mut self, data: &Dataset) -> Result<(), TrainError> {
+        let training = data.frames.iter().filter(|f| f.split == Split::Train);
+        for (frame, source) in self.frames.iter_mut().zip(training) {
+            let Some(sharp) = &source.sharp else {
+                return Err(TrainError::Config(format!(
+                    "{}: frame {} has no `sharp` reference (needed by --train-on sharp)",
+                    data.dir.display(),
+                    source.index
+                )));
+            };
+            frame.image = sharp.clone();
+        }
+        Ok(())
+    }
+
     /// Prepares the exposure model: for every training frame, the body poses at `subframes`
     /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the scene's
     /// `exposure_s`), interpolated from the SMPL parameters of every frame of the scene
