@@ -18,10 +18,17 @@ use std::path::PathBuf;
 use train::body::Body;
 use train::config::{Preset, TrainConfig};
 use train::data::{load_dataset, TrainingData};
-use train::model::{Model, RENDER_CHANNELS};
+use train::model::{mean_rgb, Model, RENDER_CHANNELS};
 use train::trainer::Trainer;
 
 fn model_and_data() -> (Model, TrainingData) {
+    model_and_data_with(|_, _| ())
+}
+
+/// The tiny fixture's model and training data, `prepare` run on the data first.
+fn model_and_data_with(
+    prepare: impl FnOnce(&mut TrainingData, &train::data::Dataset),
+) -> (Model, TrainingData) {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data-fixtures/tiny");
     let data = load_dataset(&dir).unwrap();
     let body = Body::new(
@@ -29,7 +36,8 @@ fn model_and_data() -> (Model, TrainingData) {
         data.scene.body.betas.clone(),
     )
     .unwrap();
-    let training = TrainingData::new(&data, body, 0).unwrap();
+    let mut training = TrainingData::new(&data, body, 0).unwrap();
+    prepare(&mut training, &data);
     let config = TrainConfig {
         human_gaussians: 300,
         scene_gaussians: 300,
@@ -126,5 +134,72 @@ fn frame_pass_gradients_match_central_differences_of_the_render() {
             numeric,
             f64::from(posed.opacity_logits[i]),
         );
+    }
+}
+
+/// Σ W·mean(renders at the sub-exposure poses of training frame 1), in f64.
+fn exposure_loss(model: &Model, data: &TrainingData, weights: &[f32]) -> f64 {
+    let passes: Vec<_> = data.exposure_poses[1]
+        .iter()
+        .map(|pose| model.forward(&data.camera, pose, model.latent(1)).unwrap())
+        .collect();
+    mean_rgb(&passes)
+        .iter()
+        .zip(weights)
+        .map(|(&x, &w)| f64::from(x) * f64::from(w))
+        .sum()
+}
+
+/// The exposure model's prediction (the mean of three sub-exposure renders at interpolated poses):
+/// each pass's backward of the cotangent scaled by 1/S, summed, against central differences of the
+/// mean (same tolerance and reasoning as above).
+#[test]
+fn the_sub_exposure_mean_backward_matches_central_differences() {
+    let (model, data) = model_and_data_with(|training, dataset| {
+        training.enable_exposure(dataset, 3).unwrap();
+    });
+    let hw = data.pixels();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let weights: Vec<f32> = (0..3 * hw).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let mut d_image = vec![0.0f32; RENDER_CHANNELS * hw];
+    for (d, &w) in d_image.iter_mut().zip(&weights) {
+        *d = w / 3.0;
+    }
+    let (mut latent, mut features) = (
+        vec![0.0f32; model.latent(1).len()],
+        vec![0.0f32; model.set.features.len()],
+    );
+    for pose in &data.exposure_poses[1] {
+        let pass = model.forward(&data.camera, pose, model.latent(1)).unwrap();
+        let (g, _) = pass.backward(&d_image).unwrap();
+        latent.iter_mut().zip(&g.latent).for_each(|(a, &b)| *a += b);
+        features
+            .iter_mut()
+            .zip(&g.features)
+            .for_each(|(a, &b)| *a += b);
+    }
+    let h = 1e-2f32;
+    let central = |perturb: &dyn Fn(&mut Model, f32)| {
+        let mut plus = model.clone();
+        perturb(&mut plus, h);
+        let mut minus = model.clone();
+        perturb(&mut minus, -h);
+        (exposure_loss(&plus, &data, &weights) - exposure_loss(&minus, &data, &weights))
+            / (2.0 * f64::from(h))
+    };
+    let top = |g: &[f32], k: usize| {
+        let mut idx: Vec<usize> = (0..g.len()).collect();
+        idx.sort_by(|&a, &b| g[b].abs().total_cmp(&g[a].abs()));
+        idx.truncate(k);
+        idx
+    };
+    let d = model.config.latent_dim;
+    for j in top(&latent, 3) {
+        let numeric = central(&|m, e| m.latents[d + j] += e);
+        check(&format!("latent {j}"), numeric, f64::from(latent[j]));
+    }
+    for j in top(&features, 3) {
+        let numeric = central(&|m, e| m.set.features[j] += e);
+        check(&format!("feature {j}"), numeric, f64::from(features[j]));
     }
 }

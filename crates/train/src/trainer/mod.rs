@@ -22,7 +22,7 @@ use crate::config::{BlurModel, TrainConfig};
 use crate::data::TrainingData;
 use crate::image_loss::{psnr, ImageShape};
 use crate::init::{initialise, InitConfig};
-use crate::model::{FramePass, Model};
+use crate::model::{mean_rgb, FramePass, Model};
 use crate::optimisers::Optimisers;
 use crate::posing::ModelGradients;
 use crate::schedule::{accumulate_screen_stats, exponential_rate, on_schedule};
@@ -433,19 +433,6 @@ impl Trainer {
         }
         self.step = done;
     }
-}
-
-/// The mean of the passes' RGB renders (the render itself for one pass).
-fn mean_rgb<'a>(passes: &'a [FramePass<'_>]) -> std::borrow::Cow<'a, [f32]> {
-    if let [pass] = passes {
-        return std::borrow::Cow::Borrowed(pass.rgb());
-    }
-    let mut sum = vec![0.0f32; passes.first().map_or(0, |p| p.rgb().len())];
-    for pass in passes {
-        add_to(&mut sum, pass.rgb());
-    }
-    let scale = 1.0 / passes.len() as f32;
-    std::borrow::Cow::Owned(sum.iter().map(|&v| v * scale).collect())
 }
 
 /// `a += b`, element by element.
