@@ -398,3 +398,45 @@ fn ablate_writes_a_table_json_and_grid_and_records_failed_runs() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("semantic-none"));
 }
+
+#[test]
+fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    let out = dir.path().join("exposure");
+    let o = reconstruct(
+        &out,
+        &config,
+        &[
+            "--blur-model",
+            "exposure",
+            "--subframes",
+            "3",
+            "--event-loss",
+            "on",
+            "--event-pairs",
+            "exposure",
+        ],
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("mean of 3 renders"));
+    let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    for field in [
+        "\"blur_model\": \"exposure\"",
+        "\"subframes\": 3",
+        "\"event_pairs\": \"exposure\"",
+    ] {
+        assert!(metrics.contains(field), "{field}: {metrics}");
+    }
+    let sharp = dir.path().join("sharp");
+    reconstruct(&sharp, &config, &["--train-on", "sharp"]);
+    let metrics = std::fs::read_to_string(sharp.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"train_on\": \"sharp\""), "{metrics}");
+    // Events inside exposures without the exposure model are refused, naming the setting.
+    let o = xtask()
+        .args(["reconstruct", "--event-pairs", "exposure", "--data"])
+        .arg(fixture())
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("event_pairs"));
+}
