@@ -56,6 +56,7 @@ const RUNS: [Run; 10] = [
         name: "semantic-none",
         what: "no semantics (every Gaussian deformed), no events",
         options: || TrainOptions {
+            blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::None),
             event_loss: Some(false),
             flow_loss: Some(false),
@@ -66,6 +67,7 @@ const RUNS: [Run; 10] = [
         name: "semantic-scalar",
         what: "one sigmoid logit (p = 0.5 at start), no events",
         options: || TrainOptions {
+            blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::Scalar),
             event_loss: Some(false),
             flow_loss: Some(false),
@@ -76,6 +78,7 @@ const RUNS: [Run; 10] = [
         name: "one-hot",
         what: "one-hot semantics (paper), no events",
         options: || TrainOptions {
+            blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::OneHot),
             event_loss: Some(false),
             flow_loss: Some(false),
@@ -86,6 +89,7 @@ const RUNS: [Run; 10] = [
         name: "event-loss",
         what: "one-hot + event-generation loss (EventNeRF/E-NeRF)",
         options: || TrainOptions {
+            blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::OneHot),
             event_loss: Some(true),
             flow_loss: Some(false),
@@ -96,6 +100,7 @@ const RUNS: [Run; 10] = [
         name: "flow-gt",
         what: "one-hot + flow loss, ground-truth flow",
         options: || TrainOptions {
+            blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::OneHot),
             event_loss: Some(false),
             flow_loss: Some(true),
@@ -107,6 +112,7 @@ const RUNS: [Run; 10] = [
         name: "flow-events",
         what: "one-hot + flow loss, event-only flow (contrast maximisation)",
         options: || TrainOptions {
+            blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::OneHot),
             event_loss: Some(false),
             flow_loss: Some(true),
@@ -120,6 +126,7 @@ const RUNS: [Run; 10] = [
             "one-hot + flow loss, targets from the flow network on the sharp frames (the paper's \
                ZJU-MoCap-Blur protocol)",
         options: || TrainOptions {
+            blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::OneHot),
             event_loss: Some(false),
             flow_loss: Some(true),

@@ -44,6 +44,8 @@ fn model_and_data_with(
         max_gaussians: 1000,
         deform_hidden: 16,
         skinning_warmup_steps: 20,
+        // One render per frame: these tests prepare no sub-exposure poses.
+        blur_model: train::config::BlurModel::None,
         ..TrainConfig::preset(Preset::Quick)
     };
     let mut model = Trainer::new(&training, config).unwrap().model;

@@ -40,6 +40,8 @@ fn tiny_config(steps: usize) -> TrainConfig {
         densify_grad_threshold: 1e-5,
         opacity_reset_every: 0,
         checkpoint_every: 0,
+        // One render per frame: these tests prepare no sub-exposure poses.
+        blur_model: train::config::BlurModel::None,
         ..TrainConfig::preset(Preset::Quick)
     }
 }

@@ -70,6 +70,7 @@ impl Trainer {
     /// Initialises the model (paper §4.2) for `data` and fresh optimiser state.
     pub fn new(data: &TrainingData, config: TrainConfig) -> Result<Self, TrainError> {
         config.validate()?;
+        Self::check_data(&config, data)?;
         let vertices = &data.body.canonical.posed.vertices;
         let roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.root).collect();
         let init = initialise(
@@ -105,6 +106,30 @@ impl Trainer {
             extent_of(&init.cube),
         )?;
         Ok(Self::with_model(model))
+    }
+
+    /// Refuses a configuration that needs data `data` was not prepared with: the exposure model
+    /// without sub-exposure poses ([`TrainingData::enable_exposure`]), events inside exposures
+    /// without their counts ([`TrainingData::enable_exposure_events`]).
+    pub fn check_data(config: &TrainConfig, data: &TrainingData) -> Result<(), TrainError> {
+        if config.blur_model == BlurModel::Exposure && data.exposure_poses.is_empty() {
+            return Err(TrainError::Config(
+                "blur_model = exposure, but the training data has no sub-exposure poses \
+                 (TrainingData::enable_exposure)"
+                    .into(),
+            ));
+        }
+        if config.event_loss
+            && config.event_pairs == crate::config::EventPairs::Exposure
+            && data.exposure_events.is_empty()
+        {
+            return Err(TrainError::Config(
+                "event_pairs = exposure, but the training data has no events inside exposures \
+                 (TrainingData::enable_exposure_events)"
+                    .into(),
+            ));
+        }
+        Ok(())
     }
 
     /// A trainer with fresh optimiser state around `model` (e.g. to fine-tune a saved model).
@@ -152,6 +177,7 @@ impl Trainer {
     /// On a non-finite loss or gradient nothing is updated and [`TrainError::NonFinite`] is returned.
     pub fn step(&mut self, data: &TrainingData) -> Result<StepReport, TrainError> {
         let config = self.model.config.clone();
+        Self::check_data(&config, data)?;
         let step = self.step;
         let slot = self.next_slot(data.frames.len());
         let frame = &data.frames[slot];
