@@ -70,7 +70,6 @@ impl Trainer {
     /// Initialises the model (paper §4.2) for `data` and fresh optimiser state.
     pub fn new(data: &TrainingData, config: TrainConfig) -> Result<Self, TrainError> {
         config.validate()?;
-        Self::check_data(&config, data)?;
         let vertices = &data.body.canonical.posed.vertices;
         let roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.root).collect();
         let init = initialise(
