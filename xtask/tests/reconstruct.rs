@@ -433,7 +433,14 @@ fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
     assert!(metrics.contains("\"train_on\": \"sharp\""), "{metrics}");
     // Events inside exposures without the exposure model are refused, naming the setting.
     let o = xtask()
-        .args(["reconstruct", "--event-pairs", "exposure", "--data"])
+        .args([
+            "reconstruct",
+            "--blur-model",
+            "none",
+            "--event-pairs",
+            "exposure",
+            "--data",
+        ])
         .arg(fixture())
         .output()
         .unwrap();
