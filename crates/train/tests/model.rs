@@ -74,6 +74,14 @@ fn loss(model: &Model, data: &TrainingData, weights: &[f32]) -> f64 {
         .sum()
 }
 
+/// The indices of the `k` largest magnitudes of `g`.
+fn top(g: &[f32], k: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..g.len()).collect();
+    idx.sort_by(|&a, &b| g[b].abs().total_cmp(&g[a].abs()));
+    idx.truncate(k);
+    idx
+}
+
 fn check(name: &str, numeric: f64, analytic: f64) {
     assert!(
         analytic.abs() > 2e-2,
@@ -108,19 +116,11 @@ fn frame_pass_gradients_match_central_differences_of_the_render() {
         (loss(&plus, &data, &weights) - loss(&minus, &data, &weights)) / (2.0 * f64::from(h))
     };
     // The latent entries with the largest gradients (the human colour network's route).
-    let mut order: Vec<usize> = (0..grads.latent.len()).collect();
-    order.sort_by(|&a, &b| grads.latent[b].abs().total_cmp(&grads.latent[a].abs()));
-    for &j in &order[..3] {
+    for j in top(&grads.latent, 3) {
         let numeric = central(&|m, d| m.latents[j] += d);
         check(&format!("latent {j}"), numeric, f64::from(grads.latent[j]));
     }
     // Colour features and opacity logits with the largest gradients.
-    let top = |g: &[f32], k: usize| {
-        let mut idx: Vec<usize> = (0..g.len()).collect();
-        idx.sort_by(|&a, &b| g[b].abs().total_cmp(&g[a].abs()));
-        idx.truncate(k);
-        idx
-    };
     for j in top(&grads.features, 3) {
         let numeric = central(&|m, d| m.set.features[j] += d);
         check(
@@ -188,12 +188,6 @@ fn the_sub_exposure_mean_backward_matches_central_differences() {
         perturb(&mut minus, -h);
         (exposure_loss(&plus, &data, &weights) - exposure_loss(&minus, &data, &weights))
             / (2.0 * f64::from(h))
-    };
-    let top = |g: &[f32], k: usize| {
-        let mut idx: Vec<usize> = (0..g.len()).collect();
-        idx.sort_by(|&a, &b| g[b].abs().total_cmp(&g[a].abs()));
-        idx.truncate(k);
-        idx
     };
     let d = model.config.latent_dim;
     for j in top(&latent, 3) {

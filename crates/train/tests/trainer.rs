@@ -66,6 +66,15 @@ fn bits(t: &Trainer) -> Vec<u32> {
         .collect()
 }
 
+/// Runs `f` on a pool of `threads` threads.
+fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
 /// Asserts bit equality, reporting the first difference instead of both vectors.
 fn assert_same_bits(a: &[u32], b: &[u32]) {
     assert_eq!(a.len(), b.len(), "different parameter counts");
@@ -120,15 +129,11 @@ fn resume_from_a_checkpoint_is_bit_identical() {
 fn one_and_two_threads_give_identical_bits() {
     let ctx = context();
     let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut t = Trainer::new(&ctx, tiny_config(8)).unwrap();
-                t.run(&ctx, 8, |_, _| Ok(())).unwrap();
-                bits(&t)
-            })
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, tiny_config(8)).unwrap();
+            t.run(&ctx, 8, |_, _| Ok(())).unwrap();
+            bits(&t)
+        })
     };
     assert_same_bits(&run(1), &run(2));
 }
@@ -162,21 +167,17 @@ fn the_flow_loss_trains_pairs_of_consecutive_training_frames() {
         }
     }
     let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut t = Trainer::new(&ctx, config.clone()).unwrap();
-                let mut flow_steps = 0;
-                t.run(&ctx, 8, |_, r| {
-                    assert!(r.flow.is_finite() && r.flow >= 0.0);
-                    flow_steps += usize::from(r.flow > 0.0);
-                    Ok(())
-                })
-                .unwrap();
-                (bits(&t), flow_steps)
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+            let mut flow_steps = 0;
+            t.run(&ctx, 8, |_, r| {
+                assert!(r.flow.is_finite() && r.flow >= 0.0);
+                flow_steps += usize::from(r.flow > 0.0);
+                Ok(())
             })
+            .unwrap();
+            (bits(&t), flow_steps)
+        })
     };
     let (one, flow_steps) = run(1);
     assert!(flow_steps > 0, "no step had a flow pair");
@@ -445,21 +446,17 @@ fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread
     assert!(ctx.exposure_events[0][0].is_none());
     assert!(ctx.exposure_events[1].iter().all(Option::is_some));
     let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut t = Trainer::new(&ctx, config.clone()).unwrap();
-                let mut events = 0.0f32;
-                t.run(&ctx, 8, |_, r| {
-                    assert!(r.loss.is_finite());
-                    events += r.event;
-                    Ok(())
-                })
-                .unwrap();
-                (bits(&t), events)
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+            let mut events = 0.0f32;
+            t.run(&ctx, 8, |_, r| {
+                assert!(r.loss.is_finite());
+                events += r.event;
+                Ok(())
             })
+            .unwrap();
+            (bits(&t), events)
+        })
     };
     let (one, events) = run(1);
     assert!(events > 0.0, "the event loss never applied");
