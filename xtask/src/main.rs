@@ -52,8 +52,9 @@ enum Command {
     /// between its sub-exposure renders).
     Reconstruct(reconstruct::Args),
     /// The paper's ablation set (semantics none/scalar/one-hot, event loss, flow loss with
-    /// ground-truth and event-only flow): one reconstruct run each, a Markdown table, ablation.json
-    /// and an image grid.
+    /// ground-truth and event-only flow) plus the exposure model, the exposure model with events and
+    /// the sharp-trained ceiling: one reconstruct run each, a Markdown table, ablation.json and an
+    /// image grid.
     Ablate(ablate::Args),
     /// Evaluate a saved model on a scene's test split (metrics.json + comparison strips).
     Eval(eval_cmd::Args),
