@@ -69,8 +69,7 @@ impl PoseTrack {
         }
     }
 
-    /// The segment `i` with `times[i] ≤ t < times[i+1]` (clamped to the first and last segment) and
-    /// the finite-difference tangent time scale of its ends.
+    /// The segment `i` with `times[i] ≤ t < times[i+1]`, clamped to the first and last segment.
     fn segment(&self, t: f64) -> usize {
         let n = self.times.len();
         if n < 2 {
@@ -82,8 +81,9 @@ impl PoseTrack {
 
     /// Finite-difference tangent (per second) at key `j` of values `v`: the fourth-order central
     /// difference where the five keys around `j` are evenly spaced (video frames), the second-order
-    /// (Catmull-Rom) one where only three are, one-sided at the ends.
-    fn tangent(&self, v: &[DVec3], j: usize) -> DVec3 {
+    /// (Catmull-Rom) one where only three are, one-sided at the ends. `v(j)` is key `j`'s value; only
+    /// keys within two of `j` are read.
+    fn tangent(&self, v: &dyn Fn(usize) -> DVec3, j: usize) -> DVec3 {
         let n = self.times.len();
         let t = &self.times;
         if j >= 2 && j + 2 < n {
@@ -92,28 +92,29 @@ impl PoseTrack {
                 .iter()
                 .all(|d| (d - h).abs() <= 1e-9 * h.abs());
             if even {
-                return (v[j - 2] - v[j - 1] * 8.0 + v[j + 1] * 8.0 - v[j + 2]) / (12.0 * h);
+                return (v(j - 2) - v(j - 1) * 8.0 + v(j + 1) * 8.0 - v(j + 2)) / (12.0 * h);
             }
         }
         let (a, b) = (j.saturating_sub(1), (j + 1).min(n - 1));
         if a == b {
             return DVec3::ZERO;
         }
-        (v[b] - v[a]) / (t[b] - t[a])
+        (v(b) - v(a)) / (t[b] - t[a])
     }
 
     /// Cubic Hermite value at `t` of key values `v` on segment `i` (linear continuation outside the
-    /// keys' time range).
-    fn hermite(&self, v: &[DVec3], i: usize, t: f64) -> DVec3 {
+    /// keys' time range). Reads only the keys within two of the segment, so a call costs the same
+    /// whatever the track's length.
+    fn hermite(&self, v: &dyn Fn(usize) -> DVec3, i: usize, t: f64) -> DVec3 {
         let n = self.times.len();
         if n < 2 {
-            return v[0];
+            return v(0);
         }
         if t <= self.times[0] {
-            return v[0] + self.tangent(v, 0) * (t - self.times[0]);
+            return v(0) + self.tangent(v, 0) * (t - self.times[0]);
         }
         if t >= self.times[n - 1] {
-            return v[n - 1] + self.tangent(v, n - 1) * (t - self.times[n - 1]);
+            return v(n - 1) + self.tangent(v, n - 1) * (t - self.times[n - 1]);
         }
         let (t0, t1) = (self.times[i], self.times[i + 1]);
         let h = t1 - t0;
@@ -123,32 +124,29 @@ impl PoseTrack {
         let h10 = u3 - 2.0 * u2 + u;
         let h01 = -2.0 * u3 + 3.0 * u2;
         let h11 = u3 - u2;
-        v[i] * h00
+        v(i) * h00
             + self.tangent(v, i) * (h10 * h)
-            + v[i + 1] * h01
+            + v(i + 1) * h01
             + self.tangent(v, i + 1) * (h11 * h)
     }
 
     /// The SMPL parameters at time `t` (seconds).
     pub fn at(&self, t: f64) -> SmplParams {
         let i = self.segment(t);
-        let transl = self.hermite(&self.translations, i, t);
+        let transl = self.hermite(&|j| self.translations[j], i, t);
         let joints = self.rotations.first().map_or(0, Vec::len);
         let mut pose = Vec::with_capacity(3 * joints);
         for joint in 0..joints {
-            let base = self.rotations[i][joint];
+            let base_inverse = self.rotations[i][joint].inverse();
             // Key rotations relative to the segment's base, as tangent vectors (shortest arc).
-            let local: Vec<DVec3> = self
-                .rotations
-                .iter()
-                .map(|r| {
-                    let mut q = base.inverse() * r[joint];
-                    if q.w < 0.0 {
-                        q = -q;
-                    }
-                    q.to_scaled_axis()
-                })
-                .collect();
+            let local = |j: usize| {
+                let mut q = base_inverse * self.rotations[j][joint];
+                if q.w < 0.0 {
+                    q = -q;
+                }
+                q.to_scaled_axis()
+            };
+            let base = self.rotations[i][joint];
             let q = (base * DQuat::from_scaled_axis(self.hermite(&local, i, t))).normalize();
             let r = q.to_scaled_axis();
             pose.extend([r.x as f32, r.y as f32, r.z as f32]);
