@@ -187,17 +187,7 @@ impl TrainingData {
         let mut pairs = vec![None; self.frames.len()];
         let found = consecutive_training_pairs(data);
         for &(slot, p) in &found {
-            let f = &data.frames[p];
-            let Some(rel) = &data.scene.frames[p].events else {
-                return Err(TrainError::Config(format!(
-                    "{}: frame {} has no events file (needed by the event loss)",
-                    data.dir.display(),
-                    f.index
-                )));
-            };
-            let path = scene::Scene::resolve(&data.dir, rel);
-            let stream = events::read_events(&path)
-                .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+            let stream = read_frame_events(data, p, "the event loss")?;
             let counts = events::count_frame(&stream.as_slice(), sensor, events::CountMode::Signed);
             pairs[slot] = Some(EventPair {
                 next_slot: slot + 1,
@@ -229,20 +219,9 @@ impl TrainingData {
     ) -> Result<(), TrainError> {
         let sensor = events::SensorSize::new(self.camera.width, self.camera.height);
         let exposure = data.scene.exposure_s;
-        let read = |p: usize| -> Result<events::EventStream, TrainError> {
-            let Some(rel) = &data.scene.frames[p].events else {
-                return Err(TrainError::Config(format!(
-                    "{}: frame {}: no `events` file, but the exposure of frame {} reaches into \
-                     its interval (needed by the event loss inside exposures)",
-                    data.dir.display(),
-                    data.frames[p].index,
-                    data.frames[p].index
-                )));
-            };
-            let path = scene::Scene::resolve(&data.dir, rel);
-            events::read_events(&path)
-                .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))
-        };
+        // Each file is read once: an exposure reaches at most one file back, so the streams of
+        // frames before p − 1 are dropped as the loop moves on.
+        let mut loaded: std::collections::BTreeMap<usize, events::EventStream> = Default::default();
         let us = |t: f64| (t * 1e6).round() as i64;
         let mut all = Vec::with_capacity(self.frames.len());
         for (p, frame) in data.frames.iter().enumerate() {
@@ -267,9 +246,20 @@ impl TrainingData {
                 Some(next) => next.time_s,
                 None => f64::INFINITY,
             };
+            loaded.retain(|&q, _| q + 1 >= p);
             let mut stream = events::EventStream::new();
             for q in files {
-                stream.extend_from(&read(q)?.as_slice());
+                let stream_q = match loaded.entry(q) {
+                    std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+                    std::collections::btree_map::Entry::Vacant(e) => {
+                        let why = format!(
+                            "the event loss inside the exposure of frame {}",
+                            frame.index
+                        );
+                        e.insert(read_frame_events(data, q, &why)?)
+                    }
+                };
+                stream.extend_from(&stream_q.as_slice());
             }
             let slice = stream.as_slice();
             let pairs = times
@@ -361,6 +351,24 @@ impl TrainingData {
         self.flow_net = Some(net);
         Ok(())
     }
+}
+
+/// The events of frame `p`'s `events` file ([t_p, t_{p+1})); a frame without one is an error naming
+/// the frame, the field and what needed it (`needed_by`).
+fn read_frame_events(
+    data: &Dataset,
+    p: usize,
+    needed_by: &str,
+) -> Result<events::EventStream, TrainError> {
+    let Some(rel) = &data.scene.frames[p].events else {
+        return Err(TrainError::Config(format!(
+            "{}: frame {} has no `events` file (needed by {needed_by})",
+            data.dir.display(),
+            data.frames[p].index
+        )));
+    };
+    let path = scene::Scene::resolve(&data.dir, rel);
+    events::read_events(&path).map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))
 }
 
 /// Slots of consecutive training frames: `(slot of k, position of k in data.frames)` for every

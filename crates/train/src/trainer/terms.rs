@@ -141,12 +141,8 @@ pub(super) fn pair_terms(
         terms.flow = lambda * fl_loss;
         match config.flow_gradient {
             FlowGradient::All => {
-                for (o, &g) in d_first[..3 * hw].iter_mut().zip(&fl_d_first) {
-                    *o += lambda * g;
-                }
-                for (o, &g) in terms.d_second[..3 * hw].iter_mut().zip(&fl_d_second) {
-                    *o += lambda * g;
-                }
+                add_scaled(&mut d_first[..3 * hw], &fl_d_first, lambda);
+                add_scaled(&mut terms.d_second[..3 * hw], &fl_d_second, lambda);
             }
             FlowGradient::Geometry => {
                 let scaled = |g: &[f32]| g.iter().map(|&v| lambda * v).collect::<Vec<f32>>();
@@ -158,12 +154,8 @@ pub(super) fn pair_terms(
         let el = pair_event_loss(rgb, rgb2, &event_pair.expected, config.event_log_eps);
         let lambda = config.event_weight;
         terms.event = lambda * el.loss;
-        for (o, &g) in d_first[..3 * hw].iter_mut().zip(&el.d_first) {
-            *o += lambda * g;
-        }
-        for (o, &g) in terms.d_second[..3 * hw].iter_mut().zip(&el.d_second) {
-            *o += lambda * g;
-        }
+        add_scaled(&mut d_first[..3 * hw], &el.d_first, lambda);
+        add_scaled(&mut terms.d_second[..3 * hw], &el.d_second, lambda);
     }
     Ok(terms)
 }
@@ -186,14 +178,17 @@ pub(super) fn exposure_event_terms(
         };
         let el = pair_event_loss(renders[s], second, expected, config.event_log_eps);
         value += lambda * el.loss;
-        for (o, &g) in d_images[s].iter_mut().zip(&el.d_first) {
-            *o += lambda * g;
-        }
-        for (o, &g) in d_images[s + 1].iter_mut().zip(&el.d_second) {
-            *o += lambda * g;
-        }
+        add_scaled(&mut d_images[s], &el.d_first, lambda);
+        add_scaled(&mut d_images[s + 1], &el.d_second, lambda);
     }
     value
+}
+
+/// `dst += lambda · src`, element by element (a loss's weighted cotangent into an image's).
+fn add_scaled(dst: &mut [f32], src: &[f32], lambda: f32) {
+    for (o, &g) in dst.iter_mut().zip(src) {
+        *o += lambda * g;
+    }
 }
 
 /// The AIAP neighbourhoods: the human Gaussians (probability ≥ 0.5) and their K nearest human
