@@ -74,6 +74,20 @@ fn loss(model: &Model, data: &TrainingData, weights: &[f32]) -> f64 {
         .sum()
 }
 
+/// The central difference (h = 1e-2) of `loss` along `perturb(model, ±h)`.
+fn central_difference(
+    model: &Model,
+    perturb: &dyn Fn(&mut Model, f32),
+    loss: impl Fn(&Model) -> f64,
+) -> f64 {
+    let h = 1e-2f32;
+    let mut plus = model.clone();
+    perturb(&mut plus, h);
+    let mut minus = model.clone();
+    perturb(&mut minus, -h);
+    (loss(&plus) - loss(&minus)) / (2.0 * f64::from(h))
+}
+
 /// The indices of the `k` largest magnitudes of `g`.
 fn top(g: &[f32], k: usize) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..g.len()).collect();
@@ -107,13 +121,8 @@ fn frame_pass_gradients_match_central_differences_of_the_render() {
         .unwrap();
     let (grads, posed) = pass.backward(&weights).unwrap();
     drop(pass);
-    let h = 1e-2f32;
     let central = |perturb: &dyn Fn(&mut Model, f32)| {
-        let mut plus = model.clone();
-        perturb(&mut plus, h);
-        let mut minus = model.clone();
-        perturb(&mut minus, -h);
-        (loss(&plus, &data, &weights) - loss(&minus, &data, &weights)) / (2.0 * f64::from(h))
+        central_difference(&model, perturb, |m| loss(m, &data, &weights))
     };
     // The latent entries with the largest gradients (the human colour network's route).
     for j in top(&grads.latent, 3) {
@@ -180,14 +189,8 @@ fn the_sub_exposure_mean_backward_matches_central_differences() {
             .zip(&g.features)
             .for_each(|(a, &b)| *a += b);
     }
-    let h = 1e-2f32;
     let central = |perturb: &dyn Fn(&mut Model, f32)| {
-        let mut plus = model.clone();
-        perturb(&mut plus, h);
-        let mut minus = model.clone();
-        perturb(&mut minus, -h);
-        (exposure_loss(&plus, &data, &weights) - exposure_loss(&minus, &data, &weights))
-            / (2.0 * f64::from(h))
+        central_difference(&model, perturb, |m| exposure_loss(m, &data, &weights))
     };
     let d = model.config.latent_dim;
     for j in top(&latent, 3) {
