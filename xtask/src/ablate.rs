@@ -92,6 +92,8 @@ const RUNS: [Run; 10] = [
             blur_model: Some(BlurModel::None),
             semantic: Some(SemanticMode::OneHot),
             event_loss: Some(true),
+            event_pairs: Some(EventPairs::Frames),
+            event_weight: Some(3.0),
             flow_loss: Some(false),
             ..TrainOptions::default()
         },

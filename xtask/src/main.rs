@@ -45,11 +45,12 @@ enum Command {
     /// Train E-Sem3DGS (person + scene) on a scene directory — by default the synthetic benchmark —
     /// then evaluate the test split and write the model, metrics.json, strips and a curve.
     ///
-    /// Every training option below overrides the preset and the --config file. The paper's own
-    /// configuration (one render per frame, the event-flow loss) is
-    /// `--blur-model none --event-loss off --flow-loss on --flow-source events`; the physical model
-    /// of the blur is `--blur-model exposure` (add `--event-loss on --event-pairs exposure` for events
-    /// between its sub-exposure renders).
+    /// Every training option below overrides the preset and the --config file. The default is the
+    /// best method measured: the physical model of the blur (each training frame the mean of renders
+    /// over its exposure) with the event loss between those renders when the scene has events
+    /// (`--event-loss off`: the exposure model alone). The paper's own configuration (one render
+    /// per frame, the event-flow loss) is
+    /// `--blur-model none --event-loss off --flow-loss on --flow-source events`.
     Reconstruct(reconstruct::Args),
     /// The paper's ablation set (semantics none/scalar/one-hot, event loss, flow loss with
     /// ground-truth and event-only flow) plus the exposure model, the exposure model with events and

@@ -48,6 +48,19 @@ impl TrainingArgs {
         }
     }
 
+    /// Whether the user chose the training option `key` (snake_case): given on the command line or
+    /// named by the config file.
+    pub fn sets(&self, key: &str) -> Result<bool> {
+        let given = serde_json::to_value(&self.options)?
+            .get(key)
+            .is_some_and(|v| !v.is_null());
+        let in_file = match &self.config {
+            Some(path) => TrainConfig::keys_in_file(path)?.iter().any(|k| k == key),
+            None => false,
+        };
+        Ok(given || in_file)
+    }
+
     /// The resolved configuration: preset, then the file, then the options.
     pub fn resolve(&self) -> Result<TrainConfig> {
         Ok(TrainConfig::resolve(
@@ -179,6 +192,46 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
     Ok((kept, seconds))
 }
 
+/// The defaults that depend on the scene, for the settings the user left alone: the contrast
+/// threshold its generator recorded, and the event loss between sub-exposure renders when the blur
+/// model is `exposure` and every frame has events (a scene without events trains with the exposure
+/// model alone, and says so).
+fn scene_defaults(
+    mut config: TrainConfig,
+    training: &TrainingArgs,
+    data: &train::data::Dataset,
+) -> Result<TrainConfig> {
+    let recorded = data
+        .scene
+        .generator
+        .as_ref()
+        .and_then(|g| g.pointer("/config/event_threshold"))
+        .and_then(serde_json::Value::as_f64);
+    if let Some(c) = recorded.filter(|c| c.is_finite() && *c > 0.0) {
+        if !training.sets("event_threshold")? {
+            config.event_threshold = c as f32;
+        }
+    }
+    if config.blur_model == BlurModel::Exposure && !training.sets("event_loss")? {
+        let with_events = data.scene.frames.iter().all(|f| f.events.is_some());
+        config.event_loss = with_events;
+        if with_events {
+            println!(
+                "events: the event loss compares consecutive sub-exposure renders (weight {}, C {}; \
+                 --event-loss off to train without)",
+                config.event_weight, config.event_threshold
+            );
+        } else {
+            println!(
+                "the scene has no events (or not for every frame): training with the exposure \
+                 model alone"
+            );
+        }
+    }
+    config.validate()?;
+    Ok(config)
+}
+
 /// Runs `reconstruct`.
 pub fn run(args: Args) -> Result<()> {
     let data_dir = match &args.data {
@@ -198,6 +251,7 @@ pub fn run(args: Args) -> Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let data = train::data::load_dataset(&data_dir)
         .with_context(|| format!("loading the scene {}", data_dir.display()))?;
+    let config = scene_defaults(config, &args.training, &data)?;
     let body = scene_body(&data)?;
     let mut ctx = TrainingData::new(&data, body.clone(), config.seed)?;
     let checkpoint = out.join("checkpoint.safetensors");

@@ -403,32 +403,30 @@ fn ablate_writes_a_table_json_and_grid_and_records_failed_runs() {
 fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
     let config = write_config(dir.path());
+    // The default on a scene with events: the exposure model with events between its renders.
     let out = dir.path().join("exposure");
-    let o = reconstruct(
-        &out,
-        &config,
-        &[
-            "--blur-model",
-            "exposure",
-            "--subframes",
-            "3",
-            "--event-loss",
-            "on",
-            "--event-pairs",
-            "exposure",
-        ],
+    let o = reconstruct(&out, &config, &["--subframes", "3"]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("mean of 3 renders"), "{stdout}");
+    assert!(
+        stdout.contains("compares consecutive sub-exposure renders"),
+        "{stdout}"
     );
-    assert!(String::from_utf8_lossy(&o.stdout).contains("mean of 3 renders"));
     let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     for field in [
         "\"blur_model\": \"exposure\"",
         "\"subframes\": 3",
+        "\"event_loss\": true",
         "\"event_pairs\": \"exposure\"",
     ] {
         assert!(metrics.contains(field), "{field}: {metrics}");
     }
     let sharp = dir.path().join("sharp");
-    reconstruct(&sharp, &config, &["--train-on", "sharp"]);
+    reconstruct(
+        &sharp,
+        &config,
+        &["--train-on", "sharp", "--blur-model", "none"],
+    );
     let metrics = std::fs::read_to_string(sharp.join("metrics.json")).unwrap();
     assert!(metrics.contains("\"train_on\": \"sharp\""), "{metrics}");
     // Events inside exposures without the exposure model are refused, naming the setting.
@@ -437,6 +435,8 @@ fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
             "reconstruct",
             "--blur-model",
             "none",
+            "--event-loss",
+            "on",
             "--event-pairs",
             "exposure",
             "--data",
@@ -446,4 +446,58 @@ fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
         .unwrap();
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("event_pairs"));
+}
+
+#[test]
+fn a_scene_without_events_trains_the_exposure_model_alone_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    // The fixture without its event files.
+    let scene_dir = dir.path().join("no-events");
+    copy_dir(&fixture(), &scene_dir);
+    std::fs::remove_dir_all(scene_dir.join("events")).unwrap();
+    let scene_path = scene_dir.join("scene.json");
+    let mut scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&scene_path).unwrap()).unwrap();
+    for frame in scene["frames"].as_array_mut().unwrap() {
+        frame.as_object_mut().unwrap().remove("events");
+    }
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let out = dir.path().join("out");
+    let o = xtask()
+        .arg("reconstruct")
+        .arg("--data")
+        .arg(&scene_dir)
+        .arg("--out")
+        .arg(&out)
+        .arg("--config")
+        .arg(&config)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        stdout.contains("the scene has no events") && stdout.contains("exposure model alone"),
+        "{stdout}"
+    );
+    let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"event_loss\": false"), "{metrics}");
+}
+
+/// Copies a directory tree.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
 }

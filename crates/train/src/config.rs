@@ -183,6 +183,11 @@ training_options! {
     blur_model: BlurModel = BlurModel::Exposure,
     /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure).
     subframes: usize = 5,
+    /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,
+    /// skinning weights and both colours are evaluated at the mid-exposure pose and each
+    /// sub-exposure render re-poses them by linear blend skinning alone, `train::reposing`) or
+    /// `per-subframe` (every sub-exposure render evaluates the networks at its own pose).
+    exposure_networks: ExposureNetworks = ExposureNetworks::Once,
     /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
     /// between the two renders is pulled towards that flow (see `train::flow_loss`).
@@ -215,20 +220,22 @@ training_options! {
     /// SPyNet-style weights (safetensors) of the frozen flow network; unset: the project's shipped
     /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
     flow_network: Option<std::path::PathBuf> = None,
-    /// The event-generation loss of EventNeRF / E-NeRF (the paper's Table 6 alternative to the flow
-    /// loss, see `train::event_loss`), on the same pairs of consecutive training frames, from each
-    /// frame's `events` file.
+    /// The event-generation loss of EventNeRF / E-NeRF (see `train::event_loss`) on the pairs of
+    /// renders `event_pairs` names, from each frame's `events` file. Off in a bare configuration;
+    /// `cargo xtask reconstruct` turns it on (between sub-exposure renders) when the blur model is
+    /// `exposure` and the scene has events, unless `--event-loss` or the config file sets it.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_loss: bool = false,
-    /// Which renders the event-generation loss compares: `frames` (the renders of consecutive
-    /// training frames against the events of [t_k, t_{k+1}), EventNeRF's pairing) or `exposure`
-    /// (consecutive sub-exposure renders of each frame against the events between their times;
-    /// needs `blur_model = exposure`).
-    event_pairs: EventPairs = EventPairs::Frames,
-    /// Weight of the event-generation loss: 3, the best of a sweep over 0.3 / 1 / 3 / 10 on the
-    /// default benchmark's `quick` preset (human-box PSNR 25.05 / 25.60 / 25.89 / 25.27 dB;
-    /// `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick` preset").
-    event_weight: f32 = 3.0,
+    /// Which renders the event-generation loss compares: `exposure` (consecutive sub-exposure
+    /// renders of each frame against the events between their times; needs `blur_model =
+    /// exposure`) or `frames` (the renders of consecutive training frames against the events of
+    /// [t_k, t_{k+1}), EventNeRF's pairing and the paper's Table 6 comparison).
+    event_pairs: EventPairs = EventPairs::Exposure,
+    /// Weight of the event-generation loss: 0.3, the best of a sweep over 0.3 / 1 / 3 with
+    /// `exposure` pairs on the default benchmark's `quick` preset (human box 28.89 / 28.58 / 27.88
+    /// dB). With `frames` pairs the best of 0.3 / 1 / 3 / 10 was 3 (human box 25.05 / 25.60 / 25.89
+    /// / 25.27 dB; `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick` preset").
+    event_weight: f32 = 0.3,
     /// Contrast threshold C of the camera (log-intensity units; the benchmark's simulator: 0.2).
     event_threshold: f32 = 0.2,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
@@ -257,14 +264,25 @@ pub enum BlurModel {
     Exposure,
 }
 
+/// Network evaluations per exposure (see [`TrainConfig::exposure_networks`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExposureNetworks {
+    /// Once per frame, at mid exposure; sub-exposure renders re-pose by LBS.
+    #[default]
+    Once,
+    /// At every sub-exposure pose.
+    PerSubframe,
+}
+
 /// Which renders the event-generation loss compares (see [`TrainConfig::event_pairs`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum EventPairs {
     /// Renders of consecutive training frames.
-    #[default]
     Frames,
     /// Consecutive sub-exposure renders of one frame.
+    #[default]
     Exposure,
 }
 
@@ -392,25 +410,13 @@ impl TrainConfig {
 
     /// Reads a TOML (`.toml`) or JSON (anything else) file; fields it omits keep `base`'s values.
     pub fn load_over(path: &Path, base: &Self) -> Result<Self, TrainError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
         // Merge: serialise the base, overlay the file's keys, deserialise the result (unknown keys
         // are rejected by `deny_unknown_fields`).
         let mut merged =
             serde_json::to_value(base).map_err(|e| TrainError::Config(format!("config: {e}")))?;
-        let overlay: serde_json::Value = if path.extension().is_some_and(|e| e == "toml") {
-            let v: toml::Value = toml::from_str(&text)
-                .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
-            serde_json::to_value(v).map_err(|e| TrainError::Config(format!("config: {e}")))?
-        } else {
-            serde_json::from_str(&text)
-                .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?
-        };
-        let (Some(m), serde_json::Value::Object(o)) = (merged.as_object_mut(), overlay) else {
-            return Err(TrainError::Config(format!(
-                "config {}: the top level must be a table of settings",
-                path.display()
-            )));
+        let o = Self::read_table(path)?;
+        let Some(m) = merged.as_object_mut() else {
+            return Err(TrainError::Config("config: not a table".into()));
         };
         for (k, v) in o {
             m.insert(k, v);
@@ -419,6 +425,32 @@ impl TrainConfig {
             .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
         config.validate()?;
         Ok(config)
+    }
+
+    /// The settings a TOML (`.toml`) or JSON (anything else) config file names (snake_case keys).
+    pub fn keys_in_file(path: &Path) -> Result<Vec<String>, TrainError> {
+        Ok(Self::read_table(path)?.keys().cloned().collect())
+    }
+
+    /// The top-level table of a config file.
+    fn read_table(path: &Path) -> Result<serde_json::Map<String, serde_json::Value>, TrainError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
+        let table: serde_json::Value = if path.extension().is_some_and(|e| e == "toml") {
+            let v: toml::Value = toml::from_str(&text)
+                .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?;
+            serde_json::to_value(v).map_err(|e| TrainError::Config(format!("config: {e}")))?
+        } else {
+            serde_json::from_str(&text)
+                .map_err(|e| TrainError::Config(format!("config {}: {e}", path.display())))?
+        };
+        match table {
+            serde_json::Value::Object(o) => Ok(o),
+            _ => Err(TrainError::Config(format!(
+                "config {}: the top level must be a table of settings",
+                path.display()
+            ))),
+        }
     }
 
     /// Rejects settings that cannot be trained with, naming the field.
@@ -490,10 +522,14 @@ impl TrainConfig {
                 return bad(name, "must be a finite non-negative number");
             }
         }
-        if self.event_pairs == EventPairs::Exposure && self.blur_model != BlurModel::Exposure {
+        if self.event_loss
+            && self.event_pairs == EventPairs::Exposure
+            && self.blur_model != BlurModel::Exposure
+        {
             return bad(
                 "event_pairs",
-                "`exposure` compares sub-exposure renders: it needs blur_model = exposure",
+                "`exposure` compares sub-exposure renders: it needs blur_model = exposure \
+                 (for the pairs of consecutive frames: event_pairs = frames)",
             );
         }
         if self.subframes == 0 || self.subframes > 64 {

@@ -19,6 +19,7 @@ pub mod init;
 pub mod model;
 pub mod optimisers;
 pub mod posing;
+pub mod reposing;
 pub mod schedule;
 pub mod trainer;
 

@@ -14,9 +14,10 @@ use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::config::TrainConfig;
 use crate::posing::{
-    pose_frame_backward, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
+    pose_frame_backward_with, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
     GaussianParams, ModelGradients, ModelNets, PosedFrame,
 };
+use crate::reposing::{repose_frame, repose_frame_backward, ReposeCotangents, ReposedCache};
 use crate::TrainError;
 use gaussians::GaussianSet;
 use rasterize_cpu::{
@@ -76,13 +77,20 @@ pub struct PassTiming {
     pub render: f64,
 }
 
+/// What a pass's posing backward needs: a pass posed by the networks, or one re-posed from another
+/// pass of the same frame ([`Model::forward_reposed`]).
+enum PassCache {
+    Frame(Box<FrameCache<f32>>),
+    Reposed(ReposedCache<f32>),
+}
+
 /// One frame rendered by a model, with what its backward needs.
 pub struct FramePass<'a> {
     model: &'a Model,
     camera: &'a Camera,
     pose: &'a PreparedPose,
     latent: &'a [f32],
-    cache: FrameCache<f32>,
+    cache: PassCache,
     channels: Vec<f32>,
     /// The posed per-Gaussian attributes (the rasterizer's inputs).
     pub posed: PosedFrame<f32>,
@@ -283,6 +291,66 @@ impl Model {
             &self.params(),
             &inputs,
         )?;
+        self.rasterize(
+            camera,
+            pose,
+            latent,
+            PassCache::Frame(Box::new(cache)),
+            posed,
+            t0,
+        )
+    }
+
+    /// Renders one frame at each of `poses` (its sub-exposure poses), evaluating the networks once,
+    /// at `poses[reference]`, and re-posing that pass for the others by linear blend skinning alone
+    /// (`train::reposing`). Differentiate the passes together with [`Model::reposed_backward`].
+    pub fn forward_reposed<'a>(
+        &'a self,
+        camera: &'a Camera,
+        poses: &[&'a PreparedPose],
+        reference: usize,
+        latent: &'a [f32],
+    ) -> Result<Vec<FramePass<'a>>, TrainError> {
+        let Some(&reference_pose) = poses.get(reference) else {
+            return Err(TrainError::Config(format!(
+                "re-posed passes: reference {reference} of {} poses",
+                poses.len()
+            )));
+        };
+        let first = self.forward(camera, reference_pose, latent)?;
+        let PassCache::Frame(reference_cache) = &first.cache else {
+            unreachable!("Model::forward poses with the networks");
+        };
+        let mut reposed = Vec::with_capacity(poses.len());
+        for (s, &pose) in poses.iter().enumerate() {
+            if s == reference {
+                continue;
+            }
+            let t0 = Instant::now();
+            let (posed, cache) = repose_frame(&first.posed, reference_cache, &pose.bones)?;
+            reposed.push(self.rasterize(
+                camera,
+                pose,
+                latent,
+                PassCache::Reposed(cache),
+                posed,
+                t0,
+            )?);
+        }
+        reposed.insert(reference, first);
+        Ok(reposed)
+    }
+
+    /// Rasterizes a posed frame into a pass (`t0`: when its posing started, for the timings).
+    fn rasterize<'a>(
+        &'a self,
+        camera: &'a Camera,
+        pose: &'a PreparedPose,
+        latent: &'a [f32],
+        cache: PassCache,
+        posed: PosedFrame<f32>,
+        t0: Instant,
+    ) -> Result<FramePass<'a>, TrainError> {
         let channels = interleave_channels(&posed);
         let pose_seconds = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
@@ -305,6 +373,62 @@ impl Model {
                 render: t0.elapsed().as_secs_f64(),
             },
         })
+    }
+
+    /// The model's gradients of passes made by [`Model::forward_reposed`] (same `reference`), from
+    /// each pass's rasterizer-input gradients `posed` (same order): one backward through the
+    /// networks, into which every re-posed pass's cotangents are summed. The bone gradients are the
+    /// reference pose's alone.
+    pub fn reposed_backward(
+        &self,
+        passes: &[FramePass<'_>],
+        reference: usize,
+        posed: &[&PosedGradients],
+    ) -> Result<ModelGradients<f32>, TrainError> {
+        let reference_pass = passes
+            .get(reference)
+            .filter(|_| posed.len() == passes.len());
+        let Some(FramePass {
+            cache: PassCache::Frame(reference_cache),
+            ..
+        }) = reference_pass
+        else {
+            return Err(TrainError::Config(format!(
+                "re-posed backward: {} passes, {} gradients, reference {reference} not a posed pass",
+                passes.len(),
+                posed.len()
+            )));
+        };
+        let params = self.params();
+        let mut summed = ReposeCotangents::zeros(self.set.len(), reference_cache.active.len());
+        for (pass, grads) in passes.iter().zip(posed) {
+            let PassCache::Reposed(cache) = &pass.cache else {
+                continue;
+            };
+            let (d, _) = repose_frame_backward(
+                self.config.semantic,
+                &params,
+                reference_cache,
+                &pass.pose.bones,
+                cache,
+                &grads.cotangents(),
+            )?;
+            summed.add(&d);
+        }
+        let reference_pass = &passes[reference];
+        pose_frame_backward_with(
+            &self.nets,
+            self.config.semantic,
+            &params,
+            &frame_inputs(
+                reference_pass.camera,
+                reference_pass.pose,
+                reference_pass.latent,
+            ),
+            reference_cache,
+            &posed[reference].cotangents(),
+            Some(&summed),
+        )
     }
 
     /// Renders the model in `pose` with the frame latent `latent` from `camera`.
@@ -416,23 +540,27 @@ impl FramePass<'_> {
 
     /// Backward through the posing (networks, blend, deformation) of the rasterizer-input gradients
     /// `posed`: gradients of every learnable quantity of the model and of this frame's latent.
+    /// A re-posed pass ([`Model::forward_reposed`]) is differentiated with its frame's passes by
+    /// [`Model::reposed_backward`] and is refused here.
     pub fn model_backward(
         &self,
         posed: &PosedGradients,
     ) -> Result<ModelGradients<f32>, TrainError> {
         let model = self.model;
-        pose_frame_backward(
+        let PassCache::Frame(cache) = &self.cache else {
+            return Err(TrainError::Config(
+                "a re-posed pass is differentiated with its frame's passes (Model::reposed_backward)"
+                    .into(),
+            ));
+        };
+        pose_frame_backward_with(
             &model.nets,
             model.config.semantic,
             &model.params(),
             &frame_inputs(self.camera, self.pose, self.latent),
-            &self.cache,
-            &FrameCotangents {
-                means: &posed.means,
-                covariances: &posed.covariances,
-                colours: &posed.colours,
-                human_probability: &posed.human_probability,
-            },
+            cache,
+            &posed.cotangents(),
+            None,
         )
     }
 
@@ -448,7 +576,22 @@ impl FramePass<'_> {
 
     /// Indices of the Gaussians whose human branch was evaluated (human probability ≥ the gate).
     pub fn active(&self) -> &[usize] {
-        self.cache.active()
+        match &self.cache {
+            PassCache::Frame(cache) => cache.active(),
+            PassCache::Reposed(cache) => cache.active(),
+        }
+    }
+}
+
+impl PosedGradients {
+    /// The posing backward's view of these gradients.
+    fn cotangents(&self) -> FrameCotangents<'_, f32> {
+        FrameCotangents {
+            means: &self.means,
+            covariances: &self.covariances,
+            colours: &self.colours,
+            human_probability: &self.human_probability,
+        }
     }
 }
 

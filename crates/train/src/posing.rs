@@ -27,12 +27,13 @@
 
 use crate::blend::{blend, blend_backward, BlendInputs, Blended, SemanticMode};
 use crate::colour::{ColourInputs, ColourNet};
+use crate::reposing::ReposeCotangents;
 use crate::TrainError;
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};
 use nn::Real;
 use smpl_deform::deform_net::{
-    deform_gaussians, deform_gaussians_backward, CanonicalGaussians, DeformCache, NonRigidNet,
-    SkinningCache, SkinningField, NR_FEATURE_DIM,
+    deform_gaussians, deform_gaussians_backward_with_moved, CanonicalGaussians, DeformCache,
+    NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
 };
 use smpl_deform::math::{Affine, Mat3};
 
@@ -94,13 +95,13 @@ pub struct PosedFrame<T> {
 #[derive(Clone, Debug)]
 pub struct FrameCache<T: Real> {
     /// Indices of the Gaussians whose human branch was evaluated (p ≥ gate), ascending.
-    active: Vec<usize>,
-    deform: DeformCache<T>,
+    pub(crate) active: Vec<usize>,
+    pub(crate) deform: DeformCache<T>,
     posed_mats: Vec<Mat3<T>>,
-    posed_log_scales: Vec<[T; 3]>,
+    pub(crate) posed_log_scales: Vec<[T; 3]>,
     human_colour: crate::colour::ColourCache<T>,
     scene_colour: crate::colour::ColourCache<T>,
-    inputs: Vec<BlendInputs<T>>,
+    pub(crate) inputs: Vec<BlendInputs<T>>,
     /// Skinning weights at the canonical means (for the canonicalised direction) and their cache;
     /// `None` when the deformation's own skinning pass is that one (`DeformCache::skinning_at`).
     direction_weights: Vec<T>,
@@ -175,7 +176,7 @@ impl<T: Real> ModelGradients<T> {
 }
 
 /// Σ = M diag(e^{2s}) Mᵀ for a row-major M.
-fn deformed_covariance<T: Real>(m: &Mat3<T>, s: &[T; 3]) -> [[T; 3]; 3] {
+pub(crate) fn deformed_covariance<T: Real>(m: &Mat3<T>, s: &[T; 3]) -> [[T; 3]; 3] {
     let d = s.map(|v| (v + v).exp());
     std::array::from_fn(|i| {
         std::array::from_fn(|j| {
@@ -185,7 +186,7 @@ fn deformed_covariance<T: Real>(m: &Mat3<T>, s: &[T; 3]) -> [[T; 3]; 3] {
 }
 
 /// Backward of [`deformed_covariance`]: (dL/dM, dL/ds).
-fn deformed_covariance_backward<T: Real>(
+pub(crate) fn deformed_covariance_backward<T: Real>(
     m: &Mat3<T>,
     s: &[T; 3],
     g: &[[T; 3]; 3],
@@ -385,10 +386,28 @@ pub fn pose_frame_backward<T: Real>(
     cache: &FrameCache<T>,
     cot: &FrameCotangents<'_, T>,
 ) -> Result<ModelGradients<T>, TrainError> {
+    pose_frame_backward_with(nets, mode, g, frame, cache, cot, None)
+}
+
+/// [`pose_frame_backward`] with, when given, the summed cotangents `reposings` of the frame's
+/// re-posings ([`crate::reposing::repose_frame_backward`]): one network backward for the frame and
+/// every re-posing of it. `bones` gradients are those of this pass's own bones.
+pub fn pose_frame_backward_with<T: Real>(
+    nets: &ModelNets<T>,
+    mode: SemanticMode,
+    g: &GaussianParams<'_, T>,
+    frame: &FrameInputs<'_, T>,
+    cache: &FrameCache<T>,
+    cot: &FrameCotangents<'_, T>,
+    reposings: Option<&ReposeCotangents<T>>,
+) -> Result<ModelGradients<T>, TrainError> {
     let n = g.means.len();
     let k = mode.logits_per_gaussian();
     let active = &cache.active;
     let na = active.len();
+    if let Some(r) = reposings {
+        r.check(n, na)?;
+    }
     let mut d_semantic = vec![T::zero(); n * k];
     // Static path of every Gaussian (inactive ones are exactly static; active ones get the blend's
     // (1 − p) share below, so start from the direct cotangents and correct).
@@ -425,6 +444,18 @@ pub fn pose_frame_backward<T: Real>(
         d_scene_rgb[i * 3..i * 3 + 3].copy_from_slice(&d_in.c_scene);
         d_means[i] = d_in.x_static;
         d_cov_static[i] = d_in.cov_static;
+    }
+    if let Some(r) = reposings {
+        let add = |a: &mut [T], b: &[T]| a.iter_mut().zip(b).for_each(|(x, &y)| *x = *x + y);
+        add(d_means.as_flattened_mut(), r.means.as_flattened());
+        add(
+            d_cov_static.as_flattened_mut().as_flattened_mut(),
+            r.covariances.as_flattened().as_flattened(),
+        );
+        add(&mut d_scene_rgb, &r.scene_colours);
+        add(&mut d_p, &r.human_probability);
+        add(&mut d_human_rgb, &r.human_colours);
+        add(d_s_def.as_flattened_mut(), r.log_scales.as_flattened());
     }
     let mut d_log_scales = Vec::with_capacity(n);
     let mut d_quats = Vec::with_capacity(n);
@@ -485,7 +516,7 @@ pub fn pose_frame_backward<T: Real>(
         nets.skinning
             .backward(direction_skinning, &d_direction_weights, &mut d_skinning)?;
     debug_assert_eq!(human.extra.len(), na * NR_FEATURE_DIM);
-    let deform = deform_gaussians_backward(
+    let deform = deform_gaussians_backward_with_moved(
         &nets.nonrigid,
         &nets.skinning,
         frame.bones,
@@ -494,6 +525,7 @@ pub fn pose_frame_backward<T: Real>(
         &d_s_def,
         &d_mats,
         &human.extra,
+        reposings.map(|r| &r.moved),
         &mut d_nonrigid,
         &mut d_skinning,
     )?;

@@ -40,8 +40,11 @@ fn tiny_config(steps: usize) -> TrainConfig {
         densify_grad_threshold: 1e-5,
         opacity_reset_every: 0,
         checkpoint_every: 0,
-        // One render per frame: these tests prepare no sub-exposure poses.
+        // One render per frame: these tests prepare no sub-exposure poses (and event losses pair
+        // consecutive frames, at the weight measured for that pairing).
         blur_model: train::config::BlurModel::None,
+        event_pairs: train::config::EventPairs::Frames,
+        event_weight: 3.0,
         ..TrainConfig::preset(Preset::Quick)
     }
 }
@@ -109,8 +112,34 @@ fn training_reduces_the_loss_on_the_tiny_fixture() {
 
 #[test]
 fn resume_from_a_checkpoint_is_bit_identical() {
-    let ctx = context();
-    let config = tiny_config(16);
+    resume_is_bit_identical(&context(), tiny_config(16));
+}
+
+#[test]
+fn resume_with_the_exposure_model_and_events_is_bit_identical() {
+    let config = TrainConfig {
+        blur_model: train::config::BlurModel::Exposure,
+        subframes: 3,
+        event_loss: true,
+        event_pairs: train::config::EventPairs::Exposure,
+        event_weight: 0.3,
+        ..tiny_config(16)
+    };
+    resume_is_bit_identical(&exposure_context(&config), config);
+}
+
+/// A context with sub-exposure poses and the events between them.
+fn exposure_context(config: &TrainConfig) -> TrainingData {
+    let data = load_dataset(&fixture()).unwrap();
+    let mut ctx = context();
+    ctx.enable_exposure(&data, config.subframes).unwrap();
+    ctx.enable_exposure_events(&data, config).unwrap();
+    ctx
+}
+
+/// 16 steps straight and 9 + a checkpoint + 7 end in the same bits.
+fn resume_is_bit_identical(ctx: &TrainingData, config: TrainConfig) {
+    let ctx = ctx.clone();
     let mut straight = Trainer::new(&ctx, config.clone()).unwrap();
     straight.run(&ctx, 16, |_, _| Ok(())).unwrap();
     let dir = tempfile::tempdir().unwrap();
@@ -418,7 +447,6 @@ fn the_event_generation_loss_trains_pairs_from_the_event_files() {
 
 #[test]
 fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread_count() {
-    let data = load_dataset(&fixture()).unwrap();
     let config = TrainConfig {
         blur_model: train::config::BlurModel::Exposure,
         subframes: 3,
@@ -426,9 +454,7 @@ fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread
         event_pairs: train::config::EventPairs::Exposure,
         ..tiny_config(8)
     };
-    let mut ctx = context();
-    ctx.enable_exposure(&data, config.subframes).unwrap();
-    ctx.enable_exposure_events(&data, &config).unwrap();
+    let ctx = exposure_context(&config);
     assert_eq!(ctx.exposure_poses.len(), ctx.frames.len());
     assert!(ctx.exposure_poses.iter().all(|p| p.len() == 3));
     // The sub-exposure poses differ from each other and bracket the mid-exposure pose.
@@ -445,7 +471,7 @@ fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread
     // every other interval has events.
     assert!(ctx.exposure_events[0][0].is_none());
     assert!(ctx.exposure_events[1].iter().all(Option::is_some));
-    let run = |threads: usize| {
+    let run = |config: &TrainConfig, threads: usize| {
         with_threads(threads, || {
             let mut t = Trainer::new(&ctx, config.clone()).unwrap();
             let mut events = 0.0f32;
@@ -458,9 +484,18 @@ fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread
             (bits(&t), events)
         })
     };
-    let (one, events) = run(1);
+    let (one, events) = run(&config, 1);
     assert!(events > 0.0, "the event loss never applied");
-    assert_same_bits(&one, &run(2).0);
+    assert_same_bits(&one, &run(&config, 2).0);
+    // Networks evaluated at every sub-exposure pose: also thread-independent, and not the same
+    // function as the shared evaluation.
+    let per_subframe = TrainConfig {
+        exposure_networks: train::config::ExposureNetworks::PerSubframe,
+        ..config.clone()
+    };
+    let (exact, _) = run(&per_subframe, 1);
+    assert_same_bits(&exact, &run(&per_subframe, 2).0);
+    assert_ne!(exact, one);
     // Without the exposure model the same run ends elsewhere.
     let mut plain = Trainer::new(&ctx, tiny_config(8)).unwrap();
     plain.run(&ctx, 8, |_, _| Ok(())).unwrap();
@@ -470,9 +505,60 @@ fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread
 #[test]
 fn event_pairs_inside_exposures_need_the_exposure_model() {
     let config = TrainConfig {
+        event_loss: true,
         event_pairs: train::config::EventPairs::Exposure,
         ..tiny_config(8)
     };
     let e = config.validate().unwrap_err().to_string();
     assert!(e.contains("event_pairs") && e.contains("blur_model"), "{e}");
+}
+
+#[test]
+fn an_events_file_that_does_not_cover_its_frame_is_refused_at_load_time() {
+    // Frame 3 names frame 5's events file: its events lie outside [t_3, t_4).
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&fixture(), dir.path());
+    let scene_path = dir.path().join("scene.json");
+    let mut scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&scene_path).unwrap()).unwrap();
+    scene["frames"][3]["events"] = "events/000005.npz".into();
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let data = load_dataset(dir.path()).unwrap();
+    let config = TrainConfig {
+        blur_model: train::config::BlurModel::Exposure,
+        subframes: 3,
+        event_loss: true,
+        event_pairs: train::config::EventPairs::Exposure,
+        ..tiny_config(8)
+    };
+    let mut ctx = context();
+    ctx.enable_exposure(&data, config.subframes).unwrap();
+    let err = ctx
+        .enable_exposure_events(&data, &config)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("000005.npz") && err.contains("frame 3") && err.contains("outside"),
+        "{err}"
+    );
+    // The pairs of frames read the same file and refuse it the same way.
+    let err = ctx
+        .enable_events(&data, &tiny_config(8))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("frame 3") && err.contains("outside"), "{err}");
+}
+
+/// Copies a directory tree.
+fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            std::fs::create_dir_all(&target).unwrap();
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
 }

@@ -10,6 +10,11 @@
 //! |num − ana| ≤ 1e-7 + 1e-6·max(|num|, |ana|) has two orders of magnitude of margin. The networks
 //! are smooth except at LeakyReLU kinks, which a 1e-6 probe crosses with probability ~1e-6 per unit.
 //! The non-rigid network's zero-initialised last layer is randomised so its gradients are exercised.
+//!
+//! The second check is the exposure model's shared-network composition (`train::reposing`): the
+//! frame posed at its reference bones plus two re-posings at other bones, each output paired with its
+//! own cotangent, differentiated by one reference backward that receives the re-posings' summed
+//! cotangents — w.r.t. the same quantities and every pass's bones (same tolerance and argument).
 
 use gradient_checks::{central_differences, rng, symmetric_from_seed, GradientChecker, Tolerance};
 use proptest::prelude::*;
@@ -18,8 +23,10 @@ use smpl_deform::deform_net::{NonRigidNet, SkinningField, NR_FEATURE_DIM};
 use train::blend::SemanticMode;
 use train::colour::{ColourNet, ColourNetConfig};
 use train::posing::{
-    pose_frame_backward, pose_frame_gated, FrameCotangents, FrameInputs, GaussianParams, ModelNets,
+    pose_frame_backward, pose_frame_backward_with, pose_frame_gated, FrameCotangents, FrameInputs,
+    GaussianParams, ModelNets, PosedFrame,
 };
+use train::reposing::{repose_frame, repose_frame_backward, ReposeCotangents};
 
 const TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
 const H: f64 = 1e-6;
@@ -135,8 +142,8 @@ fn outputs(
     pose_frame_gated(&c.nets, c.mode, c.gate, &g, &f).expect("forward")
 }
 
-fn loss(c: &Case, cot: &[f64]) -> f64 {
-    let (o, _) = outputs(c);
+/// ⟨cot, outputs⟩ over the flattened outputs (means, covariances, colours, probability).
+fn pairing(o: &PosedFrame<f64>, cot: &[f64]) -> f64 {
     let flat: Vec<f64> = o
         .means
         .iter()
@@ -147,6 +154,31 @@ fn loss(c: &Case, cot: &[f64]) -> f64 {
         .copied()
         .collect();
     flat.iter().zip(cot).map(|(a, b)| a * b).sum()
+}
+
+fn loss(c: &Case, cot: &[f64]) -> f64 {
+    pairing(&outputs(c).0, cot)
+}
+
+/// The frame's outputs paired with `cots[0]` plus each re-posing's paired with `cots[1 + s]`.
+fn reposed_loss(c: &Case, reposings: &[Vec<[f64; 12]>], cots: &[Vec<f64>]) -> f64 {
+    let (reference, cache) = outputs(c);
+    let mut total = pairing(&reference, &cots[0]);
+    for (bones, cot) in reposings.iter().zip(&cots[1..]) {
+        let (o, _) = repose_frame(&reference, &cache, bones).expect("repose");
+        total += pairing(&o, cot);
+    }
+    total
+}
+
+/// The four output cotangents of a flat cotangent vector.
+fn frame_cotangents(cot: &[f64]) -> (Vec<[f64; 3]>, Vec<[[f64; 3]; 3]>) {
+    let means = rows::<3>(&cot[..N * 3]);
+    let covariances = cot[N * 3..N * 12]
+        .chunks(9)
+        .map(|m| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
+        .collect();
+    (means, covariances)
 }
 
 /// FD over one parameter block, read and written through `get`/`set` closures.
@@ -228,6 +260,75 @@ proptest! {
         checker.check("human colour net", &num, &grads.human_colour, TOL);
         let num = fd(&c, &cot, c.nets.scene_colour.mlp.params.clone(), |w, p| w.nets.scene_colour.mlp.params = p.to_vec());
         checker.check("scene colour net", &num, &grads.scene_colour, TOL);
+        checker.finish();
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(6))]
+
+    #[test]
+    fn reposed_frame_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>()) {
+        let c = case(seed, scalar, if gated { 0.5 } else { 0.0 });
+        let mut rng = rng(seed ^ 0x5eb);
+        let reposings: Vec<Vec<[f64; 12]>> = (0..2)
+            .map(|_| c.bones.iter().map(|b| b.map(|v| v + 0.05 * rng.gen_range(-1.0..1.0))).collect())
+            .collect();
+        let outputs_len = N * (3 + 9 + 3 + 1);
+        let cots: Vec<Vec<f64>> = (0..3).map(|s| symmetric_from_seed(seed ^ (0xabc + s), outputs_len)).collect();
+        let (reference, cache) = outputs(&c);
+        // At the reference's own bones a re-posing is the reference, bit for bit.
+        let (same, _) = repose_frame(&reference, &cache, &c.bones).expect("repose");
+        prop_assert_eq!(&same, &reference);
+        let g = GaussianParams { means: &c.means, log_scales: &c.log_scales, quats: &c.quats, features: &c.features, semantic_logits: &c.logits };
+        let mut summed = ReposeCotangents::zeros(N, cache.active().len());
+        let mut sub_bones = Vec::new();
+        for (bones, cot) in reposings.iter().zip(&cots[1..]) {
+            let (_, sub) = repose_frame(&reference, &cache, bones).expect("repose");
+            let (means, covariances) = frame_cotangents(cot);
+            let (d, d_bones) = repose_frame_backward(c.mode, &g, &cache, bones, &sub, &FrameCotangents {
+                means: &means,
+                covariances: &covariances,
+                colours: &cot[N * 12..N * 15],
+                human_probability: &cot[N * 15..],
+            }).expect("re-posing backward");
+            summed.add(&d);
+            sub_bones.push(d_bones);
+        }
+        let f = FrameInputs { pose_code: &c.pose_code, bones: &c.bones, camera_centre: c.centre, latent: &c.latent };
+        let (means, covariances) = frame_cotangents(&cots[0]);
+        let grads = pose_frame_backward_with(&c.nets, c.mode, &g, &f, &cache, &FrameCotangents {
+            means: &means,
+            covariances: &covariances,
+            colours: &cots[0][N * 12..N * 15],
+            human_probability: &cots[0][N * 15..],
+        }, Some(&summed)).expect("backward");
+        let flat = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
+        let fd = |x: Vec<f64>, set: &dyn Fn(&mut Case, &[f64])| {
+            let mut work = clone_case(&c);
+            central_differences(|p| { set(&mut work, p); reposed_loss(&work, &reposings, &cots) }, &x, H)
+        };
+        let mut checker = GradientChecker::new();
+        checker.check("means", &fd(flat(&c.means), &|w, p| w.means = rows(p)), &flat(&grads.means), TOL);
+        checker.check("log_scales", &fd(flat(&c.log_scales), &|w, p| w.log_scales = rows(p)), &flat(&grads.log_scales), TOL);
+        checker.check("quats", &fd(c.quats.iter().flatten().copied().collect(), &|w, p| w.quats = rows(p)), &grads.quats.iter().flatten().copied().collect::<Vec<_>>(), TOL);
+        checker.check("features", &fd(c.features.clone(), &|w, p| w.features = p.to_vec()), &grads.features, TOL);
+        checker.check("semantic logits", &fd(c.logits.clone(), &|w, p| w.logits = p.to_vec()), &grads.semantic_logits, TOL);
+        checker.check("latent", &fd(c.latent.clone(), &|w, p| w.latent = p.to_vec()), &grads.latent, TOL);
+        checker.check("reference bones", &fd(c.bones.iter().flatten().copied().collect(), &|w, p| w.bones = rows(p)), &grads.bones.iter().flatten().copied().collect::<Vec<_>>(), TOL);
+        checker.check("non-rigid net", &fd(c.nets.nonrigid.mlp.params.clone(), &|w, p| w.nets.nonrigid.mlp.params = p.to_vec()), &grads.nonrigid, TOL);
+        checker.check("skinning field", &fd(c.nets.skinning.mlp.params.clone(), &|w, p| w.nets.skinning.mlp.params = p.to_vec()), &grads.skinning, TOL);
+        checker.check("human colour net", &fd(c.nets.human_colour.mlp.params.clone(), &|w, p| w.nets.human_colour.mlp.params = p.to_vec()), &grads.human_colour, TOL);
+        checker.check("scene colour net", &fd(c.nets.scene_colour.mlp.params.clone(), &|w, p| w.nets.scene_colour.mlp.params = p.to_vec()), &grads.scene_colour, TOL);
+        for (s, d_bones) in sub_bones.iter().enumerate() {
+            let x: Vec<f64> = reposings[s].iter().flatten().copied().collect();
+            let num = central_differences(|p| {
+                let mut moved = reposings.clone();
+                moved[s] = rows(p);
+                reposed_loss(&c, &moved, &cots)
+            }, &x, H);
+            checker.check("re-posing bones", &num, &d_bones.iter().flatten().copied().collect::<Vec<_>>(), TOL);
+        }
         checker.finish();
     }
 }

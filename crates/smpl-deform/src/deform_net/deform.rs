@@ -5,17 +5,17 @@
 use std::ops::Range;
 
 use nn::mlp::Mlp;
-use nn::{gemm, Real};
+use nn::Real;
 use rayon::prelude::*;
 
 use super::nonrigid::{NonRigidNet, NrChunk, NR_FEATURE_DIM, NR_OUT_DIM};
+use super::repose::{
+    bones_matrix, lbs_chunk, lbs_chunk_backward_blend, lbs_chunk_backward_rows, MovedCotangents,
+};
 use super::skinning::{SkinChunk, SkinningCache, SkinningField};
 use super::{check_len, grow, rows_per_chunk, ChunkBuffers};
 use crate::batch_mlp;
-use crate::math::{
-    affine_apply, affine_rot, mat3_mul, mat3_mul_t, mat3_tmul, quat_to_mat3, quat_to_mat3_backward,
-    Affine, Mat3,
-};
+use crate::math::{Affine, Mat3};
 use crate::skeleton::NUM_JOINTS;
 
 /// Hamilton product `a ⊗ b` of `(w, x, y, z)` quaternions.
@@ -59,12 +59,12 @@ pub struct PosedGaussians<T> {
 
 /// One chunk of a deformation forward pass.
 #[derive(Clone, Debug)]
-struct DeformChunk<T> {
-    rows: Range<usize>,
+pub(super) struct DeformChunk<T> {
+    pub(super) rows: Range<usize>,
     nr: NrChunk<T>,
     nr_out: Vec<T>,
-    x_nr: Vec<[T; 3]>,
-    q_nr: Vec<[T; 4]>,
+    pub(super) x_nr: Vec<[T; 3]>,
+    pub(super) q_nr: Vec<[T; 4]>,
     /// Blended transforms `Σ_b w_b T_b`, `(rows, 12)`.
     blended: Vec<T>,
 }
@@ -84,6 +84,20 @@ pub struct DeformCache<T: Real> {
 }
 
 impl<T: Real> DeformCache<T> {
+    /// Number of deformed Gaussians.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether no Gaussian was deformed.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    pub(super) fn chunks(&self) -> &[DeformChunk<T>] {
+        &self.chunks
+    }
+
     /// The skinning field's pass of this deformation, at the non-rigidly moved positions `x + Δx`:
     /// its weights `(N, 24)` are [`SkinningCache::weights`], and [`SkinningField::backward`] takes it.
     pub fn skinning(&self) -> &SkinningCache<T> {
@@ -108,11 +122,6 @@ impl<T: Real> DeformCache<T> {
             });
         (self.skinning_chunks_are_standalone && moved_are_points).then_some(&self.skinning)
     }
-}
-
-/// The 24 bone transforms as a `(24, 12)` row-major matrix.
-fn bones_matrix<T: Real>(bones: &[Affine<T>]) -> Vec<T> {
-    bones.iter().flatten().copied().collect()
 }
 
 /// Deforms canonical Gaussians into a frame: non-rigid net, learned skinning weights at the
@@ -166,27 +175,7 @@ pub fn deform_gaussians<T: Real>(
                 feat[k * NR_FEATURE_DIM..(k + 1) * NR_FEATURE_DIM].copy_from_slice(&o[9..]);
             }
             let skin = field.chunk_forward(&field_wt, &x_nr, range.clone());
-            // Blended transforms (rows × 12) = weights (rows × 24) · bones (24 × 12).
-            let mut blended = vec![T::zero(); r * 12];
-            gemm(
-                r,
-                NUM_JOINTS,
-                12,
-                T::one(),
-                &skin.weights,
-                false,
-                &bm,
-                false,
-                T::zero(),
-                &mut blended,
-            );
-            for k in 0..r {
-                let t: &Affine<T> = blended[12 * k..12 * k + 12]
-                    .try_into()
-                    .expect("12 values per blended transform");
-                pos[k] = affine_apply(t, x_nr[k]);
-                ms[k] = mat3_mul(&affine_rot(t), &quat_to_mat3(q_nr[k]));
-            }
+            let blended = lbs_chunk(&skin.weights, &bm, &x_nr, &q_nr, pos, ms);
             let chunk = DeformChunk {
                 rows: range.clone(),
                 nr,
@@ -257,7 +246,43 @@ pub fn deform_gaussians_backward<T: Real>(
     d_nonrigid: &mut [T],
     d_field: &mut [T],
 ) -> Result<DeformGrad<T>, nn::NnError> {
+    deform_gaussians_backward_with_moved(
+        nonrigid,
+        field,
+        bones,
+        cache,
+        d_positions,
+        d_log_scales,
+        d_mats,
+        d_features,
+        None,
+        d_nonrigid,
+        d_field,
+    )
+}
+
+/// [`deform_gaussians_backward`] with, when given, the cotangents `moved` of the moved Gaussians
+/// from other posings of the same deformation ([`DeformCache::repose_backward`], summed) added to
+/// those of this pass's own LBS, so that one network backward serves every posing. `bones` are this
+/// pass's; ∂L/∂bones is for them alone. With `moved = None` it is [`deform_gaussians_backward`].
+#[allow(clippy::too_many_arguments)]
+pub fn deform_gaussians_backward_with_moved<T: Real>(
+    nonrigid: &NonRigidNet<T>,
+    field: &SkinningField<T>,
+    bones: &[Affine<T>],
+    cache: &DeformCache<T>,
+    d_positions: &[[T; 3]],
+    d_log_scales: &[[T; 3]],
+    d_mats: &[Mat3<T>],
+    d_features: &[T],
+    moved: Option<&MovedCotangents<T>>,
+    d_nonrigid: &mut [T],
+    d_field: &mut [T],
+) -> Result<DeformGrad<T>, nn::NnError> {
     let n = cache.n;
+    if let Some(m) = moved {
+        m.check(n)?;
+    }
     nonrigid.check(&cache.pose_code)?;
     field.check()?;
     check_len("deform bones", NUM_JOINTS, bones.len())?;
@@ -292,58 +317,37 @@ pub fn deform_gaussians_backward<T: Real>(
             let off = c.rows.start - first;
             let d_x = &mut out.d_x[off..off + r];
             let d_q = &mut out.d_q[off..off + r];
-            // LBS backward: ∂L/∂T per row (rows × 12), ∂L/∂x_nr, ∂L/∂q_nr.
+            // LBS backward: ∂L/∂T per row (rows × 12), ∂L/∂x_nr, ∂L/∂q_nr; then ∂L/∂w (rows × 24)
+            // = ∂L/∂T · bonesᵀ and ∂L/∂bones (24 × 12) += wᵀ · ∂L/∂T.
             let d_t = grow(&mut buf.d_t, r * 12);
-            for k in 0..r {
-                let i = c.rows.start + k;
-                let t: &Affine<T> = c.blended[12 * k..12 * k + 12]
-                    .try_into()
-                    .expect("12 values per blended transform");
-                let (x, dp) = (c.x_nr[k], d_positions[i]);
-                let rq = quat_to_mat3(c.q_nr[k]);
-                let a = affine_rot(t);
-                // M = A R(q): ∂L/∂A = dM R(q)ᵀ, ∂L/∂R(q) = Aᵀ dM.
-                let d_a = mat3_mul_t(&d_mats[i], &rq);
-                let dt = &mut d_t[12 * k..12 * k + 12];
-                for row in 0..3 {
-                    for col in 0..3 {
-                        dt[4 * row + col] = dp[row] * x[col] + d_a[3 * row + col];
-                    }
-                    dt[4 * row + 3] = dp[row];
-                }
-                d_x[k] = [
-                    a[0] * dp[0] + a[3] * dp[1] + a[6] * dp[2],
-                    a[1] * dp[0] + a[4] * dp[1] + a[7] * dp[2],
-                    a[2] * dp[0] + a[5] * dp[1] + a[8] * dp[2],
-                ];
-                d_q[k] = quat_to_mat3_backward(c.q_nr[k], &mat3_tmul(&a, &d_mats[i]));
-            }
-            // ∂L/∂w (rows × 24) = ∂L/∂T · bonesᵀ; ∂L/∂bones (24 × 12) += wᵀ · ∂L/∂T.
+            lbs_chunk_backward_rows(
+                &c.blended,
+                &c.x_nr,
+                &c.q_nr,
+                &d_positions[c.rows.clone()],
+                &d_mats[c.rows.clone()],
+                d_t,
+                d_x,
+                d_q,
+            );
             let d_w = grow(&mut buf.d_w, r * NUM_JOINTS);
-            gemm(
-                r,
-                12,
-                NUM_JOINTS,
-                T::one(),
-                d_t,
-                false,
-                &bm,
-                true,
-                T::zero(),
-                d_w,
-            );
-            gemm(
-                NUM_JOINTS,
-                r,
-                12,
-                T::one(),
-                &skin.weights,
-                true,
-                d_t,
-                false,
-                T::one(),
-                &mut out.d_bones,
-            );
+            lbs_chunk_backward_blend(r, d_t, &bm, &skin.weights, d_w, &mut out.d_bones);
+            if let Some(m) = moved {
+                // Cotangents of other posings of the same moved Gaussians (re-posings).
+                for k in 0..r {
+                    let i = c.rows.start + k;
+                    for a in 0..3 {
+                        d_x[k][a] = d_x[k][a] + m.positions[i][a];
+                    }
+                    for a in 0..4 {
+                        d_q[k][a] = d_q[k][a] + m.quats[i][a];
+                    }
+                    for b in 0..NUM_JOINTS {
+                        d_w[k * NUM_JOINTS + b] =
+                            d_w[k * NUM_JOINTS + b] + m.weights[i * NUM_JOINTS + b];
+                    }
+                }
+            }
             // Skinning field at x_nr.
             let mut d_x_field = std::mem::take(&mut buf.d_x_field);
             let d_w_owned = std::mem::take(&mut buf.d_w);

@@ -32,16 +32,18 @@ use crate::batch_mlp;
 mod deform;
 mod encoding;
 mod nonrigid;
+mod repose;
 mod skinning;
 #[cfg(test)]
 mod tests;
 
 pub use deform::{
-    deform_gaussians, deform_gaussians_backward, quat_mul, CanonicalGaussians, DeformCache,
-    DeformGrad, PosedGaussians,
+    deform_gaussians, deform_gaussians_backward, deform_gaussians_backward_with_moved, quat_mul,
+    CanonicalGaussians, DeformCache, DeformGrad, PosedGaussians,
 };
 pub use encoding::{encode, encode_backward_from, Normalizer, ENC_DIM, NUM_FREQS};
 pub use nonrigid::{pose_code, NonRigidNet, NR_FEATURE_DIM, NR_OUT_DIM};
+pub use repose::{MovedCotangents, ReposeCache, Reposed};
 pub use skinning::{skinning_loss, SkinningCache, SkinningField};
 
 /// LeakyReLU slope of both networks (PyTorch's default).

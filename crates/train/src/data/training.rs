@@ -368,7 +368,29 @@ fn read_frame_events(
         )));
     };
     let path = scene::Scene::resolve(&data.dir, rel);
-    events::read_events(&path).map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))
+    let stream = events::read_events(&path)
+        .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+    // The file holds the events of [t_p, t_{p+1}) (the last frame: one frame interval); events
+    // outside it mean the file is another frame's or on another clock, and would supervise the
+    // wrong renders. One microsecond of slack covers the rounding of times to microseconds.
+    let us = |t: f64| (t * 1e6).round() as i64;
+    let from = us(data.frames[p].time_s);
+    let to = data.frames.get(p + 1).map_or_else(
+        || us(data.frames[p].time_s + 1.0 / data.scene.fps),
+        |next| us(next.time_s),
+    );
+    if let (Some(&first), Some(&last)) = (stream.t.iter().min(), stream.t.iter().max()) {
+        if first < from - 1 || last > to + 1 {
+            return Err(TrainError::Config(format!(
+                "{}: the `events` file of frame {} holds events from {first} µs to {last} µs, \
+                 outside the frame's interval [{from}, {to}) µs (its `time_s` to the next frame's): \
+                 it does not cover this frame's exposure (needed by {needed_by})",
+                path.display(),
+                data.frames[p].index
+            )));
+        }
+    }
+    Ok(stream)
 }
 
 /// Slots of consecutive training frames: `(slot of k, position of k in data.frames)` for every

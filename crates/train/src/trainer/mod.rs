@@ -18,11 +18,11 @@ pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
 use crate::body::PreparedPose;
-use crate::config::{BlurModel, TrainConfig};
+use crate::config::{BlurModel, ExposureNetworks, TrainConfig};
 use crate::data::TrainingData;
 use crate::image_loss::{psnr, ImageShape};
 use crate::init::{initialise, InitConfig};
-use crate::model::{mean_rgb, FramePass, Model};
+use crate::model::{mean_rgb, FramePass, Model, PosedGradients};
 use crate::optimisers::Optimisers;
 use crate::posing::ModelGradients;
 use crate::schedule::{accumulate_screen_stats, exponential_rate, on_schedule};
@@ -193,11 +193,17 @@ impl Trainer {
             }
             _ => vec![&frame.pose],
         };
-        let passes = poses
-            .iter()
-            .map(|pose| model.forward(camera, pose, model.latent(slot)))
-            .collect::<Result<Vec<_>, _>>()?;
-        let mid = passes.len() / 2;
+        let mid = poses.len() / 2;
+        // With `exposure_networks = once` the sub-exposure passes re-pose the mid pass's networks.
+        let reposed = poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once;
+        let passes = if reposed {
+            model.forward_reposed(camera, &poses, mid, model.latent(slot))?
+        } else {
+            poses
+                .iter()
+                .map(|pose| model.forward(camera, pose, model.latent(slot)))
+                .collect::<Result<Vec<_>, _>>()?
+        };
         for pass in &passes {
             times.pose += pass.timing.pose;
             times.render += pass.timing.render;
@@ -266,21 +272,42 @@ impl Trainer {
         let t0 = Instant::now();
         let (aiap_value, aiap_canonical) =
             aiap_terms(&self.aiap, model, &first.posed, &config, &mut posed_grads);
-        let mut grads = first.model_backward(&posed_grads)?;
-        add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
-        let mut opacity_grads = posed_grads.opacity_logits;
-        let mut means_2d = posed_grads.means_2d;
         let mut sub_render_backward_seconds = 0.0;
-        for (s, pass) in passes.iter().enumerate().filter(|&(s, _)| s != mid) {
-            let t = Instant::now();
-            let sub = pass.render_backward(&d_images[s], None)?;
-            sub_render_backward_seconds += t.elapsed().as_secs_f64();
-            let g = pass.model_backward(&sub)?;
-            grads.add_shared(&g);
-            add_to(&mut grads.latent, &g.latent);
-            add_to(&mut opacity_grads, &sub.opacity_logits);
-            add_to(means_2d.as_flattened_mut(), sub.means_2d.as_flattened());
-        }
+        let (mut grads, mut opacity_grads, means_2d) = if reposed {
+            // One backward through the networks for every sub-exposure pass.
+            let mut opacity_grads = std::mem::take(&mut posed_grads.opacity_logits);
+            let mut means_2d = std::mem::take(&mut posed_grads.means_2d);
+            let mut subs = Vec::with_capacity(passes.len() - 1);
+            for (s, pass) in passes.iter().enumerate().filter(|&(s, _)| s != mid) {
+                let t = Instant::now();
+                let sub = pass.render_backward(&d_images[s], None)?;
+                sub_render_backward_seconds += t.elapsed().as_secs_f64();
+                add_to(&mut opacity_grads, &sub.opacity_logits);
+                add_to(means_2d.as_flattened_mut(), sub.means_2d.as_flattened());
+                subs.push(sub);
+            }
+            let mut all: Vec<&PosedGradients> = subs.iter().collect();
+            all.insert(mid, &posed_grads);
+            let mut grads = model.reposed_backward(&passes, mid, &all)?;
+            add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
+            (grads, opacity_grads, means_2d)
+        } else {
+            let mut grads = first.model_backward(&posed_grads)?;
+            add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
+            let mut opacity_grads = posed_grads.opacity_logits;
+            let mut means_2d = posed_grads.means_2d;
+            for (s, pass) in passes.iter().enumerate().filter(|&(s, _)| s != mid) {
+                let t = Instant::now();
+                let sub = pass.render_backward(&d_images[s], None)?;
+                sub_render_backward_seconds += t.elapsed().as_secs_f64();
+                let g = pass.model_backward(&sub)?;
+                grads.add_shared(&g);
+                add_to(&mut grads.latent, &g.latent);
+                add_to(&mut opacity_grads, &sub.opacity_logits);
+                add_to(means_2d.as_flattened_mut(), sub.means_2d.as_flattened());
+            }
+            (grads, opacity_grads, means_2d)
+        };
         times.render_backward += sub_render_backward_seconds;
 
         // Frame k+1: backward, accumulated into the shared gradients.
