@@ -13,6 +13,7 @@ pub mod eval;
 pub mod event_loss;
 pub mod export;
 pub mod exposure;
+pub mod exposure_loss;
 pub mod flow_loss;
 pub mod image_loss;
 pub mod init;

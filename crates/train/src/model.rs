@@ -636,17 +636,8 @@ fn interleave_channels(posed: &PosedFrame<f32>) -> Vec<f32> {
 }
 
 /// The exposure model's prediction: the mean of the passes' RGB renders, (3, H, W) (the render
-/// itself for one pass). Its cotangent reaches each of S passes scaled by 1/S.
-pub fn mean_rgb<'a>(passes: &'a [FramePass<'_>]) -> std::borrow::Cow<'a, [f32]> {
-    if let [pass] = passes {
-        return std::borrow::Cow::Borrowed(pass.rgb());
-    }
-    let mut sum = vec![0.0f32; passes.first().map_or(0, |p| p.rgb().len())];
-    for pass in passes {
-        for (x, &y) in sum.iter_mut().zip(pass.rgb()) {
-            *x += y;
-        }
-    }
-    let scale = 1.0 / passes.len() as f32;
-    std::borrow::Cow::Owned(sum.iter().map(|&v| v * scale).collect())
+/// itself for one pass; `crate::exposure_loss::mean_image`).
+pub fn mean_rgb(passes: &[FramePass<'_>]) -> Vec<f32> {
+    let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
+    crate::exposure_loss::mean_image(&renders, renders.first().map_or(0, |r| r.len()))
 }

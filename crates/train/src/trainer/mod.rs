@@ -20,9 +20,10 @@ pub use terms::warm_up_skinning;
 use crate::body::PreparedPose;
 use crate::config::{BlurModel, ExposureNetworks, TrainConfig};
 use crate::data::TrainingData;
+use crate::exposure_loss::{exposure_loss, ExposureEvents};
 use crate::image_loss::{psnr, ImageShape};
 use crate::init::{initialise, InitConfig};
-use crate::model::{mean_rgb, FramePass, Model, PosedGradients};
+use crate::model::{FramePass, Model, PosedGradients, RENDER_CHANNELS};
 use crate::optimisers::Optimisers;
 use crate::posing::ModelGradients;
 use crate::schedule::{accumulate_screen_stats, exponential_rate, on_schedule};
@@ -34,8 +35,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
 use terms::{
-    add_aiap_canonical, aiap_terms, exposure_event_terms, pair_terms, photometric, skinning_term,
-    AiapNeighbours, PairSupervision,
+    add_aiap_canonical, aiap_terms, pair_terms, skinning_term, AiapNeighbours, PairSupervision,
 };
 
 /// All state of a reconstruction: the model, its optimisers, density statistics, the frame-order
@@ -214,24 +214,28 @@ impl Trainer {
             height,
             width,
         };
-        let prediction = mean_rgb(&passes);
-        let photo = photometric(&prediction, &frame.image, shape, config.ssim_weight);
-        // The mean's cotangent reaches every pass scaled by 1/S (one pass: unchanged).
-        let mut d_images = if passes.len() == 1 {
-            vec![photo.d_image]
-        } else {
-            let scale = 1.0 / passes.len() as f32;
-            let d: Vec<f32> = photo.d_image.iter().map(|&v| v * scale).collect();
-            vec![d; passes.len()]
+        // The photometric loss of the passes' mean (its cotangent reaches every pass scaled by 1/S)
+        // and the events between consecutive sub-exposure renders.
+        let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
+        let events = match data.exposure_events.get(slot) {
+            Some(expected) if config.event_loss && passes.len() > 1 => Some(ExposureEvents {
+                expected,
+                weight: config.event_weight,
+                log_eps: config.event_log_eps,
+            }),
+            _ => None,
         };
-        // Events inside the exposure: between consecutive sub-exposure renders.
-        let exposure_events = match data.exposure_events.get(slot) {
-            Some(expected) if config.event_loss && passes.len() > 1 => {
-                let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
-                exposure_event_terms(&renders, expected, &config, &mut d_images)
-            }
-            _ => 0.0,
-        };
+        let photo = exposure_loss(
+            &renders,
+            &frame.image,
+            shape,
+            config.ssim_weight,
+            events,
+            RENDER_CHANNELS,
+        );
+        let exposure_events = photo.events;
+        let prediction = photo.prediction;
+        let mut d_images = photo.d_renders;
         times.loss = t0.elapsed().as_secs_f64();
         let first = &passes[mid];
 
@@ -339,7 +343,7 @@ impl Trainer {
             t0.elapsed().as_secs_f64() - second_backward_seconds - sub_render_backward_seconds;
 
         let event_value = event_value + exposure_events;
-        let loss = photo.value + aiap_value + skinning_value + flow_value + event_value;
+        let loss = photo.photometric + aiap_value + skinning_value + flow_value + event_value;
         let finite = loss.is_finite()
             && opacity_grads.iter().all(|v| v.is_finite())
             && second_latent

@@ -1,13 +1,13 @@
-//! The loss terms of one training step, each returning its value and its cotangents: the
-//! photometric loss of a pass, the pair losses (flow, events) between the passes of frames k and k+1,
+//! The loss terms of one training step, each returning its value and its cotangents (the frame's
+//! own photometric and in-exposure event terms are `crate::exposure_loss`): the pair losses (flow, events) between the passes of frames k and k+1,
 //! the AIAP regulariser on the human Gaussians and the skinning loss on canonical surface samples.
 
 use crate::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP_NEIGHBOURS};
 use crate::config::{EventPairs, FlowGradient, FlowMeasure, TrainConfig};
 use crate::data::{EventPair, FlowPair, TrainingData};
 use crate::event_loss::pair_event_loss;
+use crate::exposure_loss::add_scaled;
 use crate::flow_loss::{pair_flow_loss, pair_warp_loss};
-use crate::image_loss::{l1, ssim, ImageShape};
 use crate::model::{Model, PosedGradients, RENDER_CHANNELS};
 use crate::posing::{ModelGradients, PosedFrame};
 use crate::TrainError;
@@ -15,44 +15,6 @@ use flow::SpyNet;
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};
 use smpl_deform::deform_net::{skinning_loss, SkinningField};
 use std::time::Instant;
-
-/// (1 − λ)·L1 + λ·(1 − SSIM) of a render against its target, with the image cotangent.
-pub(super) struct Photometric {
-    /// The weighted loss.
-    pub value: f32,
-    /// The L1 term.
-    pub l1: f32,
-    /// SSIM (not 1 − SSIM).
-    pub ssim: f32,
-    /// dL/d image, (C, H, W) with C = [`RENDER_CHANNELS`] (zero on the probability plane).
-    pub d_image: Vec<f32>,
-}
-
-/// The photometric loss of `rgb` ((3, H, W)) against `target`.
-pub(super) fn photometric(
-    rgb: &[f32],
-    target: &[f32],
-    shape: ImageShape,
-    ssim_weight: f32,
-) -> Photometric {
-    let hw = shape.height * shape.width;
-    let mut d_l1 = vec![0.0f32; 3 * hw];
-    let mut d_ssim = vec![0.0f32; 3 * hw];
-    let l1_value = l1(rgb, target, Some(&mut d_l1));
-    let ssim_value = ssim(rgb, target, shape, Some(&mut d_ssim));
-    let w = ssim_weight;
-    let value = (1.0 - w) * l1_value + w * (1.0 - ssim_value);
-    let mut d_image = vec![0.0f32; RENDER_CHANNELS * hw];
-    for (o, (&a, &b)) in d_image.iter_mut().zip(d_l1.iter().zip(&d_ssim)) {
-        *o = (1.0 - w) * a - w * b;
-    }
-    Photometric {
-        value,
-        l1: l1_value,
-        ssim: ssim_value,
-        d_image,
-    }
-}
 
 /// The supervision of the pair (k, k+1) that a step uses, if any.
 pub(super) struct PairSupervision<'a> {
@@ -158,37 +120,6 @@ pub(super) fn pair_terms(
         add_scaled(&mut terms.d_second[..3 * hw], &el.d_second, lambda);
     }
     Ok(terms)
-}
-
-/// The event-generation loss inside one exposure: between each pair of consecutive sub-exposure
-/// renders `renders[s]`, `renders[s + 1]` ((3, H, W) each) with events (`expected[s]` = C·E), weighted
-/// by `config.event_weight`; the cotangents are added to `d_images[s]` and `d_images[s + 1]`
-/// ((C, H, W) each). Returns the weighted loss.
-pub(super) fn exposure_event_terms(
-    renders: &[&[f32]],
-    expected: &[Option<Vec<f32>>],
-    config: &TrainConfig,
-    d_images: &mut [Vec<f32>],
-) -> f32 {
-    let lambda = config.event_weight;
-    let mut value = 0.0f32;
-    for (s, expected) in expected.iter().enumerate() {
-        let (Some(expected), Some(&second)) = (expected, renders.get(s + 1)) else {
-            continue;
-        };
-        let el = pair_event_loss(renders[s], second, expected, config.event_log_eps);
-        value += lambda * el.loss;
-        add_scaled(&mut d_images[s], &el.d_first, lambda);
-        add_scaled(&mut d_images[s + 1], &el.d_second, lambda);
-    }
-    value
-}
-
-/// `dst += lambda · src`, element by element (a loss's weighted cotangent into an image's).
-fn add_scaled(dst: &mut [f32], src: &[f32], lambda: f32) {
-    for (o, &g) in dst.iter_mut().zip(src) {
-        *o += lambda * g;
-    }
 }
 
 /// The AIAP neighbourhoods: the human Gaussians (probability ≥ 0.5) and their K nearest human

@@ -1,0 +1,116 @@
+//! The exposure model's image terms on one training frame, generic over f32 / f64 (the trainer runs
+//! f32; the gradient checks run f64): the photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) — of the mean
+//! of the frame's S sub-exposure renders against the observed frame, and the event-generation loss
+//! between consecutive renders against the events between their times (`train::event_loss`).
+//!
+//! Backward: the photometric cotangent of the mean reaches every render scaled by 1/S (unscaled for
+//! one render, so the single-render model is the S = 1 case bit for bit); each event pair adds its
+//! weighted cotangents to its two renders.
+
+use crate::event_loss::pair_event_loss;
+use crate::image_loss::{l1, ssim, ImageShape};
+use nn::Real;
+
+/// The events between consecutive sub-exposure renders of a frame.
+#[derive(Clone, Copy, Debug)]
+pub struct ExposureEvents<'a, T> {
+    /// Per consecutive pair (s, s+1): C·E per pixel (H × W), or `None` where no events file covers
+    /// the interval.
+    pub expected: &'a [Option<Vec<T>>],
+    /// Weight of the event-generation loss.
+    pub weight: T,
+    /// ε of log(Y + ε).
+    pub log_eps: T,
+}
+
+/// The value of the terms and the cotangent of every render.
+#[derive(Clone, Debug)]
+pub struct ExposureLoss<T> {
+    /// (1 − λ)·L1 + λ·(1 − SSIM) of the mean render.
+    pub photometric: T,
+    /// The L1 part.
+    pub l1: T,
+    /// The SSIM of the mean render.
+    pub ssim: T,
+    /// The weighted event-generation loss summed over the pairs (0 without events).
+    pub events: T,
+    /// The mean of the renders, (3, H, W).
+    pub prediction: Vec<T>,
+    /// dL/d render s, (`channels`, H, W) as asked for (the planes past the third are zero).
+    pub d_renders: Vec<Vec<T>>,
+}
+
+/// The terms of one frame: `renders` are S planar (3, H, W) linear RGB images (each may carry
+/// further planes, ignored), `observed` the frame (3, H, W), `ssim_weight` λ; the cotangents are
+/// laid out with `channels` ≥ 3 planes (the trainer's renders carry the human probability as a
+/// fourth).
+pub fn exposure_loss<T: Real>(
+    renders: &[&[T]],
+    observed: &[T],
+    shape: ImageShape,
+    ssim_weight: T,
+    events: Option<ExposureEvents<'_, T>>,
+    channels: usize,
+) -> ExposureLoss<T> {
+    let hw = shape.height * shape.width;
+    let prediction = mean_image(renders, 3 * hw);
+    let mut d_l1 = vec![T::zero(); 3 * hw];
+    let mut d_ssim = vec![T::zero(); 3 * hw];
+    let l1_value = l1(&prediction, observed, Some(&mut d_l1));
+    let ssim_value = ssim(&prediction, observed, shape, Some(&mut d_ssim));
+    let w = ssim_weight;
+    let photometric = (T::one() - w) * l1_value + w * (T::one() - ssim_value);
+    let mut d_mean = vec![T::zero(); channels.max(3) * hw];
+    for (o, (&a, &b)) in d_mean.iter_mut().zip(d_l1.iter().zip(&d_ssim)) {
+        *o = (T::one() - w) * a - w * b;
+    }
+    let mut d_renders = if renders.len() == 1 {
+        vec![d_mean]
+    } else {
+        let scale = T::one() / T::of(renders.len() as f64);
+        let d: Vec<T> = d_mean.iter().map(|&v| v * scale).collect();
+        vec![d; renders.len()]
+    };
+    let mut event_value = T::zero();
+    if let Some(events) = events {
+        for (s, expected) in events.expected.iter().enumerate() {
+            let (Some(expected), Some(&second)) = (expected, renders.get(s + 1)) else {
+                continue;
+            };
+            let el = pair_event_loss(renders[s], second, expected, events.log_eps);
+            event_value = event_value + events.weight * el.loss;
+            add_scaled(&mut d_renders[s], &el.d_first, events.weight);
+            add_scaled(&mut d_renders[s + 1], &el.d_second, events.weight);
+        }
+    }
+    ExposureLoss {
+        photometric,
+        l1: l1_value,
+        ssim: ssim_value,
+        events: event_value,
+        prediction,
+        d_renders,
+    }
+}
+
+/// The mean of the first `len` values of `images` (the image itself for one), summed in order.
+pub fn mean_image<T: Real>(images: &[&[T]], len: usize) -> Vec<T> {
+    if let [image] = images {
+        return image[..len].to_vec();
+    }
+    let mut sum = vec![T::zero(); len];
+    for image in images {
+        for (x, &y) in sum.iter_mut().zip(image.iter()) {
+            *x = *x + y;
+        }
+    }
+    let scale = T::one() / T::of(images.len() as f64);
+    sum.iter().map(|&v| v * scale).collect()
+}
+
+/// `dst += weight · src`, element by element (a loss's weighted cotangent into an image's).
+pub fn add_scaled<T: Real>(dst: &mut [T], src: &[T], weight: T) {
+    for (o, &g) in dst.iter_mut().zip(src) {
+        *o = *o + weight * g;
+    }
+}

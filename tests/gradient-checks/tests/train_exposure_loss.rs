@@ -1,0 +1,93 @@
+//! Finite-difference check of the exposure model's image terms (`train::exposure_loss`): the
+//! photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) — of the mean of S sub-exposure renders against the
+//! observed frame, plus the weighted event-generation loss between consecutive renders (some pairs
+//! without events), w.r.t. every render, for S = 1, 2, 3 and 5. Each render carries a fourth plane
+//! (the trainer's human probability) that the terms ignore: its cotangent must be exactly zero.
+//!
+//! Tolerance in f64 with h = 1e-6: the loss is O(1), so rounding is ≈ ε·|L|/h ≈ 2e-10; the terms are
+//! smooth (SSIM, log of luma ≥ 0.05) except at L1's kinks where the mean equals the observed value,
+//! which a probe of 1e-6 crosses with probability ~1e-6 per pixel for values drawn apart;
+//! truncation h²·|L'''| is ≤ 1e-8 at luma ≥ 0.05. |num − ana| ≤ 1e-9 + 1e-6·max(|num|, |ana|) keeps
+//! more than an order of magnitude of margin. Dropping the 1/S of the mean, or the weight of the
+//! event pairs, fails it (asserted below).
+
+use gradient_checks::{central_differences, compare, rng, GradientChecker, Tolerance};
+use proptest::prelude::*;
+use rand::Rng;
+use train::exposure_loss::{exposure_loss, ExposureEvents};
+use train::image_loss::ImageShape;
+
+const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
+const H: f64 = 1e-6;
+const SIDE: usize = 12;
+const HW: usize = SIDE * SIDE;
+const PLANES: usize = 4;
+
+/// The terms' value for S renders laid out one after the other in `x` (PLANES × HW each).
+fn value(
+    x: &[f64],
+    observed: &[f64],
+    expected: &[Option<Vec<f64>>],
+    event_weight: f64,
+) -> (f64, Vec<Vec<f64>>) {
+    let renders: Vec<&[f64]> = x.chunks(PLANES * HW).collect();
+    let shape = ImageShape {
+        channels: 3,
+        height: SIDE,
+        width: SIDE,
+    };
+    let out = exposure_loss(
+        &renders,
+        observed,
+        shape,
+        0.2,
+        Some(ExposureEvents {
+            expected,
+            weight: event_weight,
+            log_eps: 1e-3,
+        }),
+        PLANES,
+    );
+    (out.photometric + out.events, out.d_renders)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(8))]
+
+    #[test]
+    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4) {
+        let subframes = [1, 2, 3, 5][which];
+        let mut rng = rng(seed);
+        let x: Vec<f64> = (0..subframes * PLANES * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
+        let observed: Vec<f64> = (0..3 * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
+        // Every other pair has events (C·E with C = 0.2); the first pair has none.
+        let expected: Vec<Option<Vec<f64>>> = (0..subframes.saturating_sub(1))
+            .map(|s| (s % 2 == 1 || subframes == 2).then(|| (0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
+            .collect();
+        let (_, d) = value(&x, &observed, &expected, 0.7);
+        let analytic: Vec<f64> = d.concat();
+        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7).0, &x, H);
+        let mut checker = GradientChecker::new();
+        checker.check(&format!("exposure terms, S = {subframes}"), &numeric, &analytic, TOL);
+        // The probability plane is not part of the terms.
+        for render in &d {
+            prop_assert!(render[3 * HW..].iter().all(|&v| v == 0.0));
+        }
+        if subframes > 1 {
+            // The mean's 1/S is needed: the unscaled photometric cotangent fails.
+            let (_, d_no_events) = value(&x, &observed, &expected, 0.0);
+            let unscaled: Vec<f64> = d.iter().zip(&d_no_events).flat_map(|(with, without)| {
+                with.iter().zip(without).map(move |(&a, &b)| a + (subframes as f64 - 1.0) * b)
+            }).collect();
+            prop_assert!(!compare("unscaled mean", &numeric, &unscaled, TOL).passed());
+            // And so is every event pair's weight.
+            let unweighted: Vec<f64> = d.iter().zip(&d_no_events).flat_map(|(with, without)| {
+                with.iter().zip(without).map(|(&a, &b)| b + (a - b) / 0.7)
+            }).collect();
+            if expected.iter().any(Option::is_some) {
+                prop_assert!(!compare("unweighted events", &numeric, &unweighted, TOL).passed());
+            }
+        }
+        checker.finish();
+    }
+}
