@@ -236,7 +236,10 @@ training_options! {
     /// dB). With `frames` pairs the best of 0.3 / 1 / 3 / 10 was 3 (human box 25.05 / 25.60 / 25.89
     /// / 25.27 dB; `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick` preset").
     event_weight: f32 = 0.3,
-    /// Contrast threshold C of the camera (log-intensity units; the benchmark's simulator: 0.2).
+    /// Contrast threshold C of the camera (log-intensity units): 0.2, the benchmark simulator's;
+    /// `cargo xtask reconstruct` takes the one the scene's generator recorded
+    /// (`generator.config.event_threshold` in scene.json) unless this option or the config file
+    /// sets it.
     event_threshold: f32 = 0.2,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
     event_log_eps: f32 = 1e-3,
