@@ -14,10 +14,12 @@ pub mod flow;
 pub mod generate;
 pub mod mesh;
 pub mod motion;
+pub mod pose_metrics;
 mod preview;
 pub mod raster;
 pub mod room;
 pub mod texture;
+pub mod true_poses;
 
 /// Version of the generator's output: bump it whenever the bytes written for some [`SynthConfig`]
 /// change (a new renderer detail, motion, simulator or contrast-maximisation setting), so cached
@@ -29,3 +31,5 @@ pub use config::{Preset, SynthConfig};
 pub use error::{Result, SynthError};
 pub use generate::{generate, generate_with_body, Stats};
 pub use motion::Speed;
+pub use pose_metrics::PoseErrorStats;
+pub use true_poses::{FramePose, TruePoses, TRUE_POSES_FILE};
