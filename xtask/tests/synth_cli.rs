@@ -114,3 +114,108 @@ fn synth_refuses_bad_knobs_with_a_message() {
         );
     }
 }
+
+fn files(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+fn run_ok(args: &[String]) -> String {
+    let o = xtask(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "xtask {args:?} failed: {}\n{stdout}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    stdout
+}
+
+/// `--pose-error 0` is the benchmark without the flag, byte for byte (stamp included); a non-zero
+/// value writes the estimate to scene.json, the truth to poses_true.json, the realised figures to
+/// stats.json and the terminal, and only the SMPL parameters differ.
+#[test]
+fn synth_pose_error_flag() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (plain, zero, on) = (
+        tmp.path().join("plain"),
+        tmp.path().join("zero"),
+        tmp.path().join("on"),
+    );
+    run_ok(&tiny_args(&plain, &[]));
+    run_ok(&tiny_args(&zero, &[("--pose-error", "0")]));
+    assert!(
+        files(&plain) == files(&zero),
+        "--pose-error 0 changed bytes"
+    );
+    let stdout = run_ok(&tiny_args(&on, &[("--pose-error", "8")]));
+    assert!(stdout.contains("pose error in scene.json"), "{stdout}");
+    let (fp, fo) = (files(&plain), files(&on));
+    assert!(fo.contains_key("poses_true.json"));
+    for (k, v) in &fp {
+        if ![".complete", "scene.json", "stats.json"].contains(&k.as_str()) {
+            assert!(fo[k] == *v, "{k} changed with --pose-error 8");
+        }
+    }
+    let stats: serde_json::Value = serde_json::from_slice(&fo["stats.json"]).unwrap();
+    let rms = stats["pose_error"]["joint_rms_deg"].as_f64().unwrap();
+    assert!((rms - 8.0).abs() < 0.05, "{rms}");
+    // The root errors follow in the realistic preset's proportion (16° : 6° : 8 cm).
+    let root = stats["pose_error"]["root_orient_rms_deg"].as_f64().unwrap();
+    assert!((root - 3.0).abs() < 0.02, "{root}");
+    let stamp = String::from_utf8_lossy(&fo[".complete"]).into_owned();
+    assert!(stamp.contains("\"pose_error\""), "{stamp}");
+    let truth: serde_json::Value = serde_json::from_slice(&fo["poses_true.json"]).unwrap();
+    let scene_plain: serde_json::Value = serde_json::from_slice(&fp["scene.json"]).unwrap();
+    for (t, s) in truth["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(scene_plain["frames"].as_array().unwrap())
+    {
+        assert_eq!(t["pose"], s["pose"]);
+        assert_eq!(t["transl"], s["transl"]);
+    }
+}
+
+#[test]
+fn synth_refuses_bad_pose_errors_and_documents_the_flag() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("refused");
+    for (flag, value, knob) in [
+        ("--pose-error", "-1", "pose-error"),
+        ("--pose-error", "45", "pose-error"),
+        ("--root-transl-error", "80", "root-transl-error"),
+    ] {
+        let args = tiny_args(&out, &[(flag, value)]);
+        let o = xtask(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{flag} {value} was accepted");
+        assert!(
+            stderr.contains(&format!("invalid setting {knob} = {value}")),
+            "{flag} {value}: unexpected message: {stderr}"
+        );
+    }
+    let help = xtask(&["synth", "--help"]);
+    let text = String::from_utf8_lossy(&help.stdout);
+    for needle in [
+        "--pose-error <DEG>",
+        "geodesic",
+        "poses_true.json",
+        "realistic",
+    ] {
+        assert!(text.contains(needle), "--help lacks {needle}: {text}");
+    }
+}

@@ -54,6 +54,11 @@ impl PinholeCamera {
         self.rot_cam_from_world * p_world + self.t_cam_from_world
     }
 
+    /// The camera centre in world coordinates (metres): `−Rᵀ t`.
+    pub fn centre_world(&self) -> Vec3 {
+        -(self.rot_cam_from_world.transpose() * self.t_cam_from_world)
+    }
+
     /// World direction to camera space.
     pub fn cam_dir_from_world(&self, d_world: Vec3) -> Vec3 {
         self.rot_cam_from_world * d_world

@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SynthError};
 use crate::motion::Speed;
+use crate::pose_error::PoseError;
 
 /// Largest accepted image side (pixels).
 pub const MAX_SIDE: u32 = 8192;
@@ -21,6 +22,9 @@ pub enum Preset {
     Default,
     /// 400 frames at 256×256, S = 16.
     Paper,
+    /// [`Preset::Default`] with the SMPL parameters of `scene.json` estimated as a monocular fitter
+    /// would ([`PoseError::REALISTIC`]); the renders are the default benchmark's.
+    Realistic,
 }
 
 /// Every knob of the generator. Same settings, same bytes (any thread count).
@@ -60,6 +64,11 @@ pub struct SynthConfig {
     pub event_flow: bool,
     /// Body model reference (`builtin:makehuman` or an SMPL `.npz` path).
     pub body: String,
+    /// Error of the SMPL parameters written to `scene.json` (an estimate like a monocular fitter's;
+    /// the truth goes to `poses_true.json`). Off (all zero) by default, and then not serialised, so
+    /// settings without it keep their bytes. Never changes what is rendered.
+    #[serde(default, skip_serializing_if = "PoseError::is_off")]
+    pub pose_error: PoseError,
 }
 
 impl SynthConfig {
@@ -83,6 +92,7 @@ impl SynthConfig {
             refractory_us: 1000,
             event_flow: true,
             body: "builtin:makehuman".into(),
+            pose_error: PoseError::OFF,
         };
         match p {
             Preset::Tiny => Self {
@@ -98,6 +108,10 @@ impl SynthConfig {
             Preset::Default => base,
             Preset::Paper => Self {
                 frames: 400,
+                ..base
+            },
+            Preset::Realistic => Self {
+                pose_error: PoseError::REALISTIC,
                 ..base
             },
         }
@@ -198,6 +212,6 @@ impl SynthConfig {
                 "must be >= 0",
             );
         }
-        Ok(())
+        self.pose_error.validate()
     }
 }

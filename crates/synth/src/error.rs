@@ -41,12 +41,20 @@ pub enum SynthError {
         /// The encoder's message.
         message: String,
     },
-    /// Writing JSON failed.
+    /// `poses_true.json` is not what this crate writes.
+    #[error("{path}: {reason}")]
+    TruePoses {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, naming the frame and field.
+        reason: String,
+    },
+    /// Reading or writing JSON failed.
     #[error("{path}: JSON error: {source}")]
     Json {
-        /// File being written.
+        /// File being read or written.
         path: PathBuf,
-        /// The serialiser's error.
+        /// The parser's or serialiser's error.
         #[source]
         source: serde_json::Error,
     },

@@ -29,6 +29,7 @@ use crate::error::{Result, SynthError};
 use crate::flow::{ground_truth_flow, warp_error};
 use crate::mesh::{Light, Mesh};
 use crate::motion::Motion;
+use crate::pose_metrics::PoseErrorStats;
 use crate::raster::{render_over, GBuffer, StaticSamples, NO_HIT};
 use crate::{preview, room};
 
@@ -150,6 +151,10 @@ pub struct Stats {
     pub events_cm_flow: CmStats,
     /// Frame indices shown in `preview.png`, top to bottom.
     pub preview_frames: Vec<u32>,
+    /// Realised error of the SMPL parameters in `scene.json` against `poses_true.json`; absent
+    /// (and not written) when the pose error is off.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_error: Option<PoseErrorStats>,
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SynthError + '_ {
@@ -644,6 +649,25 @@ pub fn generate_with_body(
         row.events = flushed_counts[k].clone();
     }
 
+    // The scene's SMPL parameters so far are the true ones; with a pose error they become an
+    // estimate and the truth goes to its own file (everything rendered above is unchanged).
+    let mut generator = serde_json::json!({
+        "name": "synth",
+        "config": cfg,
+    });
+    if cfg.pose_error.is_off() {
+        // A truth file left by an earlier generation into `out` would not be this scene's.
+        crate::true_poses::TruePoses::remove(out)?;
+    } else {
+        stats.pose_error = Some(crate::pose_error::apply(
+            cfg,
+            &body,
+            cam.centre_world(),
+            &mut scene_frames,
+            out,
+        )?);
+        generator["true_poses"] = serde_json::json!(crate::true_poses::TRUE_POSES_FILE);
+    }
     let sc = scene::Scene {
         format_version: scene::FORMAT_VERSION,
         camera: cam.to_scene(),
@@ -658,10 +682,7 @@ pub fn generate_with_body(
             transfer: scene::Transfer::Srgb,
         },
         frames: scene_frames,
-        generator: Some(serde_json::json!({
-            "name": "synth",
-            "config": cfg,
-        })),
+        generator: Some(generator),
     };
     sc.write(out)?;
 

@@ -1,7 +1,9 @@
 //! The synthetic motion-blur benchmark generator: a textured room, a dressed SMPL-topology body
 //! moving fast, a fixed camera; S sub-frames per exposure rendered by a triangle-mesh renderer
 //! independent of the Gaussian rasterizer; blurred frames, sharp references, masks, ground-truth
-//! flow, events; written in scene format v1 (DESIGN.md §5, docs/FORMATS.md).
+//! flow, events; written in scene format v1 (DESIGN.md §5, docs/FORMATS.md). Optionally the SMPL
+//! parameters given to the trainer carry a monocular fitter's error (`pose_error`), the truth
+//! then written beside them (`true_poses`).
 //!
 //! This crate must never depend on `rasterize-cpu` or `train`: the benchmark would otherwise share
 //! the model's renderer or its assumptions. Every output byte is a function of [`SynthConfig`].
@@ -14,10 +16,13 @@ pub mod flow;
 pub mod generate;
 pub mod mesh;
 pub mod motion;
+pub mod pose_error;
+pub mod pose_metrics;
 mod preview;
 pub mod raster;
 pub mod room;
 pub mod texture;
+pub mod true_poses;
 
 /// Version of the generator's output: bump it whenever the bytes written for some [`SynthConfig`]
 /// change (a new renderer detail, motion, simulator or contrast-maximisation setting), so cached
@@ -29,3 +34,6 @@ pub use config::{Preset, SynthConfig};
 pub use error::{Result, SynthError};
 pub use generate::{generate, generate_with_body, Stats};
 pub use motion::Speed;
+pub use pose_error::PoseError;
+pub use pose_metrics::PoseErrorStats;
+pub use true_poses::{FramePose, TruePoses, TRUE_POSES_FILE};
