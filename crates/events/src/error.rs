@@ -24,6 +24,18 @@ pub enum EventsError {
         /// What is wrong, naming the field and the value.
         message: String,
     },
+    /// A word of a Prophesee EVT 2.0 / 3.0 stream that its specification does not allow there
+    /// (reserved type, event outside the sensor, event without a row, vector without a base, time
+    /// going backwards).
+    #[error("{path}: byte {offset}: {message}")]
+    BadWord {
+        /// File being read.
+        path: String,
+        /// Byte offset of the word in the file (header included).
+        offset: u64,
+        /// What is wrong, naming the word and the value.
+        message: String,
+    },
     /// Timestamps decrease at `index` (use [`crate::EventStream::sort_by_time`] to repair).
     #[error(
         "timestamps are not monotonic at event {index}: {previous_us} us followed by {t_us} us"

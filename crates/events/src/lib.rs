@@ -17,7 +17,10 @@ pub mod stream;
 pub use cmax::{flow_from_events, CmaxConfig, CmaxProblem};
 pub use error::{EventsError, Result};
 pub use flowio::{flow_to_rgb, read_flow, write_flo, write_flow, write_flow_colour_png, Flow};
-pub use io::{open_events, read_events, write_events, EventReader};
+pub use io::{
+    open_events, open_events_with, read_events, read_events_with, write_events, EventReader,
+    ReadOptions,
+};
 pub use repr::{count_frame, time_slice_frames, voxel_grid, CountMode};
 pub use simulate::{grey_from_rgb, simulate_sequence, EsimConfig, EventSimulator};
 pub use stream::{Event, EventSlice, EventStream, SensorSize};

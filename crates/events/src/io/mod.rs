@@ -3,8 +3,11 @@
 //! Every reader streams: it holds a bounded buffer and hands out events in chunks through
 //! [`EventReader::read_chunk`], so a multi-gigabyte recording never has to fit in memory twice.
 //! Readers never allocate by an unchecked header value, never panic on malformed bytes, and report
-//! the sensor size when the file states it. They do not sort or validate: the caller decides
-//! (see [`crate::EventStream::validate`] and [`crate::EventStream::sort_by_time`]).
+//! the sensor size when the file states it. They do not sort or validate the stream as a whole: the
+//! caller decides (see [`crate::EventStream::validate`] and [`crate::EventStream::sort_by_time`]).
+//! The Prophesee EVT 2.0 / 3.0 reader does check each word as its specification allows (a stream of
+//! stateful words decodes garbage into plausible-looking events otherwise), and never guesses the
+//! encoding of a `.raw` file whose header does not state it: [`ReadOptions`] gives it.
 
 use std::path::Path;
 
@@ -19,6 +22,22 @@ pub mod text;
 /// Default number of events per chunk used by [`read_events`].
 pub const DEFAULT_CHUNK: usize = 1 << 20;
 
+/// How to read an event file; the default reads every file that states its format and refuses
+/// anything malformed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Encoding of a Prophesee `.raw` file whose header does not state it (no `% evt 2.0|3.0` or
+    /// `% format EVT2|EVT3` line). `None`: such a file is refused. A header that states a
+    /// different encoding is refused too. Only for `.raw` files (an error for other formats).
+    pub raw_format: Option<prophesee::RawEncoding>,
+    /// Skip the words of a Prophesee EVT 2.0 / 3.0 stream that its specification does not allow
+    /// (reserved types, events outside the sensor, events without a row, vectors without a base,
+    /// time going backwards) instead of failing at the first; the reader counts them
+    /// ([`EventReader::skipped_words`]). Other formats ignore it (their readers refuse malformed
+    /// input either way).
+    pub lenient: bool,
+}
+
 /// A streaming source of events.
 pub trait EventReader {
     /// Short format name (`"text"`, `"npz"`, `"aedat4"`, `"evt2"`, `"evt3"`, `"dat"`).
@@ -32,6 +51,11 @@ pub trait EventReader {
     fn bytes_read(&self) -> u64;
     /// Total size of the source in bytes, when known.
     fn total_bytes(&self) -> Option<u64>;
+    /// Bad words skipped so far by a lenient reader ([`ReadOptions::lenient`]); 0 for readers
+    /// that never skip.
+    fn skipped_words(&self) -> u64 {
+        0
+    }
 }
 
 /// The file formats this crate reads and writes.
@@ -43,7 +67,7 @@ pub enum EventFormat {
     Npz,
     /// AEDAT 4 (iniVation DV).
     Aedat4,
-    /// Prophesee `.raw` (EVT 2.0 / 3.0, from the header); [`write_events`] writes EVT 3.0 (use
+    /// Prophesee `.raw` (EVT 2.0 / 3.0, from the header or [`ReadOptions::raw_format`]); [`write_events`] writes EVT 3.0 (use
     /// [`prophesee::write_raw`] for EVT 2.0).
     PropheseeRaw,
     /// Prophesee `.dat` (8-byte records, 14-bit coordinates, u32 µs times).
@@ -70,22 +94,50 @@ impl EventFormat {
     }
 }
 
-/// Opens a streaming reader, choosing the format from the extension.
+/// Opens a streaming reader, choosing the format from the extension, with default
+/// [`ReadOptions`] (a `.raw` file must state its encoding; malformed words are errors).
 pub fn open_events(path: impl AsRef<Path>) -> Result<Box<dyn EventReader>> {
+    open_events_with(path, &ReadOptions::default())
+}
+
+/// Opens a streaming reader, choosing the format from the extension, with `options`. Errors:
+/// [`EventsError::InvalidArgument`] for a `raw_format` given with a file that is not `.raw`.
+pub fn open_events_with(
+    path: impl AsRef<Path>,
+    options: &ReadOptions,
+) -> Result<Box<dyn EventReader>> {
     let path = path.as_ref();
-    Ok(match EventFormat::from_path(path)? {
+    let format = EventFormat::from_path(path)?;
+    if options.raw_format.is_some() && format != EventFormat::PropheseeRaw {
+        return Err(EventsError::arg(
+            "raw_format",
+            format!(
+                "{}: the EVT encoding applies to Prophesee .raw files only",
+                path.display()
+            ),
+        ));
+    }
+    Ok(match format {
         EventFormat::Text => Box::new(text::TextReader::open(path)?),
         EventFormat::Npz => Box::new(npz::NpzReader::open(path)?),
         EventFormat::Aedat4 => Box::new(aedat4::Aedat4Reader::open(path)?),
         EventFormat::PropheseeRaw | EventFormat::PropheseeDat => {
-            Box::new(prophesee::PropheseeReader::open(path)?)
+            Box::new(prophesee::PropheseeReader::open_with(path, options)?)
         }
     })
 }
 
-/// Reads every event of a file (format from the extension); the sensor size is set when stated.
+/// Reads every event of a file (format from the extension) with default [`ReadOptions`]; the
+/// sensor size is set when stated.
 pub fn read_events(path: impl AsRef<Path>) -> Result<EventStream> {
-    let mut r = open_events(path)?;
+    read_events_with(path, &ReadOptions::default())
+}
+
+/// Reads every event of a file (format from the extension) with `options`; the sensor size is set
+/// when stated. A lenient read does not say how many words it skipped: open the reader with
+/// [`open_events_with`] and ask [`EventReader::skipped_words`] when that matters.
+pub fn read_events_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<EventStream> {
+    let mut r = open_events_with(path, options)?;
     read_all(r.as_mut())
 }
 

@@ -2,15 +2,30 @@
 //!
 //! All start with an ASCII header of lines beginning with `%` (sensor size from `% geometry WxH`,
 //! `% format EVT3;height=H;width=W` or `% Width W` / `% Height H`; the encoding from `% evt 2.0|3.0`
-//! or `format EVT2|EVT3`). Then, little-endian:
+//! or `format EVT2|EVT3`). A `.raw` header that does not state the encoding is refused unless the
+//! caller gives it ([`ReadOptions::raw_format`]): random bytes decode as a plausible EVT 3.0
+//! stream, so the encoding is never guessed. Then, little-endian:
 //! - EVT 2.0: 32-bit words, type in bits 31..28: CD_OFF 0x0 / CD_ON 0x1 with t low bits 27..22,
-//!   x 21..11, y 10..0; EVT_TIME_HIGH 0x8 with t bits 33..6 in 27..0; others skipped.
+//!   x 21..11, y 10..0; EVT_TIME_HIGH 0x8 with t bits 33..6 in 27..0 (a drop from the top of the
+//!   28-bit counter to its bottom is a loop, unrolled); EXT_TRIGGER 0xA, OTHERS 0xE and
+//!   CONTINUED 0xF skipped; the other types are reserved.
 //! - EVT 3.0: 16-bit words, type in bits 15..12: ADDR_Y 0x0 (y 10..0), ADDR_X 0x2 (pol 11, x 10..0,
 //!   one event), VECT_BASE_X 0x3 (pol 11, x 10..0), VECT_12 0x4 / VECT_8 0x5 (validity masks of 12 / 8
 //!   consecutive x, then base x advances), TIME_LOW 0x6 and TIME_HIGH 0x8 (12 bits each of a
-//!   24-bit µs counter; wrap-arounds of TIME_HIGH are unrolled); others skipped.
+//!   24-bit µs counter; wrap-arounds of TIME_HIGH are unrolled); CONTINUED_4 0x7, EXT_TRIGGER 0xA,
+//!   OTHERS 0xE and CONTINUED_12 0xF skipped; the other types (0x1, 0x9, 0xB-0xD) are reserved.
 //! - `.dat`: after the header, one byte event type and one byte event size (8), then records
 //!   {u32 t µs, u32 data} with x = bits 13..0, y = bits 27..14, p = bits 31..28.
+//!
+//! EVT words are checked as the specifications allow: a reserved type, an event outside the
+//! header's sensor (else the 2048-pixel address range), an EVT 3.0 event before any ADDR_Y or
+//! vector before any VECT_BASE_X, and a TIME_HIGH below the current one that is not a wrap (only a
+//! drop from within 10 steps of the counter's top to its bottom is, as in Prophesee's decoders) are
+//! [`EventsError::BadWord`] with the file and the word's byte offset, or, when lenient
+//! ([`ReadOptions::lenient`]), skipped and counted. TIME_LOW may step back inside its TIME_HIGH
+//! period, and EVT 2.0 events in one period may come in any order of their low time bits: both are
+//! legal and decoded as written. Events before the first TIME_HIGH are decoded with TIME_HIGH 0,
+//! as before.
 //!
 //! Decoders keep their state across chunks; a trailing partial word is an error.
 //!
@@ -25,7 +40,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
-use super::EventReader;
+use super::{EventReader, ReadOptions};
 use crate::error::{EventsError, Result};
 use crate::stream::{EventStream, SensorSize};
 
@@ -122,7 +137,41 @@ fn header_format(lines: &[String]) -> Option<PropheseeFormat> {
     None
 }
 
+/// Encoding of the words of a Prophesee `.raw` file, for files whose header does not state it
+/// (see [`super::ReadOptions::raw_format`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RawEncoding {
+    /// EVT 2.0 (32-bit words).
+    Evt2,
+    /// EVT 3.0 (16-bit words).
+    Evt3,
+}
+
+impl From<RawEncoding> for PropheseeFormat {
+    fn from(e: RawEncoding) -> Self {
+        match e {
+            RawEncoding::Evt2 => Self::Evt2,
+            RawEncoding::Evt3 => Self::Evt3,
+        }
+    }
+}
+
+/// Largest coordinate range of EVT 2.0 / 3.0 (11-bit addresses), in pixels.
+const EVT_RANGE: u32 = 2048;
+
+/// A TIME_HIGH that drops by at least its counter's largest value minus this many steps is the
+/// counter wrapping around (the rule of Prophesee's own decoders); any smaller drop is time going
+/// backwards.
+const WRAP_SLACK: i64 = 10;
+
 /// Streaming reader of Prophesee `.raw` (EVT 2.0 / 3.0) and `.dat` files.
+///
+/// EVT streams are checked word by word as the specifications allow (see the module docs and
+/// `docs/FORMATS.md`): a reserved word type, an event outside the header's sensor (or the 2048-pixel
+/// address range), an event before any row (EVT 3.0 ADDR_Y), a vector before any base
+/// (VECT_BASE_X), or a TIME_HIGH that goes backwards without being a wrap of its counter is an
+/// [`EventsError::BadWord`] naming the file and the word's byte offset, unless the reader is
+/// lenient: then the word is skipped and counted ([`EventReader::skipped_words`]).
 pub struct PropheseeReader<R: BufRead> {
     reader: R,
     path: PathBuf,
@@ -131,12 +180,23 @@ pub struct PropheseeReader<R: BufRead> {
     buf: Vec<u8>,
     bytes: u64,
     total: Option<u64>,
+    /// Skip bad words instead of failing.
+    lenient: bool,
+    /// Bad words skipped so far (lenient only).
+    skipped: u64,
+    /// Exclusive bounds of valid columns / rows (the header's sensor, else the address range).
+    width: u32,
+    height: u32,
     // EVT 2.0 state.
     time_high2: i64,
+    time_high2_seen: bool,
+    wraps2: i64,
     // EVT 3.0 state.
     y: u16,
     base_x: u16,
     pol: i8,
+    row_seen: bool,
+    base_seen: bool,
     time_low: i64,
     time_high: i64,
     time_high_seen: bool,
@@ -145,26 +205,55 @@ pub struct PropheseeReader<R: BufRead> {
 }
 
 impl PropheseeReader<BufReader<File>> {
-    /// Opens a `.raw` (EVT 2.0/3.0 from its header, EVT 3.0 when unstated) or `.dat` file.
+    /// Opens a `.raw` (EVT 2.0/3.0 as its header states) or `.dat` file with default options: a
+    /// `.raw` file whose header does not state its encoding is refused.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+        Self::open_with(path, &ReadOptions::default())
+    }
+
+    /// Opens a `.raw` or `.dat` file with `options` (the encoding of a `.raw` file whose header
+    /// does not state it; lenient decoding).
+    pub fn open_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Self> {
         let path = path.as_ref();
         let f = File::open(path).map_err(|e| EventsError::io(path, e))?;
         let total = f.metadata().ok().map(|m| m.len());
         let dat = crate::flowio::extension(path) == "dat";
-        let mut r = Self::new(BufReader::with_capacity(1 << 20, f), path, dat)?;
+        let mut r = Self::with_options(BufReader::with_capacity(1 << 20, f), path, dat, options)?;
         r.total = total;
         Ok(r)
     }
 }
 
 impl<R: BufRead> PropheseeReader<R> {
+    /// A reader over any buffered source with default options; `dat` selects the `.dat` layout,
+    /// otherwise the header must state EVT 2.0 or EVT 3.0.
+    pub fn new(reader: R, path: impl AsRef<Path>, dat: bool) -> Result<Self> {
+        Self::with_options(reader, path, dat, &ReadOptions::default())
+    }
+
     /// A reader over any buffered source; `dat` selects the `.dat` layout, otherwise the header
-    /// decides between EVT 2.0 and EVT 3.0 (default EVT 3.0).
-    pub fn new(mut reader: R, path: impl AsRef<Path>, dat: bool) -> Result<Self> {
+    /// decides between EVT 2.0 and EVT 3.0, or `options.raw_format` when the header does not say.
+    /// A header and an option that disagree are refused, as is a header that states nothing
+    /// without the option.
+    pub fn with_options(
+        mut reader: R,
+        path: impl AsRef<Path>,
+        dat: bool,
+        options: &ReadOptions,
+    ) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
         let (lines, mut consumed) = read_header(&mut reader, &path)?;
         let sensor = header_sensor(&lines);
         let format = if dat {
+            if options.raw_format.is_some() {
+                return Err(EventsError::arg(
+                    "raw_format",
+                    format!(
+                        "{}: the encoding applies to .raw files only, not to .dat",
+                        path.display()
+                    ),
+                ));
+            }
             let mut tb = [0u8; 2];
             reader
                 .read_exact(&mut tb)
@@ -178,7 +267,13 @@ impl<R: BufRead> PropheseeReader<R> {
             }
             PropheseeFormat::Dat
         } else {
-            header_format(&lines).unwrap_or(PropheseeFormat::Evt3)
+            raw_encoding(&lines, options.raw_format, &path)?
+        };
+        let (width, height) = match sensor {
+            Some(s) if format != PropheseeFormat::Dat => {
+                (s.width.min(EVT_RANGE), s.height.min(EVT_RANGE))
+            }
+            _ => (EVT_RANGE, EVT_RANGE),
         };
         Ok(Self {
             reader,
@@ -188,10 +283,18 @@ impl<R: BufRead> PropheseeReader<R> {
             buf: Vec::new(),
             bytes: consumed,
             total: None,
+            lenient: options.lenient,
+            skipped: 0,
+            width,
+            height,
             time_high2: 0,
+            time_high2_seen: false,
+            wraps2: 0,
             y: 0,
             base_x: 0,
             pol: 1,
+            row_seen: false,
+            base_seen: false,
             time_low: 0,
             time_high: 0,
             time_high_seen: false,
@@ -213,86 +316,23 @@ impl<R: BufRead> PropheseeReader<R> {
         }
     }
 
-    fn decode(&mut self, out: &mut EventStream) -> usize {
+    /// Decodes the words in `self.buf`, whose first byte is at file offset `offset`; returns the
+    /// number of events appended. A bad word is an error (the events before it are appended) or,
+    /// when lenient, skipped and counted.
+    fn decode(&mut self, out: &mut EventStream, offset: u64) -> Result<usize> {
         let before = out.len();
+        let ws = self.word_size();
         // At most one event per word except EVT 3.0 vectors: bounded by the bytes actually read.
-        let words = self.buf.len() / self.word_size();
+        let words = self.buf.len() / ws;
         out.t.reserve(words);
         out.x.reserve(words);
         out.y.reserve(words);
         out.p.reserve(words);
         // Events are gathered in a fixed local block and appended to the columns a block at a time.
         let mut block = Block::new();
-        match self.format {
-            PropheseeFormat::Evt2 => {
-                for c in self.buf.chunks_exact(4) {
-                    block.make_room(out);
-                    let w = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-                    match w >> 28 {
-                        0x0 | 0x1 => block.put(
-                            (self.time_high2 << 6) | ((w >> 22) & 0x3F) as i64,
-                            ((w >> 11) & 0x7FF) as u16,
-                            (w & 0x7FF) as u16,
-                            if w >> 28 == 1 { 1 } else { -1 },
-                            true,
-                        ),
-                        0x8 => self.time_high2 = (w & 0x0FFF_FFFF) as i64,
-                        _ => {}
-                    }
-                }
-            }
-            PropheseeFormat::Evt3 => {
-                // The decoder state lives in locals for the loop (the current time is kept
-                // assembled and only recomputed when a time word arrives) and is stored back after.
-                let (mut y, mut base_x, mut pol) = (self.y, self.base_x, self.pol);
-                let (mut time_low, mut time_high) = (self.time_low, self.time_high);
-                let (mut seen, mut wraps) = (self.time_high_seen, self.wraps);
-                let mut t = (wraps << 24) | (time_high << 12) | time_low;
-                for c in self.buf.chunks_exact(2) {
-                    block.make_room(out);
-                    let w = u16::from_le_bytes([c[0], c[1]]);
-                    let payload = w & 0x0FFF;
-                    match w >> 12 {
-                        0x0 => y = payload & 0x7FF,
-                        0x2 => block.put(
-                            t,
-                            payload & 0x7FF,
-                            y,
-                            if payload & 0x800 != 0 { 1 } else { -1 },
-                            true,
-                        ),
-                        0x3 => {
-                            base_x = payload & 0x7FF;
-                            pol = if payload & 0x800 != 0 { 1 } else { -1 };
-                        }
-                        0x4 | 0x5 => {
-                            let n = if w >> 12 == 0x4 { 12 } else { 8 };
-                            for i in 0..n {
-                                let valid = payload & (1 << i) != 0;
-                                block.put(t, base_x.wrapping_add(i), y, pol, valid);
-                            }
-                            base_x = base_x.wrapping_add(n);
-                        }
-                        0x6 => {
-                            time_low = payload as i64;
-                            t = (wraps << 24) | (time_high << 12) | time_low;
-                        }
-                        0x8 => {
-                            let high = payload as i64;
-                            if seen && high < time_high {
-                                wraps += 1;
-                            }
-                            time_high = high;
-                            seen = true;
-                            t = (wraps << 24) | (time_high << 12) | time_low;
-                        }
-                        _ => {}
-                    }
-                }
-                (self.y, self.base_x, self.pol) = (y, base_x, pol);
-                (self.time_low, self.time_high) = (time_low, time_high);
-                (self.time_high_seen, self.wraps) = (seen, wraps);
-            }
+        let bad = match self.format {
+            PropheseeFormat::Evt2 => self.decode_evt2(&mut block, out),
+            PropheseeFormat::Evt3 => self.decode_evt3(&mut block, out),
             PropheseeFormat::Dat => {
                 for c in self.buf.chunks_exact(8) {
                     block.make_room(out);
@@ -306,10 +346,264 @@ impl<R: BufRead> PropheseeReader<R> {
                         true,
                     );
                 }
+                None
+            }
+        };
+        block.flush(out);
+        match bad {
+            Some(BadWord { index, message }) => Err(EventsError::BadWord {
+                path: self.path.display().to_string(),
+                offset: offset + (index * ws) as u64,
+                message,
+            }),
+            None => Ok(out.len() - before),
+        }
+    }
+
+    /// The sensor bounds for messages: the header's size, or the address range.
+    fn bounds(&self) -> String {
+        match self.sensor {
+            Some(_) => format!("the header's {}x{} sensor", self.width, self.height),
+            None => format!("the {EVT_RANGE}x{EVT_RANGE} address range"),
+        }
+    }
+
+    /// Decodes EVT 2.0 words; returns the first bad word (strict) or `None`.
+    fn decode_evt2(&mut self, block: &mut Block, out: &mut EventStream) -> Option<BadWord> {
+        const TIME_LOOP: i64 = 1 << 28;
+        let (width, height) = (self.width, self.height);
+        let (mut high, mut seen, mut wraps) = (self.time_high2, self.time_high2_seen, self.wraps2);
+        let mut bad = None;
+        for (i, c) in self.buf.chunks_exact(4).enumerate() {
+            block.make_room(out);
+            let w = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+            let problem = match w >> 28 {
+                0x0 | 0x1 => {
+                    let (x, y) = ((w >> 11) & 0x7FF, w & 0x7FF);
+                    if x < width && y < height {
+                        block.put(
+                            (high << 6) | ((w >> 22) & 0x3F) as i64,
+                            x as u16,
+                            y as u16,
+                            if w >> 28 == 1 { 1 } else { -1 },
+                            true,
+                        );
+                        None
+                    } else {
+                        Some(Problem::Outside(x, y))
+                    }
+                }
+                0x8 => {
+                    let value = (w & 0x0FFF_FFFF) as i64;
+                    let current = high - wraps * TIME_LOOP;
+                    if seen && value < current {
+                        if current - value >= TIME_LOOP - 1 - WRAP_SLACK {
+                            wraps += 1;
+                            high = value + wraps * TIME_LOOP;
+                            None
+                        } else {
+                            Some(Problem::Backwards {
+                                from: current,
+                                to: value,
+                                step_us: 64,
+                            })
+                        }
+                    } else {
+                        high = value + wraps * TIME_LOOP;
+                        seen = true;
+                        None
+                    }
+                }
+                // EXT_TRIGGER, OTHERS, CONTINUED: valid, carry no CD event.
+                0xA | 0xE | 0xF => None,
+                ty => Some(Problem::Reserved(ty as u16)),
+            };
+            if let Some(p) = problem {
+                if self.lenient {
+                    self.skipped += 1;
+                } else {
+                    bad = Some(BadWord {
+                        index: i,
+                        message: p.describe(&format!("{w:#010x}"), "EVT 2.0", &self.bounds()),
+                    });
+                    break;
+                }
             }
         }
-        block.flush(out);
-        out.len() - before
+        (self.time_high2, self.time_high2_seen, self.wraps2) = (high, seen, wraps);
+        bad
+    }
+
+    /// Decodes EVT 3.0 words; returns the first bad word (strict) or `None`.
+    fn decode_evt3(&mut self, block: &mut Block, out: &mut EventStream) -> Option<BadWord> {
+        // The decoder state lives in locals for the loop (the current time is kept assembled and
+        // only recomputed when a time word arrives) and is stored back after.
+        let (width, height) = (self.width, self.height);
+        let (mut y, mut base_x, mut pol) = (self.y, self.base_x, self.pol);
+        let (mut row_seen, mut base_seen) = (self.row_seen, self.base_seen);
+        let (mut time_low, mut time_high) = (self.time_low, self.time_high);
+        let (mut seen, mut wraps) = (self.time_high_seen, self.wraps);
+        let mut t = (wraps << 24) | (time_high << 12) | time_low;
+        let mut bad = None;
+        for (i, c) in self.buf.chunks_exact(2).enumerate() {
+            block.make_room(out);
+            let w = u16::from_le_bytes([c[0], c[1]]);
+            let payload = w & 0x0FFF;
+            let problem = match w >> 12 {
+                0x0 => {
+                    y = payload & 0x7FF;
+                    row_seen = true;
+                    None
+                }
+                0x2 => {
+                    let x = payload & 0x7FF;
+                    if !row_seen {
+                        Some(Problem::NoRow)
+                    } else if u32::from(x) < width && u32::from(y) < height {
+                        block.put(t, x, y, if payload & 0x800 != 0 { 1 } else { -1 }, true);
+                        None
+                    } else {
+                        Some(Problem::Outside(u32::from(x), u32::from(y)))
+                    }
+                }
+                0x3 => {
+                    base_x = payload & 0x7FF;
+                    pol = if payload & 0x800 != 0 { 1 } else { -1 };
+                    base_seen = true;
+                    None
+                }
+                0x4 | 0x5 => {
+                    let n = if w >> 12 == 0x4 { 12 } else { 8 };
+                    let mask = payload & ((1 << n) - 1);
+                    // Column of the last valid element (base_x when none is valid).
+                    let last = u32::from(base_x) + (15 - mask.leading_zeros().min(15));
+                    if !base_seen {
+                        Some(Problem::NoBase)
+                    } else if !row_seen {
+                        Some(Problem::NoRow)
+                    } else if mask != 0 && (last >= width || u32::from(y) >= height) {
+                        Some(Problem::Outside(last, u32::from(y)))
+                    } else {
+                        for i in 0..n {
+                            let valid = payload & (1 << i) != 0;
+                            block.put(t, base_x.wrapping_add(i), y, pol, valid);
+                        }
+                        base_x = base_x.saturating_add(n);
+                        None
+                    }
+                }
+                0x6 => {
+                    // Any TIME_LOW is inside the current TIME_HIGH period: small step-backs are
+                    // legal.
+                    time_low = payload as i64;
+                    t = (wraps << 24) | (time_high << 12) | time_low;
+                    None
+                }
+                0x8 => {
+                    let high = payload as i64;
+                    if seen && high < time_high && time_high - high < 0xFFF - WRAP_SLACK {
+                        Some(Problem::Backwards {
+                            from: time_high,
+                            to: high,
+                            step_us: 4096,
+                        })
+                    } else {
+                        if seen && high < time_high {
+                            wraps += 1;
+                        }
+                        time_high = high;
+                        seen = true;
+                        t = (wraps << 24) | (time_high << 12) | time_low;
+                        None
+                    }
+                }
+                // CONTINUED_4, EXT_TRIGGER, OTHERS, CONTINUED_12: valid, carry no CD event.
+                0x7 | 0xA | 0xE | 0xF => None,
+                ty => Some(Problem::Reserved(ty)),
+            };
+            if let Some(p) = problem {
+                if self.lenient {
+                    self.skipped += 1;
+                } else {
+                    bad = Some(BadWord {
+                        index: i,
+                        message: p.describe(&format!("{w:#06x}"), "EVT 3.0", &self.bounds()),
+                    });
+                    break;
+                }
+            }
+        }
+        (self.y, self.base_x, self.pol) = (y, base_x, pol);
+        (self.row_seen, self.base_seen) = (row_seen, base_seen);
+        (self.time_low, self.time_high) = (time_low, time_high);
+        (self.time_high_seen, self.wraps) = (seen, wraps);
+        bad
+    }
+}
+
+/// The first bad word of a buffer: its index in the buffer and what is wrong.
+struct BadWord {
+    index: usize,
+    message: String,
+}
+
+/// What is wrong with a word (formatted only when it is reported).
+enum Problem {
+    /// A word type the specification reserves.
+    Reserved(u16),
+    /// An event at (x, y) outside the sensor.
+    Outside(u32, u32),
+    /// An EVT 3.0 event before any ADDR_Y.
+    NoRow,
+    /// An EVT 3.0 vector before any VECT_BASE_X.
+    NoBase,
+    /// A TIME_HIGH below the current one that is not a wrap; `step_us` is one TIME_HIGH unit.
+    Backwards { from: i64, to: i64, step_us: i64 },
+}
+
+impl Problem {
+    /// The message for `word` (already in hex) of a `format` stream; `bounds` names the sensor.
+    fn describe(&self, word: &str, format: &str, bounds: &str) -> String {
+        match self {
+            Self::Reserved(ty) => format!(
+                "{format} word {word} has the reserved type {ty:#x} (not an event-camera stream of \
+                 this encoding, or a corrupt one; --lenient skips bad words)"
+            ),
+            Self::Outside(x, y) => {
+                format!("{format} word {word}: event at (x={x}, y={y}) lies outside {bounds}")
+            }
+            Self::NoRow => format!("{format} word {word}: event before any ADDR_Y word (no row)"),
+            Self::NoBase => {
+                format!("{format} word {word}: vector before any VECT_BASE_X word (no base)")
+            }
+            Self::Backwards { from, to, step_us } => format!(
+                "{format} word {word}: TIME_HIGH {to:#x} after {from:#x} sends time back by {} us \
+                 (a drop is a wrap of the counter only from its top to its bottom)",
+                (from - to) * step_us
+            ),
+        }
+    }
+}
+
+/// The encoding of a `.raw` file: the header's, else `given`; refused when neither says or they
+/// disagree.
+fn raw_encoding(
+    lines: &[String],
+    given: Option<RawEncoding>,
+    path: &Path,
+) -> Result<PropheseeFormat> {
+    match (header_format(lines), given.map(PropheseeFormat::from)) {
+        (Some(h), Some(g)) if h != g => Err(EventsError::format(
+            path,
+            format!("the header states {h:?} but {g:?} was given as its encoding"),
+        )),
+        (Some(f), _) | (None, Some(f)) => Ok(f),
+        (None, None) => Err(EventsError::format(
+            path,
+            "no header line states the encoding of this Prophesee .raw file (`% evt 2.0`, \
+             `% evt 3.0` or `% format EVT2|EVT3;...`) and it is not guessed: state it with \
+             `--format evt2|evt3` (library: `ReadOptions::raw_format`)",
+        )),
     }
 }
 
@@ -392,6 +686,7 @@ impl<R: BufRead> EventReader for PropheseeReader<R> {
             self.buf.resize(words * ws, 0);
             let got = super::read_full(&mut self.reader, &mut self.buf)
                 .map_err(|e| EventsError::io(&self.path, e))?;
+            let offset = self.bytes;
             self.bytes += got as u64;
             if got % ws != 0 {
                 return Err(EventsError::format(
@@ -403,7 +698,7 @@ impl<R: BufRead> EventReader for PropheseeReader<R> {
             if got < words * ws {
                 self.eof = true;
             }
-            n += self.decode(out);
+            n += self.decode(out, offset)?;
         }
         Ok(n)
     }
@@ -414,6 +709,10 @@ impl<R: BufRead> EventReader for PropheseeReader<R> {
 
     fn total_bytes(&self) -> Option<u64> {
         self.total
+    }
+
+    fn skipped_words(&self) -> u64 {
+        self.skipped
     }
 }
 
