@@ -4,7 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use events::io::EventReader;
+use events::io::prophesee::RawEncoding;
+use events::io::{EventReader, ReadOptions};
 use events::{EventStream, SensorSize};
 use indicatif::ProgressBar;
 
@@ -17,10 +18,13 @@ pub struct Args {
 
 #[derive(clap::Subcommand, Debug)]
 enum Sub {
-    /// Print one JSON line {"format","events","positive","t_first_us","t_last_us","width","height"}.
+    /// Print one JSON line {"format","events","positive","t_first_us","t_last_us","width","height",
+    /// "skipped_words"}.
     Info {
-        /// Event file (.txt, .npz).
+        /// Event file (.txt/.csv, .npz, .aedat4, .raw, .dat).
         file: PathBuf,
+        #[command(flatten)]
+        read: ReadArgs,
     },
     /// Convert between event formats (by extension); validates order and sensor bounds.
     Convert {
@@ -28,6 +32,8 @@ enum Sub {
         input: PathBuf,
         /// Output event file.
         output: PathBuf,
+        #[command(flatten)]
+        read: ReadArgs,
         /// Sort by timestamp instead of failing on non-monotonic input.
         #[arg(long)]
         sort: bool,
@@ -43,6 +49,8 @@ enum Sub {
         input: PathBuf,
         /// Output .npy.
         output: PathBuf,
+        #[command(flatten)]
+        read: ReadArgs,
         /// Number of time bins.
         #[arg(long, default_value_t = 5)]
         bins: usize,
@@ -85,6 +93,8 @@ enum Sub {
     Flow {
         /// Input event file.
         input: PathBuf,
+        #[command(flatten)]
+        read: ReadArgs,
         /// Frame k time (microseconds).
         #[arg(long)]
         t0_us: i64,
@@ -103,13 +113,70 @@ enum Sub {
     },
 }
 
+/// How to read the input event file (the `events` library's `ReadOptions`).
+#[derive(clap::Args, Debug, Clone, Copy)]
+struct ReadArgs {
+    /// Encoding of a Prophesee .raw input whose header does not state it (no `% evt 2.0|3.0` or
+    /// `% format EVT2|EVT3` line); such a file is refused without it. Refused when the header
+    /// states the other encoding, and for inputs that are not .raw.
+    #[arg(long, value_enum)]
+    format: Option<RawFormatArg>,
+    /// Skip the words of a Prophesee EVT 2.0 / 3.0 input that its specification does not allow
+    /// (reserved word types, events outside the header's sensor, events without a row, vectors
+    /// without a base, time going backwards) instead of failing at the first, and print how many
+    /// were skipped. Without it the first such word is an error naming its byte offset.
+    #[arg(long)]
+    lenient: bool,
+}
+
+/// The `--format` values.
+#[derive(clap::ValueEnum, Debug, Clone, Copy)]
+enum RawFormatArg {
+    /// EVT 2.0 (32-bit words).
+    Evt2,
+    /// EVT 3.0 (16-bit words).
+    Evt3,
+}
+
+impl ReadArgs {
+    fn options(self) -> ReadOptions {
+        ReadOptions {
+            raw_format: self.format.map(|f| match f {
+                RawFormatArg::Evt2 => RawEncoding::Evt2,
+                RawFormatArg::Evt3 => RawEncoding::Evt3,
+            }),
+            lenient: self.lenient,
+        }
+    }
+}
+
 fn progress(r: &dyn EventReader) -> Result<ProgressBar> {
     crate::common::byte_progress_bar(r.total_bytes().unwrap_or(0), "read")
 }
 
-/// Reads a whole file with a progress bar on stderr (hidden for small files).
-fn read_with_progress(path: &Path) -> Result<(EventStream, &'static str)> {
-    let mut r = events::open_events(path).with_context(|| format!("opening {}", path.display()))?;
+/// A file read by [`read_with_progress`].
+struct ReadFile {
+    events: EventStream,
+    /// Short format name of the reader.
+    format: &'static str,
+    /// Bad words a lenient reader skipped.
+    skipped: u64,
+}
+
+/// Reads a whole file with a progress bar on stderr (hidden for small files); a lenient read that
+/// skipped words says how many on stderr.
+fn read_with_progress(path: &Path, read: ReadArgs) -> Result<ReadFile> {
+    if read.format.is_some()
+        && events::io::EventFormat::from_path(path).ok()
+            != Some(events::io::EventFormat::PropheseeRaw)
+    {
+        bail!(
+            "--format evt2|evt3 applies to Prophesee .raw files only, and {} is not one",
+            path.display()
+        );
+    }
+    let mut r = events::io::open_events_with(path, &read.options())
+        .with_context(|| format!("opening {}", path.display()))?;
     let pb = progress(r.as_ref())?;
     if r.total_bytes().unwrap_or(0) < (64 << 20) {
         pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
@@ -127,7 +194,19 @@ fn read_with_progress(path: &Path) -> Result<(EventStream, &'static str)> {
     }
     pb.finish_and_clear();
     s.sensor = r.sensor();
-    Ok((s, r.format()))
+    let skipped = r.skipped_words();
+    if read.lenient {
+        eprintln!(
+            "{}: skipped {skipped} bad word{} (--lenient)",
+            path.display(),
+            if skipped == 1 { "" } else { "s" }
+        );
+    }
+    Ok(ReadFile {
+        events: s,
+        format: r.format(),
+        skipped,
+    })
 }
 
 fn parse_sensor(s: &str) -> Result<SensorSize> {
@@ -154,8 +233,12 @@ fn sensor_of(s: &EventStream, arg: &Option<String>) -> Result<SensorSize> {
 /// Runs the subcommand.
 pub fn run(args: Args) -> Result<()> {
     match args.command {
-        Sub::Info { file } => {
-            let (s, format) = read_with_progress(&file)?;
+        Sub::Info { file, read } => {
+            let ReadFile {
+                events: s,
+                format,
+                skipped,
+            } = read_with_progress(&file, read)?;
             let line = serde_json::json!({
                 "format": format,
                 "events": s.len(),
@@ -164,16 +247,18 @@ pub fn run(args: Args) -> Result<()> {
                 "t_last_us": s.t.last(),
                 "width": s.sensor.map(|z| z.width),
                 "height": s.sensor.map(|z| z.height),
+                "skipped_words": skipped,
             });
             println!("{line}");
         }
         Sub::Convert {
             input,
             output,
+            read,
             sort,
             sensor,
         } => {
-            let (mut s, _) = read_with_progress(&input)?;
+            let mut s = read_with_progress(&input, read)?.events;
             if let Some(arg) = &sensor {
                 s.sensor = Some(parse_sensor(arg).context("--sensor")?);
             }
@@ -192,13 +277,14 @@ pub fn run(args: Args) -> Result<()> {
         Sub::Voxelize {
             input,
             output,
+            read,
             bins,
             t0_us,
             t1_us,
             sensor,
             normalize,
         } => {
-            let (s, _) = read_with_progress(&input)?;
+            let s = read_with_progress(&input, read)?.events;
             let sz = sensor_of(&s, &sensor)?;
             let t0 = t0_us
                 .or(s.t.first().copied())
@@ -275,13 +361,14 @@ pub fn run(args: Args) -> Result<()> {
         }
         Sub::Flow {
             input,
+            read,
             t0_us,
             t1_us,
             out,
             viz,
             sensor,
         } => {
-            let (s, _) = read_with_progress(&input)?;
+            let s = read_with_progress(&input, read)?.events;
             s.validate(None)
                 .with_context(|| format!("validating {}", input.display()))?;
             let sz = sensor_of(&s, &sensor)?;
