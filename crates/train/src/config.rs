@@ -231,6 +231,11 @@ training_options! {
     /// exposure`) or `frames` (the renders of consecutive training frames against the events of
     /// [t_k, t_{k+1}), EventNeRF's pairing and the paper's Table 6 comparison).
     event_pairs: EventPairs = EventPairs::Exposure,
+    /// With `event_pairs = exposure`: which pairs of sub-exposure renders (s, s′), s < s′, the
+    /// event loss compares against the events of [t_s, t_s′): `consecutive` (s′ = s + 1, S − 1
+    /// pairs) or `all` (every pair, S(S − 1)/2; the counts of a longer interval are the sums of its
+    /// consecutive ones).
+    exposure_pairs: ExposurePairs = ExposurePairs::Consecutive,
     /// Weight of the event-generation loss: 0.3, the best of a sweep over 0.3 / 1 / 3 with
     /// `exposure` pairs on the default benchmark's `quick` preset (human box 28.89 / 28.58 / 27.88
     /// dB). With `frames` pairs the best of 0.3 / 1 / 3 / 10 was 3 (human box 25.05 / 25.60 / 25.89
@@ -265,6 +270,17 @@ pub enum BlurModel {
     /// The mean of renders at sub-exposure poses: the physical model of motion blur.
     #[default]
     Exposure,
+}
+
+/// Which sub-exposure renders the event loss pairs (see [`TrainConfig::exposure_pairs`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExposurePairs {
+    /// Consecutive renders.
+    #[default]
+    Consecutive,
+    /// Every pair of renders.
+    All,
 }
 
 /// Network evaluations per exposure (see [`TrainConfig::exposure_networks`]).

@@ -4,8 +4,8 @@
 //! between consecutive renders against the events between their times (`train::event_loss`).
 //!
 //! Backward: the photometric cotangent of the mean reaches every render scaled by 1/S (unscaled for
-//! one render, so the single-render model is the S = 1 case bit for bit); each event pair adds its
-//! weighted cotangents to its two renders.
+//! one render, so the single-render model is the S = 1 case bit for bit); each event pair —
+//! consecutive renders, or every pair — adds its weighted cotangents to its two renders.
 
 use crate::event_loss::pair_event_loss;
 use crate::image_loss::{l1, ssim, ImageShape};
@@ -21,6 +21,9 @@ pub struct ExposureEvents<'a, T> {
     pub weight: T,
     /// ε of log(Y + ε).
     pub log_eps: T,
+    /// Every pair of renders (s < s′, against the summed counts of the consecutive intervals
+    /// between them, when all of them are covered) instead of consecutive ones.
+    pub all_pairs: bool,
 }
 
 /// The value of the terms and the cotangent of every render.
@@ -73,14 +76,23 @@ pub fn exposure_loss<T: Real>(
     };
     let mut event_value = T::zero();
     if let Some(events) = events {
-        for (s, expected) in events.expected.iter().enumerate() {
-            let (Some(expected), Some(&second)) = (expected, renders.get(s + 1)) else {
-                continue;
-            };
-            let el = pair_event_loss(renders[s], second, expected, events.log_eps);
-            event_value = event_value + events.weight * el.loss;
-            add_scaled(&mut d_renders[s], &el.d_first, events.weight);
-            add_scaled(&mut d_renders[s + 1], &el.d_second, events.weight);
+        let last = |s: usize| {
+            if events.all_pairs {
+                renders.len() - 1
+            } else {
+                s + 1
+            }
+        };
+        for s in 0..renders.len().saturating_sub(1) {
+            for s2 in s + 1..=last(s) {
+                let Some(expected) = interval_counts(events.expected, s, s2) else {
+                    continue;
+                };
+                let el = pair_event_loss(renders[s], renders[s2], &expected, events.log_eps);
+                event_value = event_value + events.weight * el.loss;
+                add_scaled(&mut d_renders[s], &el.d_first, events.weight);
+                add_scaled(&mut d_renders[s2], &el.d_second, events.weight);
+            }
         }
     }
     ExposureLoss {
@@ -91,6 +103,26 @@ pub fn exposure_loss<T: Real>(
         prediction,
         d_renders,
     }
+}
+
+/// C·E of the interval between sub-exposure times `s` and `s2` > `s`: the consecutive intervals'
+/// counts summed in order (borrowed for one interval), or `None` if one of them is uncovered.
+fn interval_counts<T: Real>(
+    consecutive: &[Option<Vec<T>>],
+    s: usize,
+    s2: usize,
+) -> Option<std::borrow::Cow<'_, [T]>> {
+    let parts = consecutive.get(s..s2)?;
+    if let [Some(only)] = parts {
+        return Some(std::borrow::Cow::Borrowed(only));
+    }
+    let mut sum = parts.first()?.clone()?;
+    for part in &parts[1..] {
+        for (x, &y) in sum.iter_mut().zip(part.as_ref()?) {
+            *x = *x + y;
+        }
+    }
+    Some(std::borrow::Cow::Owned(sum))
 }
 
 /// The mean of the first `len` values of `images` (the image itself for one), summed in order.

@@ -1,7 +1,7 @@
 //! Finite-difference check of the exposure model's image terms (`train::exposure_loss`): the
 //! photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) — of the mean of S sub-exposure renders against the
-//! observed frame, plus the weighted event-generation loss between consecutive renders (some pairs
-//! without events), w.r.t. every render, for S = 1, 2, 3 and 5. Each render carries a fourth plane
+//! observed frame, plus the weighted event-generation loss between consecutive renders, or between
+//! every pair of renders (some intervals without events), w.r.t. every render, for S = 1, 2, 3 and 5. Each render carries a fourth plane
 //! (the trainer's human probability) that the terms ignore: its cotangent must be exactly zero.
 //!
 //! Tolerance in f64 with h = 1e-6: the loss is O(1), so rounding is ≈ ε·|L|/h ≈ 2e-10; the terms are
@@ -29,6 +29,7 @@ fn value(
     observed: &[f64],
     expected: &[Option<Vec<f64>>],
     event_weight: f64,
+    all_pairs: bool,
 ) -> (f64, Vec<Vec<f64>>) {
     let renders: Vec<&[f64]> = x.chunks(PLANES * HW).collect();
     let shape = ImageShape {
@@ -45,6 +46,7 @@ fn value(
             expected,
             weight: event_weight,
             log_eps: 1e-3,
+            all_pairs,
         }),
         PLANES,
     );
@@ -55,7 +57,7 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(8))]
 
     #[test]
-    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4) {
+    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4, all_pairs in any::<bool>()) {
         let subframes = [1, 2, 3, 5][which];
         let mut rng = rng(seed);
         let x: Vec<f64> = (0..subframes * PLANES * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
@@ -64,18 +66,18 @@ proptest! {
         let expected: Vec<Option<Vec<f64>>> = (0..subframes.saturating_sub(1))
             .map(|s| (s % 2 == 1 || subframes == 2).then(|| (0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
             .collect();
-        let (_, d) = value(&x, &observed, &expected, 0.7);
+        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs);
         let analytic: Vec<f64> = d.concat();
-        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7).0, &x, H);
+        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs).0, &x, H);
         let mut checker = GradientChecker::new();
-        checker.check(&format!("exposure terms, S = {subframes}"), &numeric, &analytic, TOL);
+        checker.check(&format!("exposure terms, S = {subframes}, all pairs {all_pairs}"), &numeric, &analytic, TOL);
         // The probability plane is not part of the terms.
         for render in &d {
             prop_assert!(render[3 * HW..].iter().all(|&v| v == 0.0));
         }
         if subframes > 1 {
             // The mean's 1/S is needed: the unscaled photometric cotangent fails.
-            let (_, d_no_events) = value(&x, &observed, &expected, 0.0);
+            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs);
             let unscaled: Vec<f64> = d.iter().zip(&d_no_events).flat_map(|(with, without)| {
                 with.iter().zip(without).map(move |(&a, &b)| a + (subframes as f64 - 1.0) * b)
             }).collect();

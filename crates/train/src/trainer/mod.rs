@@ -18,7 +18,7 @@ pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
 use crate::body::PreparedPose;
-use crate::config::{BlurModel, ExposureNetworks, TrainConfig};
+use crate::config::{BlurModel, ExposureNetworks, ExposurePairs, TrainConfig};
 use crate::data::TrainingData;
 use crate::exposure_loss::{exposure_loss, ExposureEvents};
 use crate::image_loss::{psnr, ImageShape};
@@ -222,6 +222,7 @@ impl Trainer {
                 expected,
                 weight: config.event_weight,
                 log_eps: config.event_log_eps,
+                all_pairs: config.exposure_pairs == ExposurePairs::All,
             }),
             _ => None,
         };
