@@ -168,40 +168,7 @@ pub fn decompose_covariance(sigma: &Mat3<f64>, min_variance: f64) -> ([f32; 3], 
             a[c][r] = m;
         }
     }
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for _sweep in 0..50 {
-        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
-        let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
-        if off <= 1e-15 * scale.max(f64::MIN_POSITIVE) {
-            break;
-        }
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            if a[p][q] == 0.0 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            // A ← Jᵀ A J with J the rotation in the (p, q) plane; V ← V J.
-            for k in 0..3 {
-                let (akp, akq) = (a[k][p], a[k][q]);
-                a[k][p] = c * akp - s * akq;
-                a[k][q] = s * akp + c * akq;
-            }
-            for k in 0..3 {
-                let (apk, aqk) = (a[p][k], a[q][k]);
-                a[p][k] = c * apk - s * aqk;
-                a[q][k] = s * apk + c * aqk;
-            }
-            for row in &mut v {
-                let (vp, vq) = (row[p], row[q]);
-                row[p] = c * vp - s * vq;
-                row[q] = s * vp + c * vq;
-            }
-        }
-    }
+    let (_, mut v) = symmetric_eigen(&mut a);
     let det = v[0][0] * (v[1][1] * v[2][2] - v[1][2] * v[2][1])
         - v[0][1] * (v[1][0] * v[2][2] - v[1][2] * v[2][0])
         + v[0][2] * (v[1][0] * v[2][1] - v[1][1] * v[2][0]);
@@ -212,6 +179,58 @@ pub fn decompose_covariance(sigma: &Mat3<f64>, min_variance: f64) -> ([f32; 3], 
     }
     let log_scales = [0, 1, 2].map(|k| (0.5 * a[k][k].max(min_variance).ln()) as f32);
     (log_scales, quat_from_rotation(&v).map(|x| x as f32))
+}
+
+/// Eigen-decomposition of a symmetric N × N matrix by cyclic Jacobi rotations (at most 50 sweeps,
+/// until the off-diagonal magnitude is below 1e-15 of the diagonal's): `a` is left with the
+/// eigenvalues on its diagonal, which are also returned, with the matrix whose columns are the
+/// eigenvectors (orthonormal; its determinant may be −1).
+pub fn symmetric_eigen<const N: usize>(a: &mut [[f64; N]; N]) -> ([f64; N], [[f64; N]; N]) {
+    let mut v = [[0.0f64; N]; N];
+    for (i, row) in v.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for _sweep in 0..50 {
+        let mut off = 0.0;
+        for p in 0..N {
+            for q in p + 1..N {
+                off += a[p][q].abs();
+            }
+        }
+        let scale = (0..N).fold(0.0, |acc, k| acc + a[k][k].abs());
+        if off <= 1e-15 * f64::max(scale, f64::MIN_POSITIVE) {
+            break;
+        }
+        for p in 0..N {
+            for q in p + 1..N {
+                if a[p][q] == 0.0 {
+                    continue;
+                }
+                // A ← Jᵀ A J with J the rotation in the (p, q) plane that zeroes a[p][q]; V ← V J.
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                for k in 0..N {
+                    let (akp, akq) = (a[k][p], a[k][q]);
+                    a[k][p] = c * akp - s * akq;
+                    a[k][q] = s * akp + c * akq;
+                }
+                for k in 0..N {
+                    let (apk, aqk) = (a[p][k], a[q][k]);
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                for row in v.iter_mut() {
+                    let (vp, vq) = (row[p], row[q]);
+                    row[p] = c * vp - s * vq;
+                    row[q] = s * vp + c * vq;
+                }
+            }
+        }
+    }
+    (std::array::from_fn(|k| a[k][k]), v)
 }
 
 /// Unit (w, x, y, z) quaternion of a proper rotation matrix (Shepperd's method; w ≥ 0).

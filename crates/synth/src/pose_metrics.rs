@@ -298,13 +298,13 @@ fn best_rotation(xs: &[DVec3], ys: &[DVec3]) -> DQuat {
         }
     }
     let [[sxx, sxy, sxz], [syx, syy, syz], [szx, szy, szz]] = s;
-    let m = [
+    let mut m = [
         [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
         [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
         [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
         [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
     ];
-    let (values, vectors) = symmetric_eigen4(m);
+    let (values, vectors) = gaussians::covariance::symmetric_eigen(&mut m);
     let mut best = 0;
     for i in 1..4 {
         if values[i] > values[best] {
@@ -318,55 +318,6 @@ fn best_rotation(xs: &[DVec3], ys: &[DVec3]) -> DQuat {
         vectors[3][best],
     ];
     DQuat::from_xyzw(v[1], v[2], v[3], v[0]).normalize()
-}
-
-/// Eigen-decomposition of a symmetric 4×4 matrix by cyclic Jacobi rotations: eigenvalues and the
-/// matrix whose columns are the eigenvectors.
-fn symmetric_eigen4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
-    let mut v = [[0.0f64; 4]; 4];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    let scale: f64 = a.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
-    for _sweep in 0..64 {
-        let off: f64 = (0..4)
-            .flat_map(|p| ((p + 1)..4).map(move |q| (p, q)))
-            .map(|(p, q)| a[p][q] * a[p][q])
-            .sum::<f64>()
-            .sqrt();
-        if off <= 1e-15 * scale || off == 0.0 {
-            break;
-        }
-        for p in 0..4 {
-            for q in (p + 1)..4 {
-                if a[p][q] == 0.0 {
-                    continue;
-                }
-                // Rotation in the (p, q) plane that zeroes a[p][q].
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..4 {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
-                }
-                for k in 0..4 {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
-                }
-                for row in v.iter_mut() {
-                    let (vp, vq) = (row[p], row[q]);
-                    row[p] = c * vp - s * vq;
-                    row[q] = s * vp + c * vq;
-                }
-            }
-        }
-    }
-    ([a[0][0], a[1][1], a[2][2], a[3][3]], v)
 }
 
 #[cfg(test)]
