@@ -216,6 +216,76 @@ pub(crate) fn deformed_covariance_backward<T: Real>(
     (d_m, d_s)
 }
 
+/// Cotangents of the active Gaussians' human branch, out of the blend and the deformed covariance.
+pub(crate) struct ActiveBlendGrads<T> {
+    /// dL/d deformed position.
+    pub x_def: Vec<[T; 3]>,
+    /// dL/d deformed matrix M (Σ = M diag(e^{2s}) Mᵀ).
+    pub mats: Vec<Mat3<T>>,
+    /// dL/d deformed log-scales.
+    pub log_scales: Vec<[T; 3]>,
+    /// dL/d human colours, active × 3.
+    pub human_rgb: Vec<T>,
+}
+
+/// The per-Gaussian cotangents of the static branch and of the probability that the blend's
+/// backward writes (static mean, static covariance, scene colour: replaced for active Gaussians)
+/// or adds to (probability).
+pub(crate) struct StaticCotangents<'a, T> {
+    pub means: &'a mut [[T; 3]],
+    pub covariances: &'a mut [[[T; 3]; 3]],
+    pub scene_rgb: &'a mut [T],
+    pub probability: &'a mut [T],
+}
+
+/// Backward of the blend and of the deformed covariance for the `active` Gaussians of a posed frame
+/// (`inputs`, `posed_mats`, `posed_log_scales` in active order) from the outputs' cotangents `cot`;
+/// shared by a frame's own pass and its re-posings (`crate::reposing`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn blend_backward_active<T: Real>(
+    mode: SemanticMode,
+    semantic_logits: &[T],
+    active: &[usize],
+    inputs: &[BlendInputs<T>],
+    posed_mats: &[Mat3<T>],
+    posed_log_scales: &[[T; 3]],
+    cot: &FrameCotangents<'_, T>,
+    out: StaticCotangents<'_, T>,
+) -> ActiveBlendGrads<T> {
+    let k = mode.logits_per_gaussian();
+    let na = active.len();
+    let mut grads = ActiveBlendGrads {
+        x_def: Vec::with_capacity(na),
+        mats: Vec::with_capacity(na),
+        log_scales: Vec::with_capacity(na),
+        human_rgb: Vec::with_capacity(na * 3),
+    };
+    for (a, &i) in active.iter().enumerate() {
+        let p = mode.probability(&semantic_logits[i * k..(i + 1) * k]);
+        let d_out = Blended {
+            x: cot.means[i],
+            cov: cot.covariances[i],
+            c: [
+                cot.colours[i * 3],
+                cot.colours[i * 3 + 1],
+                cot.colours[i * 3 + 2],
+            ],
+        };
+        let (dp, d_in) = blend_backward(p, &inputs[a], &d_out);
+        out.probability[i] = out.probability[i] + dp;
+        grads.x_def.push(d_in.x_def);
+        let (dm, ds) =
+            deformed_covariance_backward(&posed_mats[a], &posed_log_scales[a], &d_in.cov_def);
+        grads.mats.push(dm);
+        grads.log_scales.push(ds);
+        grads.human_rgb.extend_from_slice(&d_in.c_human);
+        out.scene_rgb[i * 3..i * 3 + 3].copy_from_slice(&d_in.c_scene);
+        out.means[i] = d_in.x_static;
+        out.covariances[i] = d_in.cov_static;
+    }
+    grads
+}
+
 /// The model's per-Gaussian attributes for one frame (every Gaussian blended exactly: `gate = 0`).
 pub fn pose_frame<T: Real>(
     nets: &ModelNets<T>,
@@ -415,36 +485,26 @@ pub fn pose_frame_backward_with<T: Real>(
     let mut d_cov_static: Vec<[[T; 3]; 3]> = cot.covariances.to_vec();
     let mut d_scene_rgb: Vec<T> = cot.colours.to_vec();
     let mut d_p: Vec<T> = cot.human_probability.to_vec();
-    let mut d_x_def = Vec::with_capacity(na);
-    let mut d_mats = Vec::with_capacity(na);
-    let mut d_s_def = Vec::with_capacity(na);
-    let mut d_human_rgb = Vec::with_capacity(na * 3);
-    for (a, &i) in active.iter().enumerate() {
-        let p = mode.probability(&g.semantic_logits[i * k..(i + 1) * k]);
-        let d_out = Blended {
-            x: cot.means[i],
-            cov: cot.covariances[i],
-            c: [
-                cot.colours[i * 3],
-                cot.colours[i * 3 + 1],
-                cot.colours[i * 3 + 2],
-            ],
-        };
-        let (dp, d_in) = blend_backward(p, &cache.inputs[a], &d_out);
-        d_p[i] = d_p[i] + dp;
-        d_x_def.push(d_in.x_def);
-        let (dm, ds) = deformed_covariance_backward(
-            &cache.posed_mats[a],
-            &cache.posed_log_scales[a],
-            &d_in.cov_def,
-        );
-        d_mats.push(dm);
-        d_s_def.push(ds);
-        d_human_rgb.extend_from_slice(&d_in.c_human);
-        d_scene_rgb[i * 3..i * 3 + 3].copy_from_slice(&d_in.c_scene);
-        d_means[i] = d_in.x_static;
-        d_cov_static[i] = d_in.cov_static;
-    }
+    let ActiveBlendGrads {
+        x_def: mut d_x_def,
+        mats: d_mats,
+        log_scales: mut d_s_def,
+        human_rgb: mut d_human_rgb,
+    } = blend_backward_active(
+        mode,
+        g.semantic_logits,
+        active,
+        &cache.inputs,
+        &cache.posed_mats,
+        &cache.posed_log_scales,
+        cot,
+        StaticCotangents {
+            means: &mut d_means,
+            covariances: &mut d_cov_static,
+            scene_rgb: &mut d_scene_rgb,
+            probability: &mut d_p,
+        },
+    );
     if let Some(r) = reposings {
         let add = |a: &mut [T], b: &[T]| a.iter_mut().zip(b).for_each(|(x, &y)| *x = *x + y);
         add(d_means.as_flattened_mut(), r.means.as_flattened());

@@ -13,10 +13,10 @@
 //! ([`pose_frame_backward_with`](crate::posing::pose_frame_backward_with)). S sub-exposure passes
 //! then cost one network forward and backward plus S cheap re-posings, instead of S of each.
 
-use crate::blend::{blend, blend_backward, BlendInputs, Blended, SemanticMode};
+use crate::blend::{blend, BlendInputs, SemanticMode};
 use crate::posing::{
-    deformed_covariance, deformed_covariance_backward, FrameCache, FrameCotangents, GaussianParams,
-    PosedFrame,
+    blend_backward_active, deformed_covariance, FrameCache, FrameCotangents, GaussianParams,
+    PosedFrame, StaticCotangents,
 };
 use crate::TrainError;
 use nn::Real;
@@ -180,51 +180,41 @@ pub fn repose_frame_backward<T: Real>(
     cache: &ReposedCache<T>,
     cot: &FrameCotangents<'_, T>,
 ) -> Result<(ReposeCotangents<T>, Vec<Affine<T>>), TrainError> {
-    let k = mode.logits_per_gaussian();
-    let na = cache.active.len();
     // Inactive Gaussians are static: their cotangents are the outputs'. Active ones are overwritten
-    // with the blend's shares below.
-    let mut d = ReposeCotangents {
-        means: cot.means.to_vec(),
-        covariances: cot.covariances.to_vec(),
-        scene_colours: cot.colours.to_vec(),
-        human_probability: cot.human_probability.to_vec(),
-        human_colours: Vec::with_capacity(na * 3),
-        log_scales: Vec::with_capacity(na),
-        moved: MovedCotangents::zeros(0),
+    // with the blend's shares.
+    let mut means = cot.means.to_vec();
+    let mut covariances = cot.covariances.to_vec();
+    let mut scene_colours = cot.colours.to_vec();
+    let mut human_probability = cot.human_probability.to_vec();
+    let active = blend_backward_active(
+        mode,
+        g.semantic_logits,
+        &cache.active,
+        &cache.inputs,
+        &cache.posed_mats,
+        &reference_cache.posed_log_scales,
+        cot,
+        StaticCotangents {
+            means: &mut means,
+            covariances: &mut covariances,
+            scene_rgb: &mut scene_colours,
+            probability: &mut human_probability,
+        },
+    );
+    let (moved, d_bones) = reference_cache.deform.repose_backward(
+        bones,
+        &cache.repose,
+        &active.x_def,
+        &active.mats,
+    )?;
+    let d = ReposeCotangents {
+        means,
+        covariances,
+        scene_colours,
+        human_probability,
+        human_colours: active.human_rgb,
+        log_scales: active.log_scales,
+        moved,
     };
-    let mut d_x_def = Vec::with_capacity(na);
-    let mut d_mats = Vec::with_capacity(na);
-    for (a, &i) in cache.active.iter().enumerate() {
-        let p = mode.probability(&g.semantic_logits[i * k..(i + 1) * k]);
-        let d_out = Blended {
-            x: cot.means[i],
-            cov: cot.covariances[i],
-            c: [
-                cot.colours[i * 3],
-                cot.colours[i * 3 + 1],
-                cot.colours[i * 3 + 2],
-            ],
-        };
-        let (dp, d_in) = blend_backward(p, &cache.inputs[a], &d_out);
-        d.human_probability[i] = d.human_probability[i] + dp;
-        d_x_def.push(d_in.x_def);
-        let (dm, ds) = deformed_covariance_backward(
-            &cache.posed_mats[a],
-            &reference_cache.posed_log_scales[a],
-            &d_in.cov_def,
-        );
-        d_mats.push(dm);
-        d.log_scales.push(ds);
-        d.human_colours.extend_from_slice(&d_in.c_human);
-        d.scene_colours[i * 3..i * 3 + 3].copy_from_slice(&d_in.c_scene);
-        d.means[i] = d_in.x_static;
-        d.covariances[i] = d_in.cov_static;
-    }
-    let (moved, d_bones) =
-        reference_cache
-            .deform
-            .repose_backward(bones, &cache.repose, &d_x_def, &d_mats)?;
-    d.moved = moved;
     Ok((d, d_bones))
 }
