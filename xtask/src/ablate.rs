@@ -301,12 +301,14 @@ type Outcome<'a> = (String, &'a Run, PathBuf, Result<serde_json::Value>);
 fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -> Result<()> {
     let mut md = format!(
         "# Ablation on {scene} (preset `{preset}`)\n\nRows are numbered as in `ablation_grid.png`; \
-         `blurred` columns are the input frames against the same references.\n\n| # | run | what |"
+         `blurred` columns are the input frames against the same references. Poses: `exact` (the \
+         scene has no `poses_true.json`: its poses are the truth), `estimated` (a fitter's, used as \
+         given) or `corrected` (learned pose correction).\n\n| # | run | what | poses |"
     );
     for (_, title) in COLUMNS {
         md.push_str(&format!(" {title} |"));
     }
-    md.push_str("\n| ---: | --- | --- |");
+    md.push_str("\n| ---: | --- | --- | --- |");
     md.push_str(&" ---: |".repeat(COLUMNS.len()));
     md.push('\n');
     let mut json = Vec::new();
@@ -314,6 +316,7 @@ fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -
         md.push_str(&format!("| {} | `{label}` | {} |", k + 1, r.what));
         match outcome {
             Ok(m) => {
+                md.push_str(&format!(" {} |", pose_source(m)));
                 for (key, _) in COLUMNS {
                     let cell = m[key].as_f64().map_or_else(
                         || "—".to_string(),
@@ -333,7 +336,7 @@ fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -
             }
             Err(e) => {
                 let msg = format!("{e:#}").replace('|', "/").replace('\n', " ");
-                md.push_str(&format!(" failed: {msg} |"));
+                md.push_str(&format!(" — | failed: {msg} |"));
                 md.push_str(&" |".repeat(COLUMNS.len() - 1));
                 json.push(serde_json::json!({
                     "run": label, "what": r.what, "options": (r.options)(), "dir": dir.display().to_string(),
@@ -350,6 +353,18 @@ fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -
         .with_context(|| format!("writing {}", json_path.display()))?;
     print!("{md}");
     Ok(())
+}
+
+/// Where a run's poses came from, by its metrics: `exact` without a pose error report (no
+/// `poses_true.json`), else `corrected` with pose correction and `estimated` without.
+fn pose_source(metrics: &serde_json::Value) -> &'static str {
+    if metrics["pose_error"].is_null() {
+        "exact"
+    } else if metrics["pose_correction"].as_bool() == Some(true) {
+        "corrected"
+    } else {
+        "estimated"
+    }
 }
 
 /// Stacks the first test strip of every successful run, each row headed by its table number.

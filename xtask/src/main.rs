@@ -18,6 +18,7 @@ mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
 mod ply_info;
+mod pose_report;
 mod reconstruct;
 mod render;
 mod render_pose;

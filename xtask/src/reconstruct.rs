@@ -400,13 +400,17 @@ pub fn run(args: Args) -> Result<()> {
     train::export::save_model(&model_dir, model, trainer.step, &data)
         .with_context(|| format!("writing the model to {}", model_dir.display()))?;
     if let Some(first) = ctx.frames.first() {
-        let r = model.render(&ctx.camera, &first.pose, model.latent_for(first.index))?;
+        let pose = ctx
+            .body
+            .prepare(&model.corrected_params(first.index, &first.params))?;
+        let r = model.render(&ctx.camera, &pose, model.latent_for(first.index))?;
         let posed = train::export::posed_set(model, &r.posed);
         let path = model_dir.join(format!("posed_frame_{:06}.ply", first.index));
         gaussians::ply::write_ply(&path, &posed)
             .with_context(|| format!("writing {}", path.display()))?;
     }
     let breakdown = mean_times(&recent);
+    let pose_error = crate::pose_report::pose_report(&data, model, &ctx.body)?;
     let summary = EvalSummary {
         train_seconds,
         steps: trainer.step,
@@ -431,6 +435,8 @@ pub fn run(args: Args) -> Result<()> {
             "event_pairs": config.event_pairs,
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,
+            "pose_correction": config.pose_correction,
+            "pose_error": pose_error,
             "seed": config.seed,
             "threads": rayon::current_num_threads(),
             "step_seconds_breakdown": breakdown
@@ -441,6 +447,9 @@ pub fn run(args: Args) -> Result<()> {
     };
     write_evaluation(model, &ctx.body, &data, &out, &summary)?;
     crate::curve::write_curve(&log_path, &out.join("curve.png"))?;
+    if let Some(report) = &pose_error {
+        println!("{}", crate::pose_report::summary_line(report));
+    }
     println!("model: {}", model_dir.display());
     println!(
         "step time, mean of the last {} steps (ms):\n{}",

@@ -57,8 +57,12 @@ impl CanonicalBody {
     /// Per-bone transforms from canonical space to the frame posed by `frame`
     /// (`frame.posed_from_rest` must come from the same model and betas).
     pub fn frame_from_canonical(&self, frame: &PosedBody) -> Vec<Affine<f32>> {
-        frame
-            .posed_from_rest
+        self.frame_from_canonical_of(&frame.posed_from_rest)
+    }
+
+    /// [`CanonicalBody::frame_from_canonical`] of a frame's skinning transforms `posed_from_rest`.
+    pub fn frame_from_canonical_of(&self, posed_from_rest: &[Affine<f32>]) -> Vec<Affine<f32>> {
+        posed_from_rest
             .iter()
             .zip(&self.rest_from_canonical)
             .map(|(f, inv)| affine_mul(&f.map(f64::from), &inv.map(f64::from)).map(|x| x as f32))

@@ -11,6 +11,7 @@ pub mod canonical;
 pub mod deform_net;
 pub mod error;
 pub mod fk;
+pub mod frame_pose;
 pub mod inside;
 pub mod io;
 pub mod lbs;

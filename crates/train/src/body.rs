@@ -3,8 +3,9 @@
 
 use crate::TrainError;
 use smpl_deform::deform_net::pose_code;
+use smpl_deform::frame_pose::{frame_pose, frame_pose_backward, FramePose};
 use smpl_deform::math::Affine;
-use smpl_deform::{BodyModel, BodyRef, CanonicalBody, SmplParams};
+use smpl_deform::{BodyModel, BodyRef, CanonicalBody, SmplDeformError, SmplParams, NUM_JOINTS};
 use std::path::Path;
 
 /// A body pose prepared for the model: the pose feature and the canonical-to-frame bone transforms.
@@ -16,6 +17,14 @@ pub struct PreparedPose {
     pub bones: Vec<Affine<f32>>,
     /// World position of the root joint (m).
     pub root: [f32; 3],
+}
+
+/// What [`Body::pose_backward`] needs of a pose prepared by [`Body::prepare_differentiable`]: the
+/// pose in f64 and its forward kinematics.
+#[derive(Clone, Debug)]
+pub struct PoseTape {
+    pose: Vec<f64>,
+    frame: FramePose<f64>,
 }
 
 /// The body in canonical space, able to prepare any SMPL pose for the model.
@@ -66,6 +75,103 @@ impl Body {
             bones: self.canonical.frame_from_canonical(&posed),
             root: posed.joints.first().copied().unwrap_or(params.transl),
         })
+    }
+
+    /// [`Body::prepare`] (the same values, bit for bit, without posing the mesh) with what
+    /// [`Body::pose_backward`] needs to differentiate the bones and the pose code w.r.t. the pose.
+    pub fn prepare_differentiable(
+        &self,
+        params: &SmplParams,
+    ) -> Result<(PreparedPose, PoseTape), TrainError> {
+        let invalid = |field: &str, reason: &str| {
+            TrainError::SmplDeform(SmplDeformError::InvalidParams {
+                field: field.into(),
+                reason: reason.into(),
+            })
+        };
+        if params.pose.len() != 3 * NUM_JOINTS {
+            return Err(invalid("pose", "expected 72 values"));
+        }
+        if params
+            .pose
+            .iter()
+            .chain(&params.transl)
+            .any(|v| !v.is_finite())
+        {
+            return Err(invalid("pose", "non-finite value"));
+        }
+        let pose: Vec<f64> = params.pose.iter().map(|&x| f64::from(x)).collect();
+        let (joints, inverses) = self.constants_f64();
+        let frame = frame_pose(
+            &pose,
+            params.transl.map(f64::from),
+            &joints,
+            &self.model.parents,
+            &inverses,
+        );
+        // The same roundings as `BodyModel::pose` and `CanonicalBody::frame_from_canonical`.
+        let to_f32 = |m: &[f64; 12]| m.map(|x| x as f32);
+        let posed_from_rest: Vec<Affine<f32>> =
+            frame.fk.posed_from_rest.iter().map(to_f32).collect();
+        let local: Vec<[f32; 9]> = frame
+            .fk
+            .local_rotations
+            .iter()
+            .map(|m| m.map(|x| x as f32))
+            .collect();
+        let root = frame
+            .fk
+            .joints_posed
+            .first()
+            .map_or(params.transl, |j| j.map(|x| x as f32));
+        let prepared = PreparedPose {
+            pose_code: pose_code(&local),
+            bones: self.canonical.frame_from_canonical_of(&posed_from_rest),
+            root,
+        };
+        Ok((prepared, PoseTape { pose, frame }))
+    }
+
+    /// ∂L/∂pose (72) and ∂L/∂transl of a pose prepared by [`Body::prepare_differentiable`], from the
+    /// gradients of its bones and pose code ([`crate::posing::ModelGradients`]'s `bones` and
+    /// `pose_code`; an empty `d_pose_code` when the code was not differentiated).
+    pub fn pose_backward(
+        &self,
+        tape: &PoseTape,
+        d_bones: &[Affine<f32>],
+        d_pose_code: &[f32],
+    ) -> (Vec<f64>, [f64; 3]) {
+        let (joints, inverses) = self.constants_f64();
+        let d_bones: Vec<Affine<f64>> = d_bones.iter().map(|b| b.map(f64::from)).collect();
+        let d_code: Vec<f64> = d_pose_code.iter().map(|&x| f64::from(x)).collect();
+        let g = frame_pose_backward(
+            &tape.pose,
+            &joints,
+            &self.model.parents,
+            &inverses,
+            &tape.frame,
+            &d_bones,
+            &d_code,
+        );
+        (g.pose, g.transl)
+    }
+
+    /// The rest joints and canonical inverses in f64 (the constants of a frame's pose).
+    fn constants_f64(&self) -> (Vec<[f64; 3]>, Vec<Affine<f64>>) {
+        let joints = self
+            .canonical
+            .posed
+            .joints_rest
+            .iter()
+            .map(|j| j.map(f64::from))
+            .collect();
+        let inverses = self
+            .canonical
+            .rest_from_canonical
+            .iter()
+            .map(|a| a.map(f64::from))
+            .collect();
+        (joints, inverses)
     }
 }
 

@@ -248,6 +248,24 @@ training_options! {
     event_threshold: f32 = 0.2,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
     event_log_eps: f32 = 1e-3,
+    /// Learned pose correction (`train::pose_correction`), for poses estimated by a fitter: per
+    /// training frame, additive corrections of the 24 joint rotations (axis-angle, radians) and the
+    /// translation (m) at mid exposure and, with `blur_model = exposure`, of their change over the
+    /// exposure, regularised towards zero and towards the neighbouring frames' corrections.
+    /// Held-out frames take corrections interpolated from their neighbouring training frames.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    pose_correction: bool = false,
+    /// Adam learning rate of the pose corrections (radians or metres).
+    lr_pose_correction: f32 = 3e-3,
+    /// λ₀ of the pose-correction prior: weight of ‖δ_k‖² (radians², m²) pulling each training
+    /// frame's correction towards zero.
+    pose_correction_zero_weight: f32 = 1e-3,
+    /// λ_s of the pose-correction prior: weight of ‖δ_k − δ_{k±1}‖² between consecutive training
+    /// frames' corrections.
+    pose_correction_smooth_weight: f32 = 1e-3,
+    /// The pose corrections stay zero before this step (while the model is still a blur of
+    /// Gaussians, its gradients do not say where the limbs are).
+    pose_correction_from: usize = 300,
 }
 
 /// Which images are trained on (see [`TrainConfig::train_on`]).
@@ -532,6 +550,15 @@ impl TrainConfig {
             ("lr_skinning", self.lr_skinning),
             ("lr_colour", self.lr_colour),
             ("lr_latent", self.lr_latent),
+            ("lr_pose_correction", self.lr_pose_correction),
+            (
+                "pose_correction_zero_weight",
+                self.pose_correction_zero_weight,
+            ),
+            (
+                "pose_correction_smooth_weight",
+                self.pose_correction_smooth_weight,
+            ),
             ("skinning_weight", self.skinning_weight),
             ("aiap_position_weight", self.aiap_position_weight),
             ("aiap_covariance_weight", self.aiap_covariance_weight),

@@ -159,7 +159,8 @@ pub struct EvaluatedFrame {
 
 /// Renders every frame of `split` with the model and scores it against the sharp reference (or, for
 /// data without one, against the observed frame — the figures then measure fidelity to the input).
-/// Unseen frames use the latent of the nearest training frame.
+/// Unseen frames use the latent of the nearest training frame and, with pose correction, the
+/// correction interpolated from their neighbouring training frames ([`crate::model::Model::corrected_params`]).
 pub fn evaluate_split(
     model: &crate::model::Model,
     body: &crate::body::Body,
@@ -169,7 +170,7 @@ pub fn evaluate_split(
     let (w, h) = (data.camera.width as usize, data.camera.height as usize);
     let mut out = Vec::new();
     for f in data.frames.iter().filter(|f| f.split == split) {
-        let pose = body.prepare(&f.smpl)?;
+        let pose = body.prepare(&model.corrected_params(f.index, &f.smpl))?;
         let r = model.render(&data.camera, &pose, model.latent_for(f.index))?;
         let no_mask = vec![false; w * h];
         let frame = EvalFrame {

@@ -19,6 +19,7 @@ pub mod image_loss;
 pub mod init;
 pub mod model;
 pub mod optimisers;
+pub mod pose_correction;
 pub mod posing;
 pub mod reposing;
 pub mod schedule;

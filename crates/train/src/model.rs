@@ -1,7 +1,8 @@
 //! The learned E-Sem3DGS model — everything a reconstruction learns, and nothing about how it is
 //! optimised: the semantic Gaussian set, the four networks (non-rigid deformation, skinning field,
-//! human colour, scene colour), the per-training-frame latents, and the settings that shape its
-//! rendering (semantic mode, gate, background, near plane, all in [`TrainConfig`]).
+//! human colour, scene colour), the per-training-frame latents and pose corrections, and the
+//! settings that shape its rendering (semantic mode, gate, background, near plane, all in
+//! [`TrainConfig`]).
 //!
 //! [`Model::forward`] poses the Gaussians for one frame (see [`crate::posing`]) and rasterizes them
 //! with the human probability as a fourth channel; the returned [`FramePass`] keeps what its backward
@@ -13,6 +14,7 @@ use crate::body::PreparedPose;
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::config::TrainConfig;
+use crate::pose_correction::{corrected_params, interpolated_correction, CORRECTION_VALUES};
 use crate::posing::{
     pose_frame_backward_with, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
     GaussianParams, ModelGradients, ModelNets, PosedFrame,
@@ -25,19 +27,23 @@ use rasterize_cpu::{
     RenderSettings,
 };
 use smpl_deform::deform_net::{NonRigidNet, SkinningField};
+use smpl_deform::math::Affine;
+use smpl_deform::SmplParams;
 use std::time::Instant;
 
 /// Number of rendered channels: linear RGB and the human probability.
 pub const RENDER_CHANNELS: usize = 4;
 
 /// Names of the model's network parameter groups, in checkpoint order, with the tensor each is
-/// stored under (the per-frame latents are a group too).
-pub const NETWORK_GROUPS: [(&str, &str); 5] = [
+/// stored under (the per-frame latents and pose corrections are groups too; an empty group — the
+/// pose corrections when `pose_correction` is off — is not stored).
+pub const NETWORK_GROUPS: [(&str, &str); 6] = [
     ("nonrigid", "nonrigid"),
     ("skinning", "skinning"),
     ("human_colour", "human_colour"),
     ("scene_colour", "scene_colour"),
     ("latent", "latents"),
+    ("pose_correction", "pose_corrections"),
 ];
 
 /// What a reconstruction learned.
@@ -53,6 +59,9 @@ pub struct Model {
     pub latents: Vec<f32>,
     /// Frame number of each latent slot (the training frames in time order).
     pub frame_indices: Vec<u32>,
+    /// Per-training-frame pose corrections, (frames, [`CORRECTION_VALUES`]) (`train::pose_correction`);
+    /// empty when `pose_correction` is off.
+    pub pose_corrections: Vec<f32>,
     /// Scene extent (m): scales the position rate and the density thresholds.
     pub scene_extent: f32,
 }
@@ -100,6 +109,9 @@ pub struct FramePass<'a> {
     pub timing: PassTiming,
 }
 
+/// ∂L/∂bones of one pass: one 3×4 per bone.
+pub type BoneGradients = Vec<Affine<f32>>;
+
 /// A loss's gradients with respect to a pass's rasterizer inputs.
 #[derive(Clone, Debug)]
 pub struct PosedGradients {
@@ -118,7 +130,8 @@ pub struct PosedGradients {
 }
 
 impl Model {
-    /// A model from its parts, checked against `config` (semantic logits, features, latents).
+    /// A model from its parts, checked against `config` (semantic logits, features, latents), with
+    /// zero pose corrections when `config.pose_correction` is on.
     pub fn new(
         config: TrainConfig,
         set: GaussianSet,
@@ -149,12 +162,18 @@ impl Model {
                 found: latents.len(),
             });
         }
+        let pose_corrections = if config.pose_correction {
+            vec![0.0; frame_indices.len() * CORRECTION_VALUES]
+        } else {
+            Vec::new()
+        };
         Ok(Self {
             config,
             set,
             nets,
             latents,
             frame_indices,
+            pose_corrections,
             scene_extent,
         })
     }
@@ -178,24 +197,26 @@ impl Model {
     }
 
     /// The flat parameters of every network group ([`NETWORK_GROUPS`] order).
-    pub fn network_groups(&self) -> [&Vec<f32>; 5] {
+    pub fn network_groups(&self) -> [&Vec<f32>; 6] {
         [
             &self.nets.nonrigid.mlp.params,
             &self.nets.skinning.mlp.params,
             &self.nets.human_colour.mlp.params,
             &self.nets.scene_colour.mlp.params,
             &self.latents,
+            &self.pose_corrections,
         ]
     }
 
     /// Mutable [`Model::network_groups`], for the optimisers and for loading.
-    pub fn network_groups_mut(&mut self) -> [&mut Vec<f32>; 5] {
+    pub fn network_groups_mut(&mut self) -> [&mut Vec<f32>; 6] {
         [
             &mut self.nets.nonrigid.mlp.params,
             &mut self.nets.skinning.mlp.params,
             &mut self.nets.human_colour.mlp.params,
             &mut self.nets.scene_colour.mlp.params,
             &mut self.latents,
+            &mut self.pose_corrections,
         ]
     }
 
@@ -203,7 +224,9 @@ impl Model {
     /// model directories share it).
     pub fn push_networks(&self, w: &mut CheckpointWriter) {
         for ((_, tensor), params) in NETWORK_GROUPS.iter().zip(self.network_groups()) {
-            w.push(*tensor, params.clone());
+            if !params.is_empty() {
+                w.push(*tensor, params.clone());
+            }
         }
     }
 
@@ -211,7 +234,9 @@ impl Model {
     /// length against this model's shapes.
     pub fn read_networks(&mut self, r: &CheckpointReader) -> Result<(), TrainError> {
         for ((_, tensor), params) in NETWORK_GROUPS.iter().zip(self.network_groups_mut()) {
-            *params = r.get_len(tensor, params.len())?;
+            if !params.is_empty() {
+                *params = r.get_len(tensor, params.len())?;
+            }
         }
         Ok(())
     }
@@ -246,6 +271,24 @@ impl Model {
             .min_by_key(|(_, &f)| (i64::from(f) - i64::from(index)).abs())
             .map_or(0, |(s, _)| s);
         self.latent(slot)
+    }
+
+    /// The pose correction of frame `index` ([`CORRECTION_VALUES`] values, empty when pose
+    /// correction is off): a training frame's own mid-exposure correction, a held-out frame's
+    /// interpolated from its neighbours (`train::pose_correction::interpolated_correction`).
+    pub fn pose_correction_for(&self, index: u32) -> Vec<f32> {
+        interpolated_correction(&self.frame_indices, &self.pose_corrections, index)
+    }
+
+    /// SMPL parameters of frame `index` with its pose correction applied at mid exposure (`params`
+    /// unchanged when pose correction is off): what evaluation renders a scene's frame with.
+    pub fn corrected_params(&self, index: u32, params: &SmplParams) -> SmplParams {
+        let correction = self.pose_correction_for(index);
+        if correction.is_empty() {
+            params.clone()
+        } else {
+            corrected_params(params, &correction, 0.0)
+        }
     }
 
     /// The stored per-Gaussian parameters as the posing functions take them.
@@ -377,14 +420,15 @@ impl Model {
 
     /// The model's gradients of passes made by [`Model::forward_reposed`] (same `reference`), from
     /// each pass's rasterizer-input gradients `posed` (same order): one backward through the
-    /// networks, into which every re-posed pass's cotangents are summed. The bone gradients are the
-    /// reference pose's alone.
+    /// networks, into which every re-posed pass's cotangents are summed. The returned model gradients'
+    /// `bones` and `pose_code` are the reference pass's; the list holds ∂L/∂bones of every pass (same
+    /// order), for pose correction.
     pub fn reposed_backward(
         &self,
         passes: &[FramePass<'_>],
         reference: usize,
         posed: &[&PosedGradients],
-    ) -> Result<ModelGradients<f32>, TrainError> {
+    ) -> Result<(ModelGradients<f32>, Vec<BoneGradients>), TrainError> {
         let reference_pass = passes
             .get(reference)
             .filter(|_| posed.len() == passes.len());
@@ -401,11 +445,12 @@ impl Model {
         };
         let params = self.params();
         let mut summed = ReposeCotangents::zeros(self.set.len(), reference_cache.active.len());
-        for (pass, grads) in passes.iter().zip(posed) {
+        let mut pass_bones = vec![Vec::new(); passes.len()];
+        for ((pass, grads), bones) in passes.iter().zip(posed).zip(&mut pass_bones) {
             let PassCache::Reposed(cache) = &pass.cache else {
                 continue;
             };
-            let (d, _) = repose_frame_backward(
+            let (d, d_bones) = repose_frame_backward(
                 self.config.semantic,
                 &params,
                 reference_cache,
@@ -414,9 +459,10 @@ impl Model {
                 &grads.cotangents(),
             )?;
             summed.add(&d);
+            *bones = d_bones;
         }
         let reference_pass = &passes[reference];
-        pose_frame_backward_with(
+        let grads = pose_frame_backward_with(
             &self.nets,
             self.config.semantic,
             &params,
@@ -428,7 +474,9 @@ impl Model {
             reference_cache,
             &posed[reference].cotangents(),
             Some(&summed),
-        )
+        )?;
+        pass_bones[reference] = grads.bones.clone();
+        Ok((grads, pass_bones))
     }
 
     /// Renders the model in `pose` with the frame latent `latent` from `camera`.

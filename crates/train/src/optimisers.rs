@@ -33,6 +33,7 @@ fn network_rate(config: &TrainConfig, group: &str) -> f32 {
         "nonrigid" => config.lr_nonrigid,
         "skinning" => config.lr_skinning,
         "human_colour" | "scene_colour" => config.lr_colour,
+        "pose_correction" => config.lr_pose_correction,
         _ => config.lr_latent,
     }
 }
@@ -92,14 +93,20 @@ impl Optimisers {
         Ok(self.networks[k].step(params, grads)?)
     }
 
-    /// Adds every moment to `w` (`adam.<group>.{m,v}` and `<group>_adam.{m,v}`); returns the step
-    /// counts for the metadata.
+    /// Adds every moment to `w` (`adam.<group>.{m,v}` and `<group>_adam.{m,v}`; an empty group's
+    /// are not stored); returns the step counts for the metadata.
     pub fn save(&self, w: &mut CheckpointWriter) -> OptimiserSteps {
         let gaussians = w.push_gaussian_adam("adam", &self.gaussians);
         let networks = NETWORK_GROUPS
             .iter()
             .zip(&self.networks)
-            .map(|((name, _), adam)| w.push_adam(&format!("{name}_adam"), adam))
+            .map(|((name, _), adam)| {
+                if adam.moments().0.is_empty() {
+                    adam.steps()
+                } else {
+                    w.push_adam(&format!("{name}_adam"), adam)
+                }
+            })
             .collect();
         OptimiserSteps {
             gaussians,
@@ -107,7 +114,9 @@ impl Optimisers {
         }
     }
 
-    /// The optimisers [`Optimisers::save`] wrote, for `model` (which fixes every length).
+    /// The optimisers [`Optimisers::save`] wrote, for `model` (which fixes every length). A
+    /// checkpoint from before the pose-correction group (one step count fewer) loads when the model
+    /// has no pose corrections.
     pub fn load(
         r: &CheckpointReader,
         model: &Model,
@@ -115,7 +124,11 @@ impl Optimisers {
     ) -> Result<Self, TrainError> {
         let mut gaussians = GaussianAdam::new(&model.set, AdamConfig::default());
         r.gaussian_adam("adam", &mut gaussians, &steps.gaussians)?;
-        if steps.networks.len() != NETWORK_GROUPS.len() {
+        let mut counts = steps.networks.clone();
+        if counts.len() + 1 == NETWORK_GROUPS.len() && model.pose_corrections.is_empty() {
+            counts.push(0);
+        }
+        if counts.len() != NETWORK_GROUPS.len() {
             return Err(r.error(format!(
                 "expected {} network optimiser step counts",
                 NETWORK_GROUPS.len()
@@ -124,14 +137,13 @@ impl Optimisers {
         let networks = NETWORK_GROUPS
             .iter()
             .zip(model.network_groups())
-            .zip(&steps.networks)
+            .zip(&counts)
             .map(|(((name, _), params), &count)| {
-                r.adam(
-                    &format!("{name}_adam"),
-                    adam_config(network_rate(&model.config, name)),
-                    params.len(),
-                    count,
-                )
+                let config = adam_config(network_rate(&model.config, name));
+                if params.is_empty() {
+                    return Ok(nn::Adam::new(0, config));
+                }
+                r.adam(&format!("{name}_adam"), config, params.len(), count)
             })
             .collect::<Result<_, _>>()?;
         Ok(Self {

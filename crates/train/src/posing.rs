@@ -149,6 +149,8 @@ pub struct ModelGradients<T> {
     pub latent: Vec<T>,
     /// dL/d bone transforms.
     pub bones: Vec<Affine<T>>,
+    /// dL/d pose code (207 values; for pose correction).
+    pub pose_code: Vec<T>,
 }
 
 impl<T: Real> ModelGradients<T> {
@@ -603,6 +605,7 @@ pub fn pose_frame_backward_with<T: Real>(
             features[i * fd + f] = features[i * fd + f] + human.features[a * fd + f];
         }
     }
+    let pose_code = deform.pose_code;
     let mut d_bones = deform.bones;
     for (db, dr) in d_bones.iter_mut().zip(&d_bone_rotations) {
         for e in 0..9 {
@@ -621,5 +624,6 @@ pub fn pose_frame_backward_with<T: Real>(
         scene_colour: scene.params,
         latent: human.latent,
         bones: d_bones,
+        pose_code,
     })
 }

@@ -2,94 +2,13 @@
 //! checkpoint, and gives identical bits with 1 and 2 threads.
 #![allow(clippy::unwrap_used)]
 
-use smpl_deform::BodyModel;
-use std::path::PathBuf;
-use train::body::Body;
-use train::config::{Preset, TrainConfig};
+use train::config::TrainConfig;
 use train::data::load_dataset;
 use train::data::TrainingData;
 use train::trainer::Trainer;
 
-fn fixture() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data-fixtures/tiny")
-}
-
-fn context() -> TrainingData {
-    let data = load_dataset(&fixture()).unwrap();
-    let body = Body::new(
-        BodyModel::builtin_makehuman().unwrap(),
-        data.scene.body.betas.clone(),
-    )
-    .unwrap();
-    TrainingData::new(&data, body, 0).unwrap()
-}
-
-fn tiny_config(steps: usize) -> TrainConfig {
-    TrainConfig {
-        steps,
-        human_gaussians: 400,
-        scene_gaussians: 800,
-        max_gaussians: 4000,
-        deform_hidden: 16,
-        skinning_until: steps / 2,
-        skinning_samples: 64,
-        nonrigid_from: 4,
-        densify_from: 6,
-        densify_until: steps,
-        densify_every: 6,
-        densify_grad_threshold: 1e-5,
-        opacity_reset_every: 0,
-        checkpoint_every: 0,
-        // One render per frame: these tests prepare no sub-exposure poses (and event losses pair
-        // consecutive frames, at the weight measured for that pairing).
-        blur_model: train::config::BlurModel::None,
-        event_pairs: train::config::EventPairs::Frames,
-        event_weight: 3.0,
-        ..TrainConfig::preset(Preset::Quick)
-    }
-}
-
-/// Every learnable value of a trainer as bits.
-fn bits(t: &Trainer) -> Vec<u32> {
-    let s = &t.model.set;
-    s.means
-        .iter()
-        .flatten()
-        .chain(s.log_scales.iter().flatten())
-        .chain(s.quats.iter().flatten())
-        .chain(&s.opacity_logits)
-        .chain(&s.features)
-        .chain(&s.semantic_logits)
-        .chain(&t.model.nets.nonrigid.mlp.params)
-        .chain(&t.model.nets.skinning.mlp.params)
-        .chain(&t.model.nets.human_colour.mlp.params)
-        .chain(&t.model.nets.scene_colour.mlp.params)
-        .chain(&t.model.latents)
-        .map(|v| v.to_bits())
-        .collect()
-}
-
-/// Runs `f` on a pool of `threads` threads.
-fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(f)
-}
-
-/// Asserts bit equality, reporting the first difference instead of both vectors.
-fn assert_same_bits(a: &[u32], b: &[u32]) {
-    assert_eq!(a.len(), b.len(), "different parameter counts");
-    if let Some(i) = (0..a.len()).find(|&i| a[i] != b[i]) {
-        panic!(
-            "first difference at value {i} of {}: {} vs {}",
-            a.len(),
-            f32::from_bits(a[i]),
-            f32::from_bits(b[i])
-        );
-    }
-}
+mod common;
+use common::*;
 
 #[test]
 fn training_reduces_the_loss_on_the_tiny_fixture() {
@@ -126,32 +45,6 @@ fn resume_with_the_exposure_model_and_events_is_bit_identical() {
         ..tiny_config(16)
     };
     resume_is_bit_identical(&exposure_context(&config), config);
-}
-
-/// A context with sub-exposure poses and the events between them.
-fn exposure_context(config: &TrainConfig) -> TrainingData {
-    let data = load_dataset(&fixture()).unwrap();
-    let mut ctx = context();
-    ctx.enable_exposure(&data, config.subframes).unwrap();
-    ctx.enable_exposure_events(&data, config).unwrap();
-    ctx
-}
-
-/// 16 steps straight and 9 + a checkpoint + 7 end in the same bits.
-fn resume_is_bit_identical(ctx: &TrainingData, config: TrainConfig) {
-    let ctx = ctx.clone();
-    let mut straight = Trainer::new(&ctx, config.clone()).unwrap();
-    straight.run(&ctx, 16, |_, _| Ok(())).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("ck.safetensors");
-    let mut first = Trainer::new(&ctx, config).unwrap();
-    first.run(&ctx, 9, |_, _| Ok(())).unwrap();
-    first.save_checkpoint(&path).unwrap();
-    drop(first);
-    let mut resumed = Trainer::load_checkpoint(&path, &ctx).unwrap();
-    assert_eq!(resumed.step, 9);
-    resumed.run(&ctx, 16, |_, _| Ok(())).unwrap();
-    assert_same_bits(&bits(&resumed), &bits(&straight));
 }
 
 #[test]

@@ -244,7 +244,7 @@ fn rodrigues_is_exact_identity_at_zero_and_orthonormal() {
 
 mod deformation_networks {
     //! End-to-end FD check of the Gaussian deformation (non-rigid MLP → skinning-field MLP → LBS)
-    //! w.r.t. canonical positions, log-scales, quaternions, bone transforms and a strided subset of
+    //! w.r.t. canonical positions, log-scales, quaternions, bone transforms, the pose code and a strided subset of
     //! both networks' parameters. Same tolerance and step as above: the pipeline is smooth except at
     //! LeakyReLU kinks, which random inputs hit within h = 1e-6 with probability ~1e-5 per unit.
 
@@ -385,6 +385,8 @@ mod deformation_networks {
             checker.check("deform d/dquats", &num, &flat(&grad.quats), TOL);
             let num = central_differences(|x| { let mut t = setup(seed); t.bones = unflat(x); loss(&t) }, &flat(&s.bones), H);
             checker.check("deform d/dbones", &num, &flat(&grad.bones), TOL);
+            let num = central_differences(|x| { let mut t = setup(seed); t.pose_code = x.to_vec(); loss(&t) }, &s.pose_code, H);
+            checker.check("deform d/dpose_code", &num, &grad.pose_code, TOL);
             // Strided parameter subsets (every 7th / 11th) cover every layer of both networks.
             let idx_nr: Vec<usize> = (0..d_nr.len()).step_by(7).collect();
             let p0: Vec<f64> = idx_nr.iter().map(|&k| s.nonrigid.mlp.params[k]).collect();
@@ -500,6 +502,57 @@ mod pose_blend_shapes {
             // Joint 0 (global orientation) does not enter the blend feature; every other joint does.
             prop_assert!(ana[..3].iter().all(|&x| x == 0.0));
             prop_assert!(ana[3..].iter().all(|&x| x != 0.0));
+        }
+    }
+}
+
+mod frame_pose {
+    //! FD check of a frame's pose as a canonical-space model consumes it (bones from canonical and
+    //! pose code) w.r.t. the 72 pose values and the translation, on a random body with the SMPL tree
+    //! and random canonical inverses. Same step and tolerance as above (a polynomial in sines and
+    //! cosines of the pose). The pose-code path is checked on its own too, so a wrongly-zero code
+    //! gradient cannot hide behind the bones' larger one.
+
+    use super::*;
+    use smpl_deform::frame_pose::{frame_pose, frame_pose_backward};
+    use smpl_deform::{NUM_JOINTS, NUM_POSE_FEATURES};
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(16))]
+
+        #[test]
+        fn frame_pose_matches_finite_differences(seed in any::<u64>(), scale in 0.1f64..1.5) {
+            let joints: Vec<[f64; 3]> = symmetric_from_seed(seed, 3 * NUM_JOINTS)
+                .chunks(3)
+                .map(|c| [0.5 * c[0], c[1], 0.3 * c[2]])
+                .collect();
+            let inverses = rigidish_bones(seed ^ 3, NUM_JOINTS);
+            let pose: Vec<f64> = symmetric_from_seed(seed ^ 5, 3 * NUM_JOINTS).iter().map(|x| scale * x).collect();
+            let transl = [0.1, -0.2, 0.3];
+            let d_bones: Vec<Affine<f64>> = symmetric_from_seed(seed ^ 6, 12 * NUM_JOINTS)
+                .chunks(12)
+                .map(|c| std::array::from_fn(|k| c[k]))
+                .collect();
+            let d_code = symmetric_from_seed(seed ^ 7, NUM_POSE_FEATURES);
+            let loss = |p: &[f64], t: [f64; 3], code_weight: f64, bone_weight: f64| {
+                let f = frame_pose(p, t, &joints, &SMPL_PARENTS, &inverses);
+                bone_weight * f.bones.iter().zip(&d_bones).map(|(a, c)| dot(a, c)).sum::<f64>()
+                    + code_weight * dot(&f.pose_code, &d_code)
+            };
+            let f = frame_pose(&pose, transl, &joints, &SMPL_PARENTS, &inverses);
+            let g = frame_pose_backward(&pose, &joints, &SMPL_PARENTS, &inverses, &f, &d_bones, &d_code);
+            let mut checker = GradientChecker::new();
+            let num = central_differences(|p| loss(p, transl, 1.0, 1.0), &pose, H);
+            checker.check("frame pose d/dpose", &num, &g.pose, TOL);
+            let num = central_differences(|t| loss(&pose, [t[0], t[1], t[2]], 1.0, 1.0), &transl, H);
+            checker.check("frame pose d/dtransl", &num, &g.transl, TOL);
+            // The pose code alone.
+            let zero_bones = vec![[0.0; 12]; NUM_JOINTS];
+            let code_only = frame_pose_backward(&pose, &joints, &SMPL_PARENTS, &inverses, &f, &zero_bones, &d_code);
+            let num = central_differences(|p| loss(p, transl, 1.0, 0.0), &pose, H);
+            checker.check("frame pose code d/dpose", &num, &code_only.pose, TOL);
+            checker.finish();
+            prop_assert!(code_only.pose[3..].iter().all(|&x| x != 0.0));
         }
     }
 }

@@ -217,6 +217,8 @@ pub struct DeformGrad<T> {
     pub quats: Vec<[T; 4]>,
     /// ∂L/∂bone transforms (summed in a fixed order).
     pub bones: Vec<Affine<T>>,
+    /// ∂L/∂pose code (207 values: the non-rigid network's pose input).
+    pub pose_code: Vec<T>,
 }
 
 /// Per-group partial results of the deformation backward pass.
@@ -410,6 +412,7 @@ pub fn deform_gaussians_backward_with_moved<T: Real>(
         quats.extend_from_slice(&p.d_q);
     }
     nonrigid.unfold_grad(&cache.pose_code, &d_folded, d_nonrigid);
+    let pose_code = nonrigid.pose_code_grad(&d_folded);
     let bones_grad = d_bones_flat
         .chunks_exact(12)
         .map(|c| c.try_into().expect("12 values per bone"))
@@ -419,5 +422,6 @@ pub fn deform_gaussians_backward_with_moved<T: Real>(
         log_scales: d_log_scales.to_vec(),
         quats,
         bones: bones_grad,
+        pose_code,
     })
 }

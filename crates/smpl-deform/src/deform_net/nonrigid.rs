@@ -166,6 +166,22 @@ impl<T: Real> NonRigidNet<T> {
             *dst = *dst + *src;
         }
     }
+
+    /// ∂L/∂pose code from the folded network's parameter gradient: the code enters only through the
+    /// folded first-layer bias `b + W_pose · code`, so `∂L/∂code_c = Σ_r ∂L/∂bias_r · W_pose[r, c]`.
+    pub(super) fn pose_code_grad(&self, d_folded: &[T]) -> Vec<T> {
+        let full_in = ENC_DIM + NUM_POSE_FEATURES;
+        let h = self.mlp.sizes[1];
+        let mut d_code = vec![T::zero(); NUM_POSE_FEATURES];
+        for r in 0..h {
+            let db = d_folded[h * ENC_DIM + r];
+            let w = &self.mlp.params[r * full_in + ENC_DIM..(r + 1) * full_in];
+            for (d, &wc) in d_code.iter_mut().zip(w) {
+                *d = *d + db * wc;
+            }
+        }
+        d_code
+    }
 }
 
 /// The 207-value pose code from local joint rotations (`R_j − I`, joints 1..23, row-major).

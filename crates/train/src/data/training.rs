@@ -20,6 +20,8 @@ pub struct TrainingFrame {
     pub image: Vec<f32>,
     /// The frame's pose.
     pub pose: PreparedPose,
+    /// The SMPL parameters it was prepared from (what pose correction corrects).
+    pub params: smpl_deform::SmplParams,
 }
 
 /// Flow supervision of one training frame k: the next training frame and the target flow k → k+1.
@@ -76,6 +78,8 @@ pub struct TrainingData {
     /// Per training slot, the poses at the sub-exposure times of the exposure model (empty unless
     /// [`TrainingData::enable_exposure`] was called).
     pub exposure_poses: Vec<Vec<PreparedPose>>,
+    /// The SMPL parameters `exposure_poses` were prepared from (same layout).
+    pub exposure_params: Vec<Vec<smpl_deform::SmplParams>>,
     /// Per training slot, per pair of consecutive sub-exposure times (s, s+1), C·E per pixel for the
     /// events of [t_s, t_{s+1}) (row-major H × W), `None` where no event file covers the interval
     /// (before the first frame's time); empty unless [`TrainingData::enable_exposure_events`] was
@@ -92,6 +96,7 @@ impl TrainingData {
                 index: f.index,
                 image: f.image.clone(),
                 pose: body.prepare(&f.smpl)?,
+                params: f.smpl.clone(),
             });
         }
         if frames.is_empty() {
@@ -117,6 +122,7 @@ impl TrainingData {
             flow_net: None,
             event_pairs: Vec::new(),
             exposure_poses: Vec::new(),
+            exposure_params: Vec::new(),
             exposure_events: Vec::new(),
         })
     }
@@ -155,16 +161,20 @@ impl TrainingData {
             data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
         let track = crate::exposure::PoseTrack::new(&keys);
         let mut poses = Vec::with_capacity(self.frames.len());
+        let mut exposure_params = Vec::with_capacity(self.frames.len());
         for frame in data.frames.iter().filter(|f| f.split == Split::Train) {
             let times = crate::exposure::subframe_times(frame.time_s, exposure, subframes);
+            let params: Vec<smpl_deform::SmplParams> = times.iter().map(|&t| track.at(t)).collect();
             poses.push(
-                times
+                params
                     .iter()
-                    .map(|&t| self.body.prepare(&track.at(t)))
+                    .map(|p| self.body.prepare(p))
                     .collect::<Result<Vec<_>, _>>()?,
             );
+            exposure_params.push(params);
         }
         self.exposure_poses = poses;
+        self.exposure_params = exposure_params;
         Ok(())
     }
 

@@ -10,10 +10,12 @@
 //! reported stage timings vary.
 
 mod checkpoint;
+mod correction;
 mod report;
 mod terms;
 
 pub use checkpoint::CHECKPOINT_FORMAT;
+use correction::CorrectedPoses;
 pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
@@ -186,11 +188,18 @@ impl Trainer {
         let model = &self.model;
 
         // Frame k: its passes (one at mid exposure, or one per sub-exposure pose with the exposure
-        // model) and the photometric loss of their mean.
-        let poses: Vec<&PreparedPose> = match data.exposure_poses.get(slot) {
-            Some(sub) if config.blur_model == BlurModel::Exposure && !sub.is_empty() => {
-                sub.iter().collect()
-            }
+        // model; poses corrected by the frame's pose correction once it learns) and the photometric
+        // loss of their mean.
+        let exposure = config.blur_model == BlurModel::Exposure;
+        let correcting = config.pose_correction && step >= config.pose_correction_from;
+        let corrected = if correcting {
+            Some(CorrectedPoses::of(model, data, slot, exposure)?)
+        } else {
+            None
+        };
+        let poses: Vec<&PreparedPose> = match (&corrected, data.exposure_poses.get(slot)) {
+            (Some(c), _) => c.prepared.iter().collect(),
+            (None, Some(sub)) if exposure && !sub.is_empty() => sub.iter().collect(),
             _ => vec![&frame.pose],
         };
         let mid = poses.len() / 2;
@@ -243,10 +252,19 @@ impl Trainer {
         // Frame k+1 when a pair loss applies: its forward and the pair losses of both renders.
         let t_pair = Instant::now();
         let pair = PairSupervision::of(data, &config, slot);
+        let next_corrected = match &pair {
+            Some(pair) if correcting => {
+                Some(CorrectedPoses::of(model, data, pair.next_slot, false)?)
+            }
+            _ => None,
+        };
         let second = match &pair {
             Some(pair) => {
                 let next = &data.frames[pair.next_slot];
-                let pass = model.forward(camera, &next.pose, model.latent(pair.next_slot))?;
+                let pose = next_corrected
+                    .as_ref()
+                    .map_or(&next.pose, |c| &c.prepared[0]);
+                let pass = model.forward(camera, pose, model.latent(pair.next_slot))?;
                 let terms = pair_terms(
                     pair,
                     &config,
@@ -278,6 +296,9 @@ impl Trainer {
         let (aiap_value, aiap_canonical) =
             aiap_terms(&self.aiap, model, &first.posed, &config, &mut posed_grads);
         let mut sub_render_backward_seconds = 0.0;
+        // Per pass, ∂L/∂bones and ∂L/∂pose code (for the pose correction).
+        let mut pass_bones = vec![Vec::new(); passes.len()];
+        let mut pass_codes = vec![Vec::new(); passes.len()];
         let (mut grads, mut opacity_grads, means_2d) = if reposed {
             // One backward through the networks for every sub-exposure pass.
             let mut opacity_grads = std::mem::take(&mut posed_grads.opacity_logits);
@@ -293,11 +314,15 @@ impl Trainer {
             }
             let mut all: Vec<&PosedGradients> = subs.iter().collect();
             all.insert(mid, &posed_grads);
-            let mut grads = model.reposed_backward(&passes, mid, &all)?;
+            let (mut grads, bones) = model.reposed_backward(&passes, mid, &all)?;
+            pass_bones = bones;
+            pass_codes[mid] = grads.pose_code.clone();
             add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
             (grads, opacity_grads, means_2d)
         } else {
             let mut grads = first.model_backward(&posed_grads)?;
+            pass_bones[mid] = grads.bones.clone();
+            pass_codes[mid] = grads.pose_code.clone();
             add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
             let mut opacity_grads = posed_grads.opacity_logits;
             let mut means_2d = posed_grads.means_2d;
@@ -308,12 +333,22 @@ impl Trainer {
                 let g = pass.model_backward(&sub)?;
                 grads.add_shared(&g);
                 add_to(&mut grads.latent, &g.latent);
+                pass_bones[s] = g.bones;
+                pass_codes[s] = g.pose_code;
                 add_to(&mut opacity_grads, &sub.opacity_logits);
                 add_to(means_2d.as_flattened_mut(), sub.means_2d.as_flattened());
             }
             (grads, opacity_grads, means_2d)
         };
         times.render_backward += sub_render_backward_seconds;
+        // The pose corrections' gradient: frame k's passes, frame k+1's below, and the prior.
+        let mut correction_grads = corrected.as_ref().map(|c| {
+            let mut g = vec![0.0f32; model.pose_corrections.len()];
+            let bones: Vec<&[_]> = pass_bones.iter().map(Vec::as_slice).collect();
+            let codes: Vec<&[f32]> = pass_codes.iter().map(Vec::as_slice).collect();
+            c.add_gradient(&data.body, &bones, &codes, &mut g);
+            g
+        });
 
         // Frame k+1: backward, accumulated into the shared gradients.
         let (mut flow_value, mut event_value) = (0.0f32, 0.0f32);
@@ -324,6 +359,9 @@ impl Trainer {
             let posed2 = pass.render_backward(&terms.d_second, d_geometric_second)?;
             let grads2 = pass.model_backward(&posed2)?;
             grads.add_shared(&grads2);
+            if let (Some(next), Some(g)) = (&next_corrected, correction_grads.as_mut()) {
+                next.add_gradient(&data.body, &[&grads2.bones], &[&grads2.pose_code], g);
+            }
             for (o, &g) in opacity_grads.iter_mut().zip(&posed2.opacity_logits) {
                 *o += g;
             }
@@ -343,9 +381,17 @@ impl Trainer {
         times.model_backward =
             t0.elapsed().as_secs_f64() - second_backward_seconds - sub_render_backward_seconds;
 
+        let pose_prior = match correction_grads.as_mut() {
+            Some(g) => correction::add_prior(model, slot, g),
+            None => 0.0,
+        };
         let event_value = event_value + exposure_events;
-        let loss = photo.photometric + aiap_value + skinning_value + flow_value + event_value;
+        let loss =
+            photo.photometric + aiap_value + skinning_value + flow_value + event_value + pose_prior;
         let finite = loss.is_finite()
+            && correction_grads
+                .as_ref()
+                .is_none_or(|g| g.iter().all(|v| v.is_finite()))
             && opacity_grads.iter().all(|v| v.is_finite())
             && second_latent
                 .as_ref()
@@ -364,7 +410,7 @@ impl Trainer {
         drop(passes);
 
         let t0 = Instant::now();
-        self.apply_gradients(slot, grads, opacity_grads, second_latent)?;
+        self.apply_gradients(slot, grads, opacity_grads, second_latent, correction_grads)?;
         times.adam = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         self.refine(data, &refine_inputs);
@@ -380,6 +426,7 @@ impl Trainer {
             aiap: aiap_value,
             flow: flow_value,
             event: event_value,
+            pose_prior,
             psnr: psnr_value,
             gaussians_human: human,
             gaussians_scene: self.model.set.len() - human,
@@ -389,14 +436,15 @@ impl Trainer {
     }
 
     /// One optimiser step of every parameter group: the Gaussians (position rate decayed over the
-    /// run), the networks (the non-rigid one only from `nonrigid_from` on) and the latents of the
-    /// step's frames.
+    /// run), the networks (the non-rigid one only from `nonrigid_from` on), the latents of the
+    /// step's frames and, when given, the pose corrections.
     fn apply_gradients(
         &mut self,
         slot: usize,
         grads: ModelGradients<f32>,
         opacity_grads: Vec<f32>,
         second_latent: Option<(usize, Vec<f32>)>,
+        correction_grads: Option<Vec<f32>>,
     ) -> Result<(), TrainError> {
         let config = &self.model.config;
         let step = self.step;
@@ -431,17 +479,25 @@ impl Trainer {
         let nonrigid_frozen = step < config.nonrigid_from;
         self.optimisers
             .step_gaussians(&mut self.model.set, &set_grads, &rates)?;
-        let [nonrigid, skinning, human_colour, scene_colour, latents] =
+        let [nonrigid, skinning, human_colour, scene_colour, latents, corrections] =
             self.model.network_groups_mut();
+        let no_correction = Vec::new();
         let groups = [
             ("nonrigid", nonrigid, &grads.nonrigid),
             ("skinning", skinning, &grads.skinning),
             ("human_colour", human_colour, &grads.human_colour),
             ("scene_colour", scene_colour, &grads.scene_colour),
             ("latent", latents, &latent_grads),
+            (
+                "pose_correction",
+                corrections,
+                correction_grads.as_ref().unwrap_or(&no_correction),
+            ),
         ];
         for (name, params, g) in groups {
-            if name == "nonrigid" && nonrigid_frozen {
+            if name == "nonrigid" && nonrigid_frozen
+                || name == "pose_correction" && correction_grads.is_none()
+            {
                 continue;
             }
             self.optimisers.step_network(name, params, g)?;

@@ -46,6 +46,8 @@ pub struct StepReport {
     pub flow: f32,
     /// The weighted event-generation loss (0 on steps without an event pair).
     pub event: f32,
+    /// The pose-correction prior's terms of the step's frame (0 without pose correction).
+    pub pose_prior: f32,
     /// PSNR (dB) of the render against the (blurred) training frame.
     pub psnr: f64,
     /// Gaussians with human probability ≥ 0.5 after the step.

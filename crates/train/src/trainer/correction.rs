@@ -1,0 +1,96 @@
+//! The step's share of learned pose correction (`crate::pose_correction`): a frame's poses prepared
+//! from its corrected SMPL parameters, and the correction's gradient from the passes' bone and
+//! pose-code gradients.
+
+use crate::body::{Body, PoseTape, PreparedPose};
+use crate::data::TrainingData;
+use crate::model::Model;
+use crate::pose_correction::{
+    correct_pose_backward, corrected_params, exposure_offset, prior_terms, CorrectionPrior,
+    CORRECTION_VALUES,
+};
+use crate::TrainError;
+use smpl_deform::math::Affine;
+
+/// One frame's corrected poses (one per pass) and what their backward needs.
+pub(super) struct CorrectedPoses {
+    /// The slot whose correction they carry.
+    pub slot: usize,
+    /// The prepared poses, one per pass.
+    pub prepared: Vec<PreparedPose>,
+    tapes: Vec<PoseTape>,
+    offsets: Vec<f32>,
+}
+
+impl CorrectedPoses {
+    /// The poses of training slot `slot` corrected by its current correction: the sub-exposure
+    /// poses when `exposure` (and the data has them), else the mid-exposure pose.
+    pub fn of(
+        model: &Model,
+        data: &TrainingData,
+        slot: usize,
+        exposure: bool,
+    ) -> Result<Self, TrainError> {
+        let correction =
+            &model.pose_corrections[slot * CORRECTION_VALUES..(slot + 1) * CORRECTION_VALUES];
+        let params = match data.exposure_params.get(slot) {
+            Some(sub) if exposure && !sub.is_empty() => sub.iter().collect(),
+            _ => vec![&data.frames[slot].params],
+        };
+        let count = params.len();
+        let offsets: Vec<f32> = (0..count).map(|s| exposure_offset(s, count)).collect();
+        let mut prepared = Vec::with_capacity(count);
+        let mut tapes = Vec::with_capacity(count);
+        for (p, &offset) in params.iter().zip(&offsets) {
+            let (pose, tape) = data
+                .body
+                .prepare_differentiable(&corrected_params(p, correction, offset))?;
+            prepared.push(pose);
+            tapes.push(tape);
+        }
+        Ok(Self {
+            slot,
+            prepared,
+            tapes,
+            offsets,
+        })
+    }
+
+    /// Adds ∂L/∂correction of these poses' slot to `grad` (every slot's, [`CORRECTION_VALUES`] per
+    /// slot) from each pass's ∂L/∂bones and ∂L/∂pose code (same order as the poses; an empty code
+    /// gradient for a pass that re-posed another's networks).
+    pub fn add_gradient(
+        &self,
+        body: &Body,
+        d_bones: &[&[Affine<f32>]],
+        d_pose_codes: &[&[f32]],
+        grad: &mut [f32],
+    ) {
+        let mut slot_grad = vec![0.0f64; CORRECTION_VALUES];
+        for (((tape, &offset), bones), code) in self
+            .tapes
+            .iter()
+            .zip(&self.offsets)
+            .zip(d_bones)
+            .zip(d_pose_codes)
+        {
+            let (d_pose, d_transl) = body.pose_backward(tape, bones, code);
+            correct_pose_backward(&d_pose, d_transl, f64::from(offset), &mut slot_grad);
+        }
+        let out = &mut grad[self.slot * CORRECTION_VALUES..(self.slot + 1) * CORRECTION_VALUES];
+        for (o, g) in out.iter_mut().zip(slot_grad) {
+            *o += g as f32;
+        }
+    }
+}
+
+/// The prior's terms for slot `slot` ([`prior_terms`] with the configured weights), its gradient
+/// added to `grad`.
+pub(super) fn add_prior(model: &Model, slot: usize, grad: &mut [f32]) -> f32 {
+    let prior = CorrectionPrior {
+        zero: model.config.pose_correction_zero_weight,
+        smooth: model.config.pose_correction_smooth_weight,
+    };
+    let out = &mut grad[slot * CORRECTION_VALUES..(slot + 1) * CORRECTION_VALUES];
+    prior_terms(&model.pose_corrections, slot, prior, out)
+}

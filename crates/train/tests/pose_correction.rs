@@ -1,0 +1,124 @@
+//! Learned pose correction on the tiny fixture: the differentiable pose preparation gives the same
+//! bits as the plain one, a correction that cannot move leaves the run's bits alone, a learning one
+//! moves the poses and ignores the thread count, resumes bit for bit, and held-out frames are
+//! rendered with interpolated corrections.
+#![allow(clippy::unwrap_used)]
+
+use train::config::{BlurModel, TrainConfig};
+use train::data::load_dataset;
+use train::pose_correction::{CORRECTION_VALUES, POSE_VALUES};
+use train::trainer::Trainer;
+
+mod common;
+use common::*;
+
+fn correction_config(steps: usize) -> TrainConfig {
+    TrainConfig {
+        pose_correction: true,
+        pose_correction_from: 2,
+        ..tiny_config(steps)
+    }
+}
+
+#[test]
+fn the_differentiable_pose_preparation_gives_the_plain_bits() {
+    let data = load_dataset(&fixture()).unwrap();
+    let ctx = context();
+    for f in &data.frames {
+        let plain = ctx.body.prepare(&f.smpl).unwrap();
+        let (differentiable, _) = ctx.body.prepare_differentiable(&f.smpl).unwrap();
+        assert_eq!(plain, differentiable, "frame {}", f.index);
+    }
+    let mut bad = data.frames[0].smpl.clone();
+    bad.pose[5] = f32::NAN;
+    assert!(ctx.body.prepare_differentiable(&bad).is_err());
+    bad.pose.pop();
+    assert!(ctx.body.prepare_differentiable(&bad).is_err());
+}
+
+#[test]
+fn a_correction_that_cannot_move_changes_no_bit() {
+    let ctx = context();
+    let run = |config: TrainConfig| {
+        let mut t = Trainer::new(&ctx, config).unwrap();
+        t.run(&ctx, 8, |_, _| Ok(())).unwrap();
+        let mut b = bits(&t);
+        b.truncate(b.len() - t.model.pose_corrections.len());
+        (b, t.model.pose_corrections.clone())
+    };
+    let (off, none) = run(tiny_config(8));
+    assert!(none.is_empty());
+    let (frozen, corrections) = run(TrainConfig {
+        lr_pose_correction: 0.0,
+        ..correction_config(8)
+    });
+    assert!(corrections.iter().all(|&v| v == 0.0));
+    assert_same_bits(&off, &frozen);
+}
+
+#[test]
+fn pose_correction_learns_ignores_the_thread_count_and_resumes_bit_for_bit() {
+    let config = TrainConfig {
+        blur_model: BlurModel::Exposure,
+        subframes: 3,
+        ..correction_config(8)
+    };
+    let ctx = exposure_context(&config);
+    let run = |threads: usize| {
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+            let mut prior = 0.0f32;
+            t.run(&ctx, 8, |_, r| {
+                assert!(r.loss.is_finite());
+                prior += r.pose_prior;
+                Ok(())
+            })
+            .unwrap();
+            (t, prior)
+        })
+    };
+    let (one, prior) = run(1);
+    let c = &one.model.pose_corrections;
+    assert_eq!(c.len(), ctx.frames.len() * CORRECTION_VALUES);
+    assert!(c.iter().all(|v| v.is_finite()));
+    // Both the mid-exposure values and their change over the exposure moved, and the prior saw them.
+    assert!(c
+        .iter()
+        .take(POSE_VALUES)
+        .chain(&c[CORRECTION_VALUES..CORRECTION_VALUES + POSE_VALUES])
+        .any(|&v| v != 0.0));
+    assert!(c
+        .chunks(CORRECTION_VALUES)
+        .any(|s| s[POSE_VALUES..].iter().any(|&v| v != 0.0)));
+    assert!(prior > 0.0);
+    assert_same_bits(&bits(&one), &bits(&run(2).0));
+    resume_is_bit_identical(&ctx, config.clone());
+}
+
+#[test]
+fn held_out_frames_are_rendered_with_interpolated_corrections() {
+    let data = load_dataset(&fixture()).unwrap();
+    let ctx = context();
+    let mut t = Trainer::new(&ctx, correction_config(4)).unwrap();
+    t.run(&ctx, 4, |_, _| Ok(())).unwrap();
+    let model = &mut t.model;
+    // A known correction: the root translated 5 cm along x on every training frame.
+    for slot in model.pose_corrections.chunks_mut(CORRECTION_VALUES) {
+        slot.fill(0.0);
+        slot[72] = 0.05;
+    }
+    let held_out = data
+        .frames
+        .iter()
+        .find(|f| !model.frame_indices.contains(&f.index))
+        .expect("the fixture holds out a frame");
+    let corrected = model.corrected_params(held_out.index, &held_out.smpl);
+    assert!((corrected.transl[0] - held_out.smpl.transl[0] - 0.05).abs() < 1e-6);
+    assert_eq!(corrected.pose, held_out.smpl.pose);
+    // Off: the parameters as given.
+    let plain = Trainer::new(&ctx, tiny_config(4)).unwrap();
+    assert_eq!(
+        plain.model.corrected_params(held_out.index, &held_out.smpl),
+        held_out.smpl
+    );
+}

@@ -1,0 +1,84 @@
+//! The pose error of a reconstruction's training frames against a synthetic scene's true poses
+//! (`poses_true.json`, which the trainer never reads): the poses as the scene gives them and, with
+//! pose correction, as corrected — in the units of `synth::pose_metrics`.
+
+use anyhow::{Context, Result};
+use scene::Split;
+use synth::pose_metrics::measure;
+use synth::{FramePose, PoseErrorStats, TruePoses};
+use train::body::Body;
+use train::data::Dataset;
+use train::model::Model;
+
+/// Pose errors of the training frames: as given, and as corrected (when the model corrects poses).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PoseReport {
+    /// The scene's poses against the truth.
+    pub given: PoseErrorStats,
+    /// The corrected poses against the truth (`None` without pose correction).
+    pub corrected: Option<PoseErrorStats>,
+}
+
+/// The report for `data`, or `None` when the scene has no `poses_true.json`.
+pub fn pose_report(data: &Dataset, model: &Model, body: &Body) -> Result<Option<PoseReport>> {
+    if !TruePoses::path(&data.dir).exists() {
+        return Ok(None);
+    }
+    let truth = TruePoses::read(&data.dir)
+        .with_context(|| format!("reading {}", TruePoses::path(&data.dir).display()))?;
+    let as_frame = |index: u32, time_s: f64, p: &smpl_deform::SmplParams| FramePose {
+        index,
+        time_s,
+        pose: p.pose.chunks_exact(3).map(|r| [r[0], r[1], r[2]]).collect(),
+        transl: p.transl,
+    };
+    let (mut true_frames, mut given, mut corrected) = (Vec::new(), Vec::new(), Vec::new());
+    for f in data.frames.iter().filter(|f| f.split == Split::Train) {
+        let t = truth
+            .frames
+            .iter()
+            .find(|t| t.index == f.index)
+            .with_context(|| format!("poses_true.json has no frame {}", f.index))?;
+        true_frames.push(t.clone());
+        given.push(as_frame(f.index, f.time_s, &f.smpl));
+        corrected.push(as_frame(
+            f.index,
+            f.time_s,
+            &model.corrected_params(f.index, &f.smpl),
+        ));
+    }
+    let joints = &body.canonical.posed.joints_rest;
+    let parents = &body.model.parents;
+    Ok(Some(PoseReport {
+        given: measure(&true_frames, &given, joints, parents),
+        corrected: model
+            .config
+            .pose_correction
+            .then(|| measure(&true_frames, &corrected, joints, parents)),
+    }))
+}
+
+/// One line for the terminal: mean joint, root orientation and translation errors, given → corrected.
+pub fn summary_line(r: &PoseReport) -> String {
+    let figures = |s: &PoseErrorStats| {
+        (
+            s.joint_mean_deg,
+            s.root_orient_mean_deg,
+            s.root_transl_mean_cm,
+        )
+    };
+    let (j, o, t) = figures(&r.given);
+    match &r.corrected {
+        Some(c) => {
+            let (cj, co, ct) = figures(c);
+            format!(
+                "pose error of the training frames (mean, against poses_true.json): joints {j:.2}° → \
+                 {cj:.2}°, root orientation {o:.2}° → {co:.2}°, translation {t:.2} → {ct:.2} cm"
+            )
+        }
+        None => format!(
+            "pose error of the training frames (mean, against poses_true.json): joints {j:.2}°, \
+             root orientation {o:.2}°, translation {t:.2} cm (no pose correction)"
+        ),
+    }
+}
