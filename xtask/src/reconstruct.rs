@@ -5,7 +5,7 @@
 //! Output directory layout: `config.json` (the resolved hyper-parameters), `log.jsonl` (one JSON object
 //! per step), `checkpoint.safetensors` (atomic, every `checkpoint_every` steps and at the end),
 //! `model/` (see `train::export`), `model/posed_frame_NNNNNN.ply` (a standard 3DGS PLY of the first
-//! training frame, colours baked to SH degree 0), `eval/strip_NNNNNN.png`, `metrics.json`, `curve.png`.
+//! training frame in INRIA's degree-3 layout), `eval/strip_NNNNNN.png`, `metrics.json`, `curve.png`.
 
 use crate::common::{default_benchmark, shipped_flow_network, target_dir};
 use crate::eval_cmd::{write_evaluation, EvalSummary};

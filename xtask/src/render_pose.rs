@@ -1,5 +1,5 @@
 //! `cargo xtask render-pose`: render a reconstructed model (person + scene) in new body poses from the
-//! training camera, one PNG per pose, optionally with a posed 3DGS PLY (colours baked to SH degree 0).
+//! training camera, one PNG per pose, optionally with a posed 3DGS PLY (INRIA's degree-3 layout, colours in the DC term).
 //!
 //! `POSES.json` is one object or a list of objects `{"pose": [72 floats, axis-angle], "transl": [3],
 //! "latent_frame": N (optional: whose appearance latent to use; default the first training frame)}`.
@@ -21,7 +21,7 @@ pub struct Args {
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
-    /// Also write `posed_NNNN.ply` per pose (standard 3DGS PLY, SH degree 0).
+    /// Also write `posed_NNNN.ply` per pose (INRIA's degree-3 3DGS layout, colours in the DC term).
     #[arg(long)]
     pub ply: bool,
 }

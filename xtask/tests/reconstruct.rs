@@ -112,7 +112,8 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         .collect();
     assert_eq!(posed.len(), 1);
     let set = gaussians::ply::read_ply(posed[0].path()).unwrap();
-    assert_eq!(set.sh_degree, 0);
+    assert_eq!(set.sh_degree, 3);
+    assert_inria_degree3_layout(&posed[0].path(), set.len());
 
     // eval of the saved model reproduces the figures reconstruct wrote.
     let eval_out = dir.path().join("eval");
@@ -500,4 +501,43 @@ fn copy_dir(from: &Path, to: &Path) {
             std::fs::copy(entry.path(), &target).unwrap();
         }
     }
+}
+
+/// What INRIA's reference readers require of a 3DGS PLY, checked the way they read it: SIBR's viewer
+/// reads fixed 248-byte rows of the degree-3 layout after the header, and the Python `load_ply`
+/// asserts exactly 45 `f_rest_*` properties. The header must list exactly these 62 float properties
+/// in this order, binary little-endian, and the body must be `count × 248` bytes.
+fn assert_inria_degree3_layout(path: &std::path::Path, count: usize) {
+    let bytes = std::fs::read(path).unwrap();
+    let end = b"end_header\n";
+    let header_len = bytes
+        .windows(end.len())
+        .position(|w| w == end)
+        .expect("a PLY header")
+        + end.len();
+    let header = std::str::from_utf8(&bytes[..header_len]).unwrap();
+    let mut expected: Vec<String> = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    expected.extend((0..45).map(|j| format!("f_rest_{j}")));
+    expected.push("opacity".into());
+    expected.extend((0..3).map(|j| format!("scale_{j}")));
+    expected.extend((0..4).map(|j| format!("rot_{j}")));
+    let properties: Vec<String> = header
+        .lines()
+        .filter_map(|l| l.strip_prefix("property float "))
+        .map(str::to_string)
+        .collect();
+    assert_eq!(properties, expected, "{header}");
+    assert_eq!(
+        header.lines().filter(|l| l.starts_with("property")).count(),
+        62,
+        "only float properties"
+    );
+    assert!(header.contains("format binary_little_endian 1.0"));
+    assert!(header.contains(&format!("element vertex {count}\n")));
+    assert_eq!(bytes.len() - header_len, count * 248);
 }

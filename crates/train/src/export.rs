@@ -1,7 +1,7 @@
 //! Saving and loading a trained model (a directory), and baking a posed frame into a standard 3DGS PLY.
 //!
 //! Layout of a model directory (`docs/FORMATS.md`):
-//! - `canonical.ply` — every Gaussian in the 3DGS layout with `f_feat_*` (colour features) and
+//! - `canonical.ply` — every Gaussian in the 3DGS layout with `feature_*` (colour features) and
 //!   `semantic_*` (logits) extra properties; human Gaussians are in canonical body space, scene
 //!   Gaussians in world space;
 //! - `networks.safetensors` — float32 tensors `nonrigid`, `skinning`, `human_colour`, `scene_colour`
@@ -144,13 +144,18 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
 /// Zeroth-order SH coefficient Y₀⁰ = 1 / (2√π).
 const SH_C0: f32 = 0.282_094_8;
 
-/// The posed Gaussians of a frame as a standard 3DGS set: world means, the posed covariance decomposed
-/// into log-scales and a rotation, the trained opacity, colours baked into SH degree 0 (linear RGB
-/// c = 0.5 + C0·f_dc, the INRIA convention), and the semantic logits kept as extra properties.
+/// SH degree of posed sets: 3, the layout INRIA's viewers and loaders read as fixed 62-float rows.
+const POSED_SH_DEGREE: usize = 3;
+
+/// The posed Gaussians of a frame as a standard 3DGS set in exactly INRIA's degree-3 layout (62
+/// floats per Gaussian, what SIBR's viewer and INRIA's `load_ply` read): world means, the posed
+/// covariance decomposed into log-scales and a rotation, the trained opacity, colours baked into the
+/// SH DC term (linear RGB c = 0.5 + C0·f_dc, the INRIA convention) with zero higher-order
+/// coefficients. Semantic logits and colour features are not posed; they stay in `canonical.ply`.
 pub fn posed_set(model: &Model, posed: &PosedFrame<f32>) -> GaussianSet {
     let n = posed.means.len();
-    let k = model.set.semantic_classes;
-    let mut set = GaussianSet::zeros(n, 0, 0, k);
+    let coefficients = (POSED_SH_DEGREE + 1) * (POSED_SH_DEGREE + 1);
+    let mut set = GaussianSet::zeros(n, POSED_SH_DEGREE, 0, 0);
     set.means = posed.means.clone();
     for i in 0..n {
         let sigma = posed.covariances[i].map(|r| r.map(f64::from));
@@ -158,10 +163,9 @@ pub fn posed_set(model: &Model, posed: &PosedFrame<f32>) -> GaussianSet {
         set.log_scales[i] = s;
         set.quats[i] = q;
         for c in 0..3 {
-            set.sh[i * 3 + c] = (posed.colours[i * 3 + c] - 0.5) / SH_C0;
+            set.sh[i * coefficients * 3 + c] = (posed.colours[i * 3 + c] - 0.5) / SH_C0;
         }
     }
     set.opacity_logits = model.set.opacity_logits.clone();
-    set.semantic_logits = model.set.semantic_logits.clone();
     set
 }
