@@ -37,10 +37,26 @@ pub struct Scene {
     pub images: ImageEncoding,
     /// The frames, in time order.
     pub frames: Vec<Frame>,
+    /// Encoding of the frames' Prophesee `.raw` event files whose header does not state it (a
+    /// recording's header can lack the `% evt` / `% format` line; the encoding is never guessed).
+    /// Absent: such a file is refused, naming it. A file whose header states its encoding is read
+    /// as stated (and refused if this disagrees).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub events_raw_format: Option<RawEventsFormat>,
     /// Free-form information from the tool that made the scene (generator name, knobs). Readers
     /// must not depend on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub generator: Option<serde_json::Value>,
+}
+
+/// Encoding of a Prophesee `.raw` event file (see [`Scene::events_raw_format`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RawEventsFormat {
+    /// EVT 2.0 (32-bit words).
+    Evt2,
+    /// EVT 3.0 (16-bit words).
+    Evt3,
 }
 
 /// OpenCV pinhole camera, fixed for the whole scene: the workspace's one camera type

@@ -356,10 +356,20 @@ impl Checker<'_> {
                 "images",
                 "frames",
             ],
-            &["generator"],
+            &["generator", "events_raw_format"],
         ) else {
             return;
         };
+        if let Some(f) = m.get("events_raw_format") {
+            if let Some(name) = self.string(f, "events_raw_format") {
+                if name != "evt2" && name != "evt3" {
+                    self.bad(
+                        "events_raw_format",
+                        format!("`{name}` is not an event encoding (expected evt2 or evt3)"),
+                    );
+                }
+            }
+        }
         if let Some(fv) = m.get("format_version") {
             if let Some(x) = self.uint(fv, "format_version", u64::from(u32::MAX)) {
                 if x != u64::from(FORMAT_VERSION) {

@@ -70,6 +70,7 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
         });
     }
     let s = Scene {
+        events_raw_format: None,
         format_version: FORMAT_VERSION,
         camera: Camera {
             width: W,

@@ -669,6 +669,7 @@ pub fn generate_with_body(
         generator["true_poses"] = serde_json::json!(crate::true_poses::TRUE_POSES_FILE);
     }
     let sc = scene::Scene {
+        events_raw_format: None,
         format_version: scene::FORMAT_VERSION,
         camera: cam.to_scene(),
         body: scene::BodySpec {

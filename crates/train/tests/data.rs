@@ -46,6 +46,7 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
         });
     }
     let s = Scene {
+        events_raw_format: None,
         format_version: 1,
         camera: Camera {
             width: w,

@@ -442,6 +442,61 @@ fn an_events_file_that_does_not_cover_its_frame_is_refused_at_load_time() {
     assert!(err.contains("frame 3") && err.contains("outside"), "{err}");
 }
 
+#[test]
+fn header_less_raw_event_files_need_the_scene_to_state_their_encoding() {
+    // Every frame's events rewritten as Prophesee EVT 3.0 `.raw` files without a header.
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&fixture(), dir.path());
+    let scene_path = dir.path().join("scene.json");
+    let mut scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&scene_path).unwrap()).unwrap();
+    for frame in scene["frames"].as_array_mut().unwrap() {
+        let Some(npz) = frame["events"].as_str().map(str::to_string) else {
+            continue;
+        };
+        let stream = events::read_events(dir.path().join(&npz)).unwrap();
+        let bytes =
+            events::io::prophesee::encode(&stream, events::io::prophesee::PropheseeFormat::Evt3)
+                .unwrap();
+        let end = b"% end\n";
+        let body = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+        let raw = npz.replace(".npz", ".raw");
+        std::fs::write(dir.path().join(&raw), &bytes[body..]).unwrap();
+        frame["events"] = raw.into();
+    }
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let config = TrainConfig {
+        blur_model: train::config::BlurModel::Exposure,
+        subframes: 3,
+        event_loss: true,
+        event_pairs: train::config::EventPairs::Exposure,
+        ..tiny_config(8)
+    };
+    let load = |data: &train::data::Dataset| {
+        let mut ctx = context();
+        ctx.enable_exposure(data, config.subframes).unwrap();
+        ctx.enable_exposure_events(data, &config).map(|()| ctx)
+    };
+    let err = load(&load_dataset(dir.path()).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(".raw") && err.contains("events_raw_format"),
+        "{err}"
+    );
+    // Stated in scene.json: the same counts as the original files give.
+    scene["events_raw_format"] = "evt3".into();
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let from_raw = load(&load_dataset(dir.path()).unwrap()).unwrap();
+    let original = exposure_context(&config);
+    assert_eq!(from_raw.exposure_events, original.exposure_events);
+    // An unknown encoding is refused by the scene validator, naming the field.
+    scene["events_raw_format"] = "evt4".into();
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let err = format!("{:#}", load_dataset(dir.path()).unwrap_err());
+    assert!(err.contains("events_raw_format"), "{err}");
+}
+
 /// Copies a directory tree.
 fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
     for entry in std::fs::read_dir(from).unwrap() {

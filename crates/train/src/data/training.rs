@@ -365,6 +365,25 @@ impl TrainingData {
 
 /// The events of frame `p`'s `events` file ([t_p, t_{p+1})); a frame without one is an error naming
 /// the frame, the field and what needed it (`needed_by`).
+/// How a frame's event file is read: a Prophesee `.raw` file with the scene's recorded encoding
+/// (`events_raw_format`) for headers that do not state it; other formats as they are.
+fn event_read_options(data: &Dataset, path: &std::path::Path) -> events::io::ReadOptions {
+    let raw = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("raw"));
+    events::io::ReadOptions {
+        raw_format: data
+            .scene
+            .events_raw_format
+            .filter(|_| raw)
+            .map(|f| match f {
+                scene::RawEventsFormat::Evt2 => events::io::prophesee::RawEncoding::Evt2,
+                scene::RawEventsFormat::Evt3 => events::io::prophesee::RawEncoding::Evt3,
+            }),
+        lenient: false,
+    }
+}
+
 fn read_frame_events(
     data: &Dataset,
     p: usize,
@@ -378,7 +397,7 @@ fn read_frame_events(
         )));
     };
     let path = scene::Scene::resolve(&data.dir, rel);
-    let stream = events::read_events(&path)
+    let stream = events::io::read_events_with(&path, &event_read_options(data, &path))
         .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
     // The file holds the events of [t_p, t_{p+1}) (the last frame: one frame interval); events
     // outside it mean the file is another frame's or on another clock, and would supervise the

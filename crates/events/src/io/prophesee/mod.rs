@@ -606,7 +606,8 @@ fn raw_encoding(
             path,
             "no header line states the encoding of this Prophesee .raw file (`% evt 2.0`, \
              `% evt 3.0` or `% format EVT2|EVT3;...`) and it is not guessed: state it with \
-             `--format evt2|evt3` (library: `ReadOptions::raw_format`)",
+             `--format evt2|evt3` on the event commands or `events_raw_format` in a scene's \
+             scene.json (library: `ReadOptions::raw_format`)",
         )),
     }
 }
