@@ -36,14 +36,7 @@ fn resume_from_a_checkpoint_is_bit_identical() {
 
 #[test]
 fn resume_with_the_exposure_model_and_events_is_bit_identical() {
-    let config = TrainConfig {
-        blur_model: train::config::BlurModel::Exposure,
-        subframes: 3,
-        event_loss: true,
-        event_pairs: train::config::EventPairs::Exposure,
-        event_weight: 0.3,
-        ..tiny_config(16)
-    };
+    let config = exposure_events_config(16);
     resume_is_bit_identical(&exposure_context(&config), config);
 }
 
@@ -340,13 +333,7 @@ fn the_event_generation_loss_trains_pairs_from_the_event_files() {
 
 #[test]
 fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread_count() {
-    let config = TrainConfig {
-        blur_model: train::config::BlurModel::Exposure,
-        subframes: 3,
-        event_loss: true,
-        event_pairs: train::config::EventPairs::Exposure,
-        ..tiny_config(8)
-    };
+    let config = exposure_events_config(8);
     let ctx = exposure_context(&config);
     assert_eq!(ctx.exposure_poses.len(), ctx.frames.len());
     assert!(ctx.exposure_poses.iter().all(|p| p.len() == 3));
@@ -417,13 +404,7 @@ fn an_events_file_that_does_not_cover_its_frame_is_refused_at_load_time() {
     scene["frames"][3]["events"] = "events/000005.npz".into();
     std::fs::write(&scene_path, scene.to_string()).unwrap();
     let data = load_dataset(dir.path()).unwrap();
-    let config = TrainConfig {
-        blur_model: train::config::BlurModel::Exposure,
-        subframes: 3,
-        event_loss: true,
-        event_pairs: train::config::EventPairs::Exposure,
-        ..tiny_config(8)
-    };
+    let config = exposure_events_config(8);
     let mut ctx = context();
     ctx.enable_exposure(&data, config.subframes).unwrap();
     let err = ctx
@@ -465,13 +446,7 @@ fn header_less_raw_event_files_need_the_scene_to_state_their_encoding() {
         frame["events"] = raw.into();
     }
     std::fs::write(&scene_path, scene.to_string()).unwrap();
-    let config = TrainConfig {
-        blur_model: train::config::BlurModel::Exposure,
-        subframes: 3,
-        event_loss: true,
-        event_pairs: train::config::EventPairs::Exposure,
-        ..tiny_config(8)
-    };
+    let config = exposure_events_config(8);
     let load = |data: &train::data::Dataset| {
         let mut ctx = context();
         ctx.enable_exposure(data, config.subframes).unwrap();

@@ -52,6 +52,19 @@ pub fn tiny_config(steps: usize) -> TrainConfig {
     }
 }
 
+/// [`tiny_config`] with the exposure model (3 renders per exposure) and the event loss between
+/// its consecutive renders, at the default weight.
+pub fn exposure_events_config(steps: usize) -> TrainConfig {
+    TrainConfig {
+        blur_model: train::config::BlurModel::Exposure,
+        subframes: 3,
+        event_loss: true,
+        event_pairs: train::config::EventPairs::Exposure,
+        event_weight: 0.3,
+        ..tiny_config(steps)
+    }
+}
+
 /// Every learnable value of a trainer as bits.
 pub fn bits(t: &Trainer) -> Vec<u32> {
     let s = &t.model.set;
