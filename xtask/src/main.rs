@@ -17,6 +17,7 @@ mod eval_cmd;
 mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
+mod lpips_cmd;
 mod ply_info;
 mod pose_report;
 mod reconstruct;
@@ -72,6 +73,9 @@ enum Command {
     Synth(synth::Args),
     /// Optical flow between two images with the SPyNet-style network.
     Flow(flow_estimate::Args),
+    /// LPIPS distance (AlexNet, v0.1) between two images of the same size; the number is the last
+    /// line printed.
+    Lpips(lpips_cmd::Args),
     /// Convert the original SPyNet Torch7 files into a safetensors weights file.
     FlowImportT7(flow_import_t7::Args),
     /// Train SPyNet-style weights on procedural pairs (coarse to fine, EPE loss).
@@ -110,6 +114,7 @@ fn main() -> Result<()> {
         Command::BodyConvert(args) => body_convert::run(args),
         Command::Synth(args) => synth::run(args),
         Command::Flow(args) => flow_estimate::run(args),
+        Command::Lpips(args) => lpips_cmd::run(args),
         Command::FlowImportT7(args) => flow_import_t7::run(args),
         Command::TrainFlow(args) => train_flow::run(args),
         Command::Events(args) => events_cmd::run(args),
