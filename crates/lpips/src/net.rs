@@ -344,20 +344,22 @@ impl<T: Real> Lpips<T> {
         relu(&mut taps[0], margin.as_deref_mut());
         for i in 1..5 {
             let (before, rest) = taps.split_at_mut(i);
-            let input = if i <= 2 {
+            let pooled;
+            let input: &[T] = if i <= 2 {
                 let pool = self.pool_shape(i - 1, sizes[i - 1]);
-                let mut pooled = vec![T::zero(); pool.output_len()];
                 if let Some(m) = margin.as_deref_mut() {
                     *m = m.min(pool_gap(pool, &before[i - 1]));
                 }
-                max_pool2d_forward(pool, &before[i - 1], &mut pooled, &mut argmax[i - 1])?;
-                pooled
+                let mut out = vec![T::zero(); pool.output_len()];
+                max_pool2d_forward(pool, &before[i - 1], &mut out, &mut argmax[i - 1])?;
+                pooled = out;
+                &pooled
             } else {
-                before[i - 1].clone()
+                &before[i - 1]
             };
             conv2d_forward(
                 self.conv_shape(i, sizes[i]),
-                &input,
+                input,
                 &self.weights[i],
                 Some(&self.biases[i]),
                 &mut rest[0],
