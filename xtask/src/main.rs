@@ -8,6 +8,7 @@ mod ablate;
 mod bench_deform;
 mod bench_events;
 mod bench_flow;
+mod bench_lpips;
 mod bench_raster;
 mod body;
 mod body_convert;
@@ -96,6 +97,8 @@ enum BenchCommand {
     Events(bench_events::Args),
     /// SPyNet forward and forward + input-gradient times.
     Flow(bench_flow::Args),
+    /// LPIPS (shipped AlexNet weights): one image's features, a distance, a distance with its gradient.
+    Lpips(bench_lpips::Args),
     /// Posing N human Gaussians (non-rigid net + skinning field + LBS), forward and backward times.
     Deform(bench_deform::Args),
     /// Rasterizer forward and forward + backward times on seeded random scenes.
@@ -120,6 +123,7 @@ fn main() -> Result<()> {
         Command::Events(args) => events_cmd::run(args),
         Command::Bench(BenchCommand::Events(args)) => bench_events::run(args),
         Command::Bench(BenchCommand::Flow(args)) => bench_flow::run(args),
+        Command::Bench(BenchCommand::Lpips(args)) => bench_lpips::run(args),
         Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
         Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
         Command::Render(args) => render::run(args),
