@@ -174,13 +174,15 @@ const RUNS: [Run; 10] = [
 ];
 
 /// The metrics of `metrics.json` shown in the table, in order.
-const COLUMNS: [(&str, &str); 8] = [
+const COLUMNS: [(&str, &str); 10] = [
     ("test_psnr_full", "PSNR full (dB)"),
     ("test_psnr_human_box", "PSNR human box (dB)"),
     ("blurred_psnr_full", "blurred full (dB)"),
     ("blurred_psnr_human_box", "blurred human box (dB)"),
     ("test_ssim_full", "SSIM full"),
     ("test_ssim_human_box", "SSIM human box"),
+    ("test_lpips_full", "LPIPS full"),
+    ("test_lpips_human_box", "LPIPS human box"),
     ("mask_iou", "mask IoU"),
     ("train_seconds", "train s"),
 ];
@@ -301,7 +303,8 @@ type Outcome<'a> = (String, &'a Run, PathBuf, Result<serde_json::Value>);
 fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -> Result<()> {
     let mut md = format!(
         "# Ablation on {scene} (preset `{preset}`)\n\nRows are numbered as in `ablation_grid.png`; \
-         `blurred` columns are the input frames against the same references. Poses: `exact` (the \
+         `blurred` columns are the input frames against the same references; LPIPS (AlexNet v0.1, lower \
+         is closer) as in `metrics.json`. Poses: `exact` (the \
          scene has no `poses_true.json`: its poses are the truth), `estimated` (a fitter's, used as \
          given) or `corrected` (learned pose correction).\n\n| # | run | what | poses |"
     );
@@ -325,6 +328,7 @@ fn write_table(out: &Path, scene: &str, preset: &str, results: &[Outcome<'_>]) -
                             "mask_iou" | "test_ssim_full" | "test_ssim_human_box" => {
                                 format!("{v:.3}")
                             }
+                            "test_lpips_full" | "test_lpips_human_box" => format!("{v:.4}"),
                             _ => format!("{v:.2}"),
                         },
                     );

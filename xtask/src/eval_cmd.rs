@@ -1,6 +1,7 @@
-//! `cargo xtask eval`: score a saved model on a scene's test split (PSNR/SSIM full frame and in the
-//! human box against the sharp references, mask IoU, the blurred input's own figures), write
-//! `metrics.json` and one comparison strip PNG per test frame, and print a summary table.
+//! `cargo xtask eval`: score a saved model on a scene's test split (PSNR/SSIM/LPIPS full frame and in
+//! the human box against the sharp references, mask IoU, the blurred input's own figures), write
+//! `metrics.json` and one comparison strip PNG per test frame, and print a summary table. LPIPS uses
+//! the shipped weights (`data-fixtures/lpips/`).
 
 use anyhow::{Context, Result};
 use serde_json::json;
@@ -45,7 +46,10 @@ pub fn write_evaluation(
     out: &Path,
     summary: &EvalSummary,
 ) -> Result<()> {
-    let frames = evaluate_split(model, body, data, scene::Split::Test)?;
+    let weights = crate::common::shipped_lpips_weights();
+    let lpips = lpips::load_safetensors(&weights)
+        .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
+    let frames = evaluate_split(model, body, data, scene::Split::Test, Some(&lpips))?;
     let strips = out.join("eval");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
     for f in &frames {
@@ -76,13 +80,17 @@ pub fn write_evaluation(
         "mask_iou": m.mask_iou,
         "blurred_psnr_full": m.blurred_psnr_full,
         "blurred_psnr_human_box": m.blurred_psnr_human_box,
+        "test_lpips_full": m.lpips_full,
+        "test_lpips_human_box": m.lpips_human_box,
+        "blurred_lpips_full": m.blurred_lpips_full,
+        "blurred_lpips_human_box": m.blurred_lpips_human_box,
         "gap_to_blurred_full_db": m.psnr_full - m.blurred_psnr_full,
         "gap_to_blurred_human_box_db": m.psnr_human_box - m.blurred_psnr_human_box,
         "train_seconds": summary.train_seconds,
         "steps": summary.steps,
         "gaussians_human": summary.gaussians_human,
         "gaussians_scene": summary.gaussians_scene,
-        "lpips": "not available (no pretrained network may be downloaded)",
+        "lpips": "AlexNet v0.1 on sRGB-encoded images (lower is closer); a human box below 31 px per side is grown to 31 for LPIPS",
         "per_frame": frames.iter().map(|f| json!({"index": f.index, "metrics": f.metrics})).collect::<Vec<_>>(),
     });
     if let (Some(obj), Some(extra)) = (metrics.as_object_mut(), summary.extra.as_object()) {
@@ -110,6 +118,14 @@ pub fn write_evaluation(
     println!(
         "| SSIM render vs sharp         | {:>10.4} | {:>9.4} |",
         m.ssim_full, m.ssim_human_box
+    );
+    println!(
+        "| LPIPS render vs sharp        | {:>10.4} | {:>9.4} |",
+        m.lpips_full, m.lpips_human_box
+    );
+    println!(
+        "| LPIPS blurred vs sharp       | {:>10.4} | {:>9.4} |",
+        m.blurred_lpips_full, m.blurred_lpips_human_box
     );
     println!(
         "| human mask IoU (p > 0.5)     | {:>10.3} |           |",

@@ -4,8 +4,9 @@
 //! stored). The number of pyramid levels comes from the weights file. Output format by extension
 //! (`.flo`, `.png` 16-bit KITTI-style, `.npy`, `.exr`, via the `events` crate).
 
+use crate::common::read_rgb;
 use anyhow::{bail, Context, Result};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Arguments of `flow`.
 #[derive(clap::Args, Debug)]
@@ -28,52 +29,6 @@ pub struct Args {
     /// Optional colour-coded visualisation (Middlebury colour wheel) as PNG.
     #[arg(long)]
     pub viz: Option<PathBuf>,
-}
-
-/// Reads an RGB image as planar `(3, H, W)` f32; returns (data, height, width).
-pub fn read_rgb(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    if ext == "exr" {
-        use exr::prelude::*;
-        let img = read_first_rgba_layer_from_file(
-            path,
-            |res, _| {
-                (
-                    res.width(),
-                    res.height(),
-                    vec![0f32; 3 * res.width() * res.height()],
-                )
-            },
-            |(w, h, px): &mut (usize, usize, Vec<f32>),
-             pos,
-             (r, g, b, _a): (f32, f32, f32, f32)| {
-                let i = pos.y() * *w + pos.x();
-                let n = *w * *h;
-                px[i] = r;
-                px[n + i] = g;
-                px[2 * n + i] = b;
-            },
-        )
-        .with_context(|| format!("reading EXR {}", path.display()))?;
-        let (w, h, px) = img.layer_data.channel_data.pixels;
-        return Ok((px, h, w));
-    }
-    let img = image::open(path)
-        .with_context(|| format!("reading image {}", path.display()))?
-        .to_rgb32f();
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let n = w * h;
-    let mut out = vec![0f32; 3 * n];
-    for (i, p) in img.pixels().enumerate() {
-        for c in 0..3 {
-            out[c * n + i] = p.0[c];
-        }
-    }
-    Ok((out, h, w))
 }
 
 /// Runs the command.

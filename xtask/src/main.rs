@@ -8,6 +8,7 @@ mod ablate;
 mod bench_deform;
 mod bench_events;
 mod bench_flow;
+mod bench_lpips;
 mod bench_raster;
 mod body;
 mod body_convert;
@@ -17,6 +18,7 @@ mod eval_cmd;
 mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
+mod lpips_cmd;
 mod ply_info;
 mod pose_report;
 mod reconstruct;
@@ -72,6 +74,9 @@ enum Command {
     Synth(synth::Args),
     /// Optical flow between two images with the SPyNet-style network.
     Flow(flow_estimate::Args),
+    /// LPIPS distance (AlexNet, v0.1) between two images of the same size; the number is the last
+    /// line printed.
+    Lpips(lpips_cmd::Args),
     /// Convert the original SPyNet Torch7 files into a safetensors weights file.
     FlowImportT7(flow_import_t7::Args),
     /// Train SPyNet-style weights on procedural pairs (coarse to fine, EPE loss).
@@ -92,6 +97,8 @@ enum BenchCommand {
     Events(bench_events::Args),
     /// SPyNet forward and forward + input-gradient times.
     Flow(bench_flow::Args),
+    /// LPIPS (shipped AlexNet weights): one image's features, a distance, a distance with its gradient.
+    Lpips(bench_lpips::Args),
     /// Posing N human Gaussians (non-rigid net + skinning field + LBS), forward and backward times.
     Deform(bench_deform::Args),
     /// Rasterizer forward and forward + backward times on seeded random scenes.
@@ -110,11 +117,13 @@ fn main() -> Result<()> {
         Command::BodyConvert(args) => body_convert::run(args),
         Command::Synth(args) => synth::run(args),
         Command::Flow(args) => flow_estimate::run(args),
+        Command::Lpips(args) => lpips_cmd::run(args),
         Command::FlowImportT7(args) => flow_import_t7::run(args),
         Command::TrainFlow(args) => train_flow::run(args),
         Command::Events(args) => events_cmd::run(args),
         Command::Bench(BenchCommand::Events(args)) => bench_events::run(args),
         Command::Bench(BenchCommand::Flow(args)) => bench_flow::run(args),
+        Command::Bench(BenchCommand::Lpips(args)) => bench_lpips::run(args),
         Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
         Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
         Command::Render(args) => render::run(args),

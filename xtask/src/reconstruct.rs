@@ -7,7 +7,7 @@
 //! `model/` (see `train::export`), `model/posed_frame_NNNNNN.ply` (a standard 3DGS PLY of the first
 //! training frame in INRIA's degree-3 layout), `eval/strip_NNNNNN.png`, `metrics.json`, `curve.png`.
 
-use crate::common::{default_benchmark, shipped_flow_network, target_dir};
+use crate::common::{default_benchmark, shipped_flow_network, shipped_lpips_weights, target_dir};
 use crate::eval_cmd::{write_evaluation, EvalSummary};
 use anyhow::{bail, Context, Result};
 use std::io::Write;
@@ -272,6 +272,17 @@ pub fn run(args: Args) -> Result<()> {
     if config.flow_loss {
         enable_flow(&mut ctx, &data, &config)?;
     }
+    if config.lpips_weight > 0.0 {
+        let weights = shipped_lpips_weights();
+        let net = lpips::load_safetensors(&weights)
+            .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
+        ctx.enable_lpips(net)
+            .context("preparing the perceptual (LPIPS) loss")?;
+        println!(
+            "perceptual loss: LPIPS (AlexNet, v0.1) of each frame's prediction, weight {}",
+            config.lpips_weight
+        );
+    }
     if config.train_on == TrainOn::Sharp {
         ctx.use_sharp_images(&data)
             .context("training on the sharp references")?;
@@ -435,6 +446,7 @@ pub fn run(args: Args) -> Result<()> {
             "event_pairs": config.event_pairs,
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,
+            "lpips_weight": config.lpips_weight,
             "pose_correction": config.pose_correction,
             "pose_error": pose_error,
             "seed": config.seed,
@@ -467,6 +479,7 @@ fn mean_times(recent: &[StepReport]) -> Vec<(&'static str, f64)> {
         ("pose", sum(|r| r.times.pose)),
         ("render", sum(|r| r.times.render)),
         ("loss", sum(|r| r.times.loss)),
+        ("lpips", sum(|r| r.times.lpips)),
         ("render_backward", sum(|r| r.times.render_backward)),
         ("model_backward", sum(|r| r.times.model_backward)),
         ("adam", sum(|r| r.times.adam)),

@@ -77,10 +77,15 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         "mask_iou",
         "blurred_psnr_full",
         "blurred_psnr_human_box",
+        "test_lpips_full",
+        "test_lpips_human_box",
+        "blurred_lpips_full",
+        "blurred_lpips_human_box",
         "train_seconds",
     ] {
         assert!(metrics[key].as_f64().unwrap().is_finite(), "{key}");
     }
+    assert_eq!(metrics["lpips_weight"], 0.0);
     assert_eq!(metrics["steps"], 12);
     assert_eq!(
         std::fs::read_to_string(out.join("log.jsonl"))
@@ -132,6 +137,11 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
             .unwrap();
     assert_eq!(again["test_psnr_full"], metrics["test_psnr_full"]);
     assert_eq!(again["mask_iou"], metrics["mask_iou"]);
+    assert_eq!(again["test_lpips_full"], metrics["test_lpips_full"]);
+    assert_eq!(
+        again["blurred_lpips_human_box"],
+        metrics["blurred_lpips_human_box"]
+    );
 
     // render-pose: a new pose renders to a PNG and a posed PLY.
     let poses = dir.path().join("poses.json");
@@ -380,6 +390,7 @@ fn ablate_writes_a_table_json_and_grid_and_records_failed_runs() {
     );
     let md = std::fs::read_to_string(out.join("ablation.md")).unwrap();
     assert!(md.contains("| 1 | `one-hot` |"), "{md}");
+    assert!(md.contains(" LPIPS full | LPIPS human box |"), "{md}");
     assert!(
         md.contains("| 2 | `flow-events` |") && md.contains("failed"),
         "{md}"
@@ -398,6 +409,30 @@ fn ablate_writes_a_table_json_and_grid_and_records_failed_runs() {
         .unwrap();
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("semantic-none"));
+}
+
+#[test]
+fn the_perceptual_loss_runs_from_the_command_line_and_is_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    let out = dir.path().join("lpips");
+    let o = reconstruct(
+        &out,
+        &config,
+        &["--blur-model", "none", "--lpips-weight", "0.1"],
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("perceptual loss: LPIPS"), "{stdout}");
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert!((metrics["lpips_weight"].as_f64().unwrap() - 0.1).abs() < 1e-6);
+    assert!(metrics["step_seconds_breakdown"]["lpips"].as_f64().unwrap() > 0.0);
+    let log = std::fs::read_to_string(out.join("log.jsonl")).unwrap();
+    for line in log.lines() {
+        let step: serde_json::Value = serde_json::from_str(line).unwrap();
+        let lpips = step["lpips"].as_f64().unwrap();
+        assert!(lpips > 0.0 && lpips.is_finite(), "{line}");
+    }
 }
 
 #[test]

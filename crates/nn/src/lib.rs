@@ -1,5 +1,6 @@
 //! Supporting neural-network building blocks for the workspace: dense layers on batches, activations,
-//! 2-D convolution, 2×2 average pooling, bilinear resize, backward warping by a flow field and Adam.
+//! 2-D convolution (stride 1, and strided by polyphase decomposition), 2×2 average pooling, max
+//! pooling, bilinear resize, backward warping by a flow field and Adam.
 //!
 //! Every op has a forward and a backward pass (w.r.t. inputs and weights) and is generic over
 //! [`Real`] (`f32` for work, `f64` for the finite-difference checks in `tests/gradient-checks`).
@@ -18,6 +19,7 @@
 mod activation;
 mod adam;
 mod conv;
+mod conv_strided;
 mod dense;
 mod gemm;
 mod gemm_avx512;
@@ -34,9 +36,16 @@ pub use adam::{adam_update, Adam, AdamConfig};
 pub use conv::{
     conv2d_backward_input, conv2d_backward_weight, conv2d_forward, conv2d_reference, Conv2dShape,
 };
+pub use conv_strided::{
+    conv2d_strided_backward_input, conv2d_strided_backward_weight, conv2d_strided_forward,
+    conv2d_strided_reference, StridedConv2dShape,
+};
 pub use dense::{dense_backward, dense_forward, DenseShape};
 pub use gemm::gemm;
-pub use pool::{avg_pool2x2_backward, avg_pool2x2_forward, pooled_size};
+pub use pool::{
+    avg_pool2x2_backward, avg_pool2x2_forward, max_pool2d_backward, max_pool2d_forward,
+    pooled_size, MaxPool2dShape,
+};
 pub use resize::{resize_bilinear_backward, resize_bilinear_forward};
 pub use warp::{warp_backward, warp_forward};
 

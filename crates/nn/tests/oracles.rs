@@ -205,3 +205,147 @@ fn adam_matches_hand_computed_steps() {
     assert!((p[1] - (p1 - upd)).abs() < 1e-12);
     assert_eq!(opt.steps(), 2);
 }
+
+#[test]
+fn strided_conv2d_matches_direct_oracle_forward_and_adjoint() {
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    for &(batch, c_in, c_out, h, w, k, stride, pad) in &[
+        (1, 3, 4, 35, 31, 11, 4, 2), // AlexNet's stem at its smallest input
+        (2, 2, 3, 13, 17, 11, 4, 2),
+        (1, 2, 3, 9, 8, 3, 2, 1),
+        (1, 1, 2, 7, 6, 1, 3, 0),
+        (2, 3, 2, 10, 12, 5, 1, 2),
+        (1, 2, 2, 6, 9, 4, 3, 0),
+    ] {
+        let s = StridedConv2dShape {
+            batch,
+            c_in,
+            c_out,
+            height: h,
+            width: w,
+            kernel: k,
+            stride,
+            pad,
+        };
+        let x = symmetric(&mut rng, s.input_len());
+        let wt = symmetric(&mut rng, s.weight_len());
+        let b = symmetric(&mut rng, c_out);
+        let mut fast = vec![0.0; s.output_len()];
+        let mut slow = vec![0.0; s.output_len()];
+        conv2d_strided_forward(s, &x, &wt, Some(&b), &mut fast).expect("shape");
+        conv2d_strided_reference(s, &x, &wt, Some(&b), &mut slow).expect("shape");
+        assert!(max_diff(&fast, &slow) < 1e-12, "{s:?} forward");
+        let g = symmetric(&mut rng, s.output_len());
+        let mut nobias = vec![0.0; s.output_len()];
+        conv2d_strided_reference(s, &x, &wt, None, &mut nobias).expect("shape");
+        let lhs = dot(&g, &nobias);
+        let mut dx = vec![f64::NAN; s.input_len()];
+        conv2d_strided_backward_input(s, &g, &wt, &mut dx).expect("shape");
+        assert!(
+            (lhs - dot(&dx, &x)).abs() < 1e-9 * (1.0 + lhs.abs()),
+            "{s:?} dx"
+        );
+        let mut dw = vec![0.0; s.weight_len()];
+        let mut db = vec![0.0; c_out];
+        conv2d_strided_backward_weight(s, &x, &g, &mut dw, Some(&mut db)).expect("shape");
+        assert!(
+            (lhs - dot(&dw, &wt)).abs() < 1e-9 * (1.0 + lhs.abs()),
+            "{s:?} dw"
+        );
+        assert!(
+            (dot(&g, &slow) - lhs - dot(&db, &b)).abs() < 1e-9 * (1.0 + lhs.abs()),
+            "{s:?} db"
+        );
+    }
+}
+
+#[test]
+fn strided_conv2d_f32_is_identical_for_one_and_two_threads() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let s = StridedConv2dShape {
+        batch: 1,
+        c_in: 3,
+        c_out: 16,
+        height: 67,
+        width: 70,
+        kernel: 11,
+        stride: 4,
+        pad: 2,
+    };
+    let f32s = |v: Vec<f64>| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+    let x = f32s(symmetric(&mut rng, s.input_len()));
+    let w = f32s(symmetric(&mut rng, s.weight_len()));
+    let g = f32s(symmetric(&mut rng, s.output_len()));
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            let mut y = vec![0.0f32; s.output_len()];
+            conv2d_strided_forward(s, &x, &w, None, &mut y).expect("shape");
+            let mut dx = vec![0.0f32; s.input_len()];
+            conv2d_strided_backward_input(s, &g, &w, &mut dx).expect("shape");
+            let mut dw = vec![0.0f32; s.weight_len()];
+            conv2d_strided_backward_weight(s, &x, &g, &mut dw, None).expect("shape");
+            (y, dx, dw)
+        })
+    };
+    assert_eq!(run(1), run(2));
+}
+
+#[test]
+fn max_pool_matches_naive_windows_and_routes_gradients_to_the_first_maximum() {
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    for &(planes, h, w, k, stride) in &[(2, 7, 9, 3, 2), (1, 8, 8, 2, 2), (3, 5, 4, 3, 1)] {
+        let s = MaxPool2dShape {
+            planes,
+            height: h,
+            width: w,
+            kernel: k,
+            stride,
+        };
+        // Values on a coarse grid, so that windows hold ties.
+        let x: Vec<f64> = symmetric(&mut rng, s.input_len())
+            .iter()
+            .map(|v| (v * 3.0).round())
+            .collect();
+        let mut y = vec![0.0; s.output_len()];
+        let mut arg = vec![0u32; s.output_len()];
+        max_pool2d_forward(s, &x, &mut y, &mut arg).expect("shape");
+        let (ho, wo) = (s.out_height(), s.out_width());
+        assert_eq!((ho, wo), ((h - k) / stride + 1, (w - k) / stride + 1));
+        let mut want_dx = vec![0.0; s.input_len()];
+        let g = symmetric(&mut rng, s.output_len());
+        for p in 0..planes {
+            for oy in 0..ho {
+                for ox in 0..wo {
+                    let mut best = (f64::NEG_INFINITY, 0);
+                    for iy in oy * stride..oy * stride + k {
+                        for ix in ox * stride..ox * stride + k {
+                            let v = x[(p * h + iy) * w + ix];
+                            if v > best.0 {
+                                best = (v, iy * w + ix);
+                            }
+                        }
+                    }
+                    let o = (p * ho + oy) * wo + ox;
+                    assert_eq!((y[o], arg[o] as usize), best, "{s:?} ({p}, {oy}, {ox})");
+                    want_dx[p * h * w + best.1] += g[o];
+                }
+            }
+        }
+        let mut dx = vec![f64::NAN; s.input_len()];
+        max_pool2d_backward(s, &arg, &g, &mut dx).expect("shape");
+        assert!(max_diff(&dx, &want_dx) < 1e-12, "{s:?} backward");
+    }
+    let s = MaxPool2dShape {
+        planes: 1,
+        height: 2,
+        width: 5,
+        kernel: 3,
+        stride: 2,
+    };
+    let err = max_pool2d_forward(s, &[0.0; 10], &mut [], &mut []).expect_err("too small");
+    assert!(matches!(err, NnError::Shape(_)), "{err:?}");
+}

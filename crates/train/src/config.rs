@@ -5,8 +5,8 @@
 //! Learning rates follow 3DGS / 3DGS-Avatar (positions 1.6e-4 × scene extent decayed log-linearly to
 //! 1 %, scales 5e-3, rotations 1e-3, opacity 5e-2, networks 1e-3); the loss weights follow 3DGS-Avatar
 //! (skinning 10 for the first part of training, AIAP on positions 1 and on covariances 100, D-SSIM 0.2
-//! as in 3DGS because LPIPS — 3DGS-Avatar's perceptual term — is not available without downloaded
-//! weights).
+//! as in 3DGS). 3DGS-Avatar's perceptual term, LPIPS, is available (`lpips_weight`) but off by
+//! default until its effect on the benchmark is measured.
 
 use crate::blend::SemanticMode;
 use crate::init::{InitMode, SemanticInit};
@@ -120,6 +120,10 @@ training_options! {
     near_plane: f64 = rasterize_cpu::DEFAULT_NEAR_PLANE,
     /// Weight λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
     ssim_weight: f32 = 0.2,
+    /// Weight of the perceptual loss: LPIPS (AlexNet, v0.1, on sRGB-encoded images) of the frame's
+    /// prediction (the mean of its sub-exposure renders) against the observed frame
+    /// (`train::perceptual`; 3DGS-Avatar's third term). 0 = off (no LPIPS work at all).
+    lpips_weight: f32 = 0.0,
     /// Weight of the skinning loss (learned weights vs the body's, on surface samples).
     skinning_weight: f32 = 10.0,
     /// The skinning loss is applied before this step only.
@@ -514,6 +518,9 @@ impl TrainConfig {
         }
         if !(0.0..=1.0).contains(&self.ssim_weight) {
             return bad("ssim_weight", "must be in [0, 1]");
+        }
+        if !(self.lpips_weight >= 0.0 && self.lpips_weight.is_finite()) {
+            return bad("lpips_weight", "must be a finite number ≥ 0");
         }
         if !(self.flow_weight >= 0.0 && self.flow_weight.is_finite()) {
             return bad("flow_weight", "must be a finite number ≥ 0");

@@ -1,11 +1,19 @@
-//! Evaluation (DESIGN.md §6): PSNR and SSIM of test renders against the sharp references over the full
-//! frame and inside the human bounding box (from the reference mask), mask IoU of the rendered human
-//! probability thresholded at 0.5, and side-by-side strips for a person to look at.
+//! Evaluation (DESIGN.md §6): PSNR, SSIM and LPIPS of test renders against the sharp references over
+//! the full frame and inside the human bounding box (from the reference mask), mask IoU of the rendered
+//! human probability thresholded at 0.5, and side-by-side strips for a person to look at.
 //!
 //! Works on images already rendered, so it is independent of how the model produced them. SSIM is the
 //! project's one SSIM (`image_loss::ssim`: 11×11 Gaussian window, σ 1.5, zero padding, data range 1).
+//! LPIPS is AlexNet v0.1 on the sRGB-encoded images (`perceptual`: the images here are linear, the
+//! network was trained on sRGB). The network needs at least `lpips::MIN_SIZE` (31) pixels per side:
+//! a human box smaller than that is grown symmetrically about its centre (kept inside the frame) to
+//! that size for LPIPS only — so a small box's LPIPS also sees a little of the scene around it — and
+//! a frame smaller than that gets NaN.
 
 use crate::image_loss::{crop, mask_iou, psnr, ssim, ImageShape};
+use crate::perceptual::{lpips_distance, reference_features};
+use crate::TrainError;
+use lpips::Lpips;
 
 /// One evaluated frame: planar (3, H, W) images in linear [0, 1] and (H, W) masks.
 #[derive(Clone, Copy, Debug)]
@@ -43,6 +51,16 @@ pub struct FrameMetrics {
     pub blurred_psnr_full: f64,
     /// PSNR (dB) of the blurred input against the reference, human box.
     pub blurred_psnr_human_box: f64,
+    /// LPIPS (AlexNet, v0.1; lower is closer), full frame (NaN without the network or for frames
+    /// below its minimum size).
+    pub lpips_full: f64,
+    /// LPIPS inside the human bounding box, grown to the network's minimum size if smaller (NaN if
+    /// the mask is empty).
+    pub lpips_human_box: f64,
+    /// LPIPS of the blurred input against the reference, full frame.
+    pub blurred_lpips_full: f64,
+    /// LPIPS of the blurred input against the reference, human box.
+    pub blurred_lpips_human_box: f64,
 }
 
 /// Tight bounding box `(x0, y0, x1, y1)` (exclusive ends) of the true pixels of an (H, W) mask.
@@ -65,8 +83,57 @@ pub fn mask_bbox(
     bbox
 }
 
-/// Figures of one frame.
-pub fn evaluate_frame(f: &EvalFrame<'_>) -> FrameMetrics {
+/// The box `(x0, y0, x1, y1)` (exclusive ends) grown symmetrically about its centre to at least
+/// `min` pixels per side, shifted to stay inside a `width` × `height` frame; `None` if the frame
+/// itself is smaller than `min`.
+pub fn grown_box(
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    width: usize,
+    height: usize,
+    min: usize,
+) -> Option<(usize, usize, usize, usize)> {
+    let grow = |lo: usize, hi: usize, n: usize| -> Option<(usize, usize)> {
+        if n < min {
+            return None;
+        }
+        if hi - lo >= min {
+            return Some((lo, hi));
+        }
+        let start = lo.saturating_sub((min - (hi - lo)) / 2).min(n - min);
+        Some((start, start + min))
+    };
+    let (x0, x1) = grow(x0, x1, width)?;
+    let (y0, y1) = grow(y0, y1, height)?;
+    Some((x0, y0, x1, y1))
+}
+
+/// LPIPS of `render` and `blurred` against `reference` (linear planar (3, H, W)), or NaN for a size
+/// the network does not take.
+fn lpips_pair(
+    net: &Lpips<f32>,
+    render: &[f32],
+    blurred: &[f32],
+    reference: &[f32],
+    height: usize,
+    width: usize,
+) -> Result<(f64, f64), TrainError> {
+    if lpips::tap_sizes(height, width).is_none() {
+        return Ok((f64::NAN, f64::NAN));
+    }
+    let features = reference_features(net, reference, height, width)?;
+    let of = |image: &[f32]| -> Result<f64, TrainError> {
+        Ok(f64::from(lpips_distance(
+            net, image, height, width, &features,
+        )?))
+    };
+    Ok((of(render)?, of(blurred)?))
+}
+
+/// Figures of one frame; the LPIPS figures are NaN without `lpips`.
+pub fn evaluate_frame(
+    f: &EvalFrame<'_>,
+    lpips: Option<&Lpips<f32>>,
+) -> Result<FrameMetrics, TrainError> {
     let shape = ImageShape {
         channels: 3,
         height: f.height,
@@ -83,20 +150,43 @@ pub fn evaluate_frame(f: &EvalFrame<'_>) -> FrameMetrics {
         },
         blurred_psnr_full: psnr(f.blurred, f.reference),
         blurred_psnr_human_box: f64::NAN,
+        lpips_full: f64::NAN,
+        lpips_human_box: f64::NAN,
+        blurred_lpips_full: f64::NAN,
+        blurred_lpips_human_box: f64::NAN,
     };
-    if let Some((x0, y0, x1, y1)) = mask_bbox(f.mask, f.width, f.height) {
-        let crop_of = |img: &[f32]| crop(img, shape, x0, y0, x1, y1);
-        let box_shape = ImageShape {
-            channels: 3,
-            height: y1 - y0,
-            width: x1 - x0,
-        };
-        let (r, g, b) = (crop_of(f.render), crop_of(f.reference), crop_of(f.blurred));
-        out.psnr_human_box = psnr(&r, &g);
-        out.ssim_human_box = f64::from(ssim(&r, &g, box_shape, None));
-        out.blurred_psnr_human_box = psnr(&b, &g);
+    if let Some(net) = lpips {
+        (out.lpips_full, out.blurred_lpips_full) =
+            lpips_pair(net, f.render, f.blurred, f.reference, f.height, f.width)?;
     }
-    out
+    let Some(bbox) = mask_bbox(f.mask, f.width, f.height) else {
+        return Ok(out);
+    };
+    let (x0, y0, x1, y1) = bbox;
+    let crop_of = |img: &[f32]| crop(img, shape, x0, y0, x1, y1);
+    let box_shape = ImageShape {
+        channels: 3,
+        height: y1 - y0,
+        width: x1 - x0,
+    };
+    let (r, g, b) = (crop_of(f.render), crop_of(f.reference), crop_of(f.blurred));
+    out.psnr_human_box = psnr(&r, &g);
+    out.ssim_human_box = f64::from(ssim(&r, &g, box_shape, None));
+    out.blurred_psnr_human_box = psnr(&b, &g);
+    if let (Some(net), Some((x0, y0, x1, y1))) =
+        (lpips, grown_box(bbox, f.width, f.height, lpips::MIN_SIZE))
+    {
+        let crop_of = |img: &[f32]| crop(img, shape, x0, y0, x1, y1);
+        (out.lpips_human_box, out.blurred_lpips_human_box) = lpips_pair(
+            net,
+            &crop_of(f.render),
+            &crop_of(f.blurred),
+            &crop_of(f.reference),
+            y1 - y0,
+            x1 - x0,
+        )?;
+    }
+    Ok(out)
 }
 
 /// Mean of the per-frame figures (NaN entries, from frames without a human, are skipped per field).
@@ -117,6 +207,10 @@ pub fn mean_metrics(frames: &[FrameMetrics]) -> FrameMetrics {
         mask_iou: mean(|m| m.mask_iou),
         blurred_psnr_full: mean(|m| m.blurred_psnr_full),
         blurred_psnr_human_box: mean(|m| m.blurred_psnr_human_box),
+        lpips_full: mean(|m| m.lpips_full),
+        lpips_human_box: mean(|m| m.lpips_human_box),
+        blurred_lpips_full: mean(|m| m.blurred_lpips_full),
+        blurred_lpips_human_box: mean(|m| m.blurred_lpips_human_box),
     }
 }
 
@@ -158,7 +252,8 @@ pub struct EvaluatedFrame {
 }
 
 /// Renders every frame of `split` with the model and scores it against the sharp reference (or, for
-/// data without one, against the observed frame — the figures then measure fidelity to the input).
+/// data without one, against the observed frame — the figures then measure fidelity to the input);
+/// LPIPS with `lpips` (NaN without).
 /// Unseen frames use the latent of the nearest training frame and, with pose correction, the
 /// correction interpolated from their neighbouring training frames ([`crate::model::Model::corrected_params`]).
 pub fn evaluate_split(
@@ -166,6 +261,7 @@ pub fn evaluate_split(
     body: &crate::body::Body,
     data: &crate::data::Dataset,
     split: scene::Split,
+    lpips: Option<&Lpips<f32>>,
 ) -> Result<Vec<EvaluatedFrame>, crate::TrainError> {
     let (w, h) = (data.camera.width as usize, data.camera.height as usize);
     let mut out = Vec::new();
@@ -184,7 +280,7 @@ pub fn evaluate_split(
         };
         out.push(EvaluatedFrame {
             index: f.index,
-            metrics: evaluate_frame(&frame),
+            metrics: evaluate_frame(&frame, lpips)?,
             strip: comparison_strip(&frame),
         });
     }
@@ -218,7 +314,7 @@ mod tests {
             human_probability: &prob,
         };
         assert_eq!(mask_bbox(&mask, w, h), Some((4, 3, 9, 6)));
-        let m = evaluate_frame(&f);
+        let m = evaluate_frame(&f, None).expect("no LPIPS, no error");
         assert_eq!(m.mask_iou, 1.0);
         // Box: 15 of 45 values off by 0.1 → MSE 1/300 → 24.77 dB; full frame: 15 of 576.
         assert!(
@@ -227,6 +323,7 @@ mod tests {
         );
         assert!((m.psnr_full - 10.0 * (576.0f64 / 15.0 / 0.01).log10()).abs() < 1e-3);
         assert!(m.blurred_psnr_full.is_infinite());
+        assert!(m.lpips_full.is_nan() && m.blurred_lpips_human_box.is_nan());
         let (sw, sh, strip) = comparison_strip(&f);
         assert_eq!((sw, sh, strip.len()), (4 * 16 + 6, 12, 3 * 12 * 70));
     }
@@ -241,6 +338,10 @@ mod tests {
             mask_iou: 1.0,
             blurred_psnr_full: 18.0,
             blurred_psnr_human_box: f64::NAN,
+            lpips_full: 0.1,
+            lpips_human_box: f64::NAN,
+            blurred_lpips_full: 0.2,
+            blurred_lpips_human_box: f64::NAN,
         };
         let b = FrameMetrics {
             psnr_human_box: 10.0,
@@ -248,6 +349,56 @@ mod tests {
         };
         let m = mean_metrics(&[a, b]);
         assert_eq!(m.psnr_human_box, 10.0);
+        assert_eq!(m.lpips_full, 0.1);
+        assert!(m.lpips_human_box.is_nan());
         assert_eq!(m.psnr_full, 20.0);
+    }
+
+    #[test]
+    fn small_boxes_grow_to_the_network_minimum_inside_the_frame() {
+        assert_eq!(
+            grown_box((10, 5, 50, 60), 64, 64, 31),
+            Some((10, 5, 50, 60))
+        );
+        // 10 px wide at x 20..30: 21 px more, 10 on the left.
+        assert_eq!(
+            grown_box((20, 0, 30, 40), 64, 64, 31),
+            Some((10, 0, 41, 40))
+        );
+        // Against the left and right edges.
+        assert_eq!(grown_box((2, 0, 6, 40), 64, 64, 31), Some((0, 0, 31, 40)));
+        assert_eq!(
+            grown_box((60, 0, 64, 40), 64, 64, 31),
+            Some((33, 0, 64, 40))
+        );
+        assert_eq!(grown_box((0, 0, 5, 5), 30, 64, 31), None);
+    }
+
+    #[test]
+    fn lpips_figures_are_zero_for_a_perfect_render_and_cover_a_small_box() {
+        let (w, h) = (48, 40);
+        let reference: Vec<f32> = (0..3 * w * h)
+            .map(|i| 0.5 + 0.4 * ((i % 13) as f32 / 13.0 - 0.5))
+            .collect();
+        let blurred: Vec<f32> = reference.iter().map(|v| v * 0.9).collect();
+        let mut mask = vec![false; w * h];
+        mask[10 * w + 20] = true; // a one-pixel human
+        let prob = vec![0.0; w * h];
+        let net = Lpips::<f32>::random([4, 4, 4, 4, 4], 1);
+        let f = EvalFrame {
+            width: w,
+            height: h,
+            render: &reference,
+            reference: &reference,
+            blurred: &blurred,
+            mask: &mask,
+            human_probability: &prob,
+        };
+        let m = evaluate_frame(&f, Some(&net)).expect("sizes");
+        assert_eq!((m.lpips_full, m.lpips_human_box), (0.0, 0.0));
+        assert!(
+            m.blurred_lpips_full > 0.0 && m.blurred_lpips_human_box > 0.0,
+            "{m:?}"
+        );
     }
 }

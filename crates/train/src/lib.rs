@@ -19,6 +19,7 @@ pub mod image_loss;
 pub mod init;
 pub mod model;
 pub mod optimisers;
+pub mod perceptual;
 pub mod pose_correction;
 pub mod posing;
 pub mod reposing;
@@ -46,6 +47,9 @@ pub enum TrainError {
     /// The flow network rejected its inputs or weights.
     #[error("flow network: {0}")]
     Flow(#[from] flow::FlowError),
+    /// The LPIPS network rejected its inputs (e.g. an image below its minimum size).
+    #[error("lpips: {0}")]
+    Lpips(#[from] lpips::LpipsError),
     /// A configuration or input that cannot be trained on.
     #[error("{0}")]
     Config(String),

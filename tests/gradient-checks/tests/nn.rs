@@ -225,3 +225,74 @@ proptest! {
         c.finish();
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    #[test]
+    fn strided_conv2d_gradients(
+        seed in any::<u64>(),
+        batch in 1usize..3,
+        c_in in 1usize..3,
+        c_out in 1usize..4,
+        height in 1usize..14,
+        width in 1usize..14,
+        ksp in prop::sample::select(vec![(11usize, 4usize, 2usize), (3, 2, 1), (5, 2, 0), (2, 3, 1), (3, 1, 1)]),
+    ) {
+        let (kernel, stride, pad) = ksp;
+        prop_assume!(height + 2 * pad >= kernel && width + 2 * pad >= kernel);
+        let mut r = rng(seed);
+        let s = StridedConv2dShape { batch, c_in, c_out, height, width, kernel, stride, pad };
+        let (x, w, b) = (symmetric(&mut r, s.input_len()), symmetric(&mut r, s.weight_len()), symmetric(&mut r, c_out));
+        let g = symmetric(&mut r, s.output_len());
+        let fwd = |x: &[f64], w: &[f64], b: &[f64]| {
+            let mut y = vec![0.0; s.output_len()];
+            conv2d_strided_forward(s, x, w, Some(b), &mut y).expect("shape");
+            y
+        };
+        let mut dx = vec![f64::NAN; x.len()];
+        conv2d_strided_backward_input(s, &g, &w, &mut dx).expect("shape");
+        let mut dw = vec![0.0; w.len()];
+        let mut db = vec![0.0; c_out];
+        conv2d_strided_backward_weight(s, &x, &g, &mut dw, Some(&mut db)).expect("shape");
+        let mut c = GradientChecker::new();
+        check(&mut c, "strided conv2d dx", &x, &g, |p| fwd(p, &w, &b), &dx);
+        check(&mut c, "strided conv2d dw", &w, &g, |p| fwd(&x, p, &b), &dw);
+        check(&mut c, "strided conv2d db", &b, &g, |p| fwd(&x, &w, p), &db);
+        c.finish();
+    }
+
+    /// Inputs are a random permutation of values 0.01 apart (≫ h), so no window's maximum changes
+    /// under the probe: max pooling is linear around the test point.
+    #[test]
+    fn max_pool_gradients(
+        seed in any::<u64>(),
+        planes in 1usize..4,
+        h in 3usize..9,
+        w in 3usize..9,
+        ks in prop::sample::select(vec![(3usize, 2usize), (2, 2), (3, 1)]),
+    ) {
+        let (kernel, stride) = ks;
+        let mut r = rng(seed);
+        let s = MaxPool2dShape { planes, height: h, width: w, kernel, stride };
+        let n = s.input_len();
+        let mut x: Vec<f64> = (0..n).map(|i| 0.01 * i as f64 - 0.005 * n as f64).collect();
+        for i in (1..n).rev() {
+            x.swap(i, r.gen_range(0..=i));
+        }
+        let g = symmetric(&mut r, s.output_len());
+        let mut y = vec![0.0; s.output_len()];
+        let mut arg = vec![0u32; s.output_len()];
+        max_pool2d_forward(s, &x, &mut y, &mut arg).expect("shape");
+        let mut dx = vec![f64::NAN; n];
+        max_pool2d_backward(s, &arg, &g, &mut dx).expect("shape");
+        let mut c = GradientChecker::new();
+        check(&mut c, "max_pool", &x, &g, |p| {
+            let mut y = vec![0.0; g.len()];
+            let mut a = vec![0u32; g.len()];
+            max_pool2d_forward(s, p, &mut y, &mut a).expect("shape");
+            y
+        }, &dx);
+        c.finish();
+    }
+}

@@ -85,6 +85,9 @@ pub struct TrainingData {
     /// (before the first frame's time); empty unless [`TrainingData::enable_exposure_events`] was
     /// called.
     pub exposure_events: Vec<Vec<Option<Vec<f32>>>>,
+    /// The frozen LPIPS network of the perceptual loss (`None` unless
+    /// [`TrainingData::enable_lpips`] was called).
+    pub lpips: Option<lpips::Lpips<f32>>,
 }
 
 impl TrainingData {
@@ -124,6 +127,7 @@ impl TrainingData {
             exposure_poses: Vec::new(),
             exposure_params: Vec::new(),
             exposure_events: Vec::new(),
+            lpips: None,
         })
     }
 
@@ -287,6 +291,22 @@ impl TrainingData {
             all.push(pairs);
         }
         self.exposure_events = all;
+        Ok(())
+    }
+
+    /// Prepares the perceptual loss with the LPIPS network `net` (the driver loads the shipped
+    /// weights); refused if the frames are smaller than the network's minimum size.
+    pub fn enable_lpips(&mut self, net: lpips::Lpips<f32>) -> Result<(), TrainError> {
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        if lpips::tap_sizes(h, w).is_none() {
+            return Err(lpips::LpipsError::TooSmall {
+                width: w,
+                height: h,
+                min: lpips::MIN_SIZE,
+            }
+            .into());
+        }
+        self.lpips = Some(net);
         Ok(())
     }
 

@@ -1,7 +1,7 @@
 //! The E-Sem3DGS optimisation loop (paper §4.5): a [`Model`], its [`Optimisers`], the density
 //! statistics, the frame-order RNG and the AIAP neighbourhoods. [`Trainer::step`] renders the frame
 //! passes a step needs (frame k, and frame k+1 when a pair loss applies), takes their losses — L1 +
-//! λ·D-SSIM, the pair losses, the skinning and AIAP regularisers — runs one backward per pass, guards
+//! λ·D-SSIM, the optional LPIPS term, the pair losses, the skinning and AIAP regularisers — runs one backward per pass, guards
 //! against non-finite values and steps the optimisers; [`Trainer::refine`] is density control and
 //! the opacity reset on their schedules. Checkpoints (`checkpoint.rs`) resume bit for bit.
 //!
@@ -27,6 +27,7 @@ use crate::image_loss::{psnr, ImageShape};
 use crate::init::{initialise, InitConfig};
 use crate::model::{FramePass, Model, PosedGradients, RENDER_CHANNELS};
 use crate::optimisers::Optimisers;
+use crate::perceptual::perceptual_term;
 use crate::posing::ModelGradients;
 use crate::schedule::{accumulate_screen_stats, exponential_rate, on_schedule};
 use crate::TrainError;
@@ -111,7 +112,8 @@ impl Trainer {
 
     /// Refuses a configuration that needs data `data` was not prepared with: the exposure model
     /// without sub-exposure poses ([`TrainingData::enable_exposure`]), events inside exposures
-    /// without their counts ([`TrainingData::enable_exposure_events`]).
+    /// without their counts ([`TrainingData::enable_exposure_events`]), the perceptual loss without
+    /// its network ([`TrainingData::enable_lpips`]).
     pub fn check_data(config: &TrainConfig, data: &TrainingData) -> Result<(), TrainError> {
         if config.blur_model == BlurModel::Exposure && data.exposure_poses.is_empty() {
             return Err(TrainError::Config(
@@ -127,6 +129,13 @@ impl Trainer {
             return Err(TrainError::Config(
                 "event_pairs = exposure, but the training data has no events inside exposures \
                  (TrainingData::enable_exposure_events)"
+                    .into(),
+            ));
+        }
+        if config.lpips_weight > 0.0 && data.lpips.is_none() {
+            return Err(TrainError::Config(
+                "lpips_weight > 0, but the training data has no LPIPS network \
+                 (TrainingData::enable_lpips)"
                     .into(),
             ));
         }
@@ -247,6 +256,22 @@ impl Trainer {
         let prediction = photo.prediction;
         let mut d_images = photo.d_renders;
         times.loss = t0.elapsed().as_secs_f64();
+        // The perceptual loss of the same prediction: its cotangent reaches every pass scaled like
+        // the photometric one (1/S; unscaled for one render).
+        let t0 = Instant::now();
+        let lpips_value = match &data.lpips {
+            Some(net) if config.lpips_weight > 0.0 => perceptual_term(
+                net,
+                &prediction,
+                &frame.image,
+                height,
+                width,
+                config.lpips_weight,
+                &mut d_images,
+            )?,
+            _ => 0.0,
+        };
+        times.lpips = t0.elapsed().as_secs_f64();
         let first = &passes[mid];
 
         // Frame k+1 when a pair loss applies: its forward and the pair losses of both renders.
@@ -386,8 +411,13 @@ impl Trainer {
             None => 0.0,
         };
         let event_value = event_value + exposure_events;
-        let loss =
-            photo.photometric + aiap_value + skinning_value + flow_value + event_value + pose_prior;
+        let loss = photo.photometric
+            + lpips_value
+            + aiap_value
+            + skinning_value
+            + flow_value
+            + event_value
+            + pose_prior;
         let finite = loss.is_finite()
             && correction_grads
                 .as_ref()
@@ -422,6 +452,7 @@ impl Trainer {
             loss,
             l1: photo.l1,
             ssim: photo.ssim,
+            lpips: lpips_value,
             skinning: skinning_value,
             aiap: aiap_value,
             flow: flow_value,

@@ -9,6 +9,9 @@ pub struct StageTimes {
     pub render: f64,
     /// Photometric loss and its gradient.
     pub loss: f64,
+    /// The perceptual (LPIPS) loss and its gradient: the network's forward on the observed frame,
+    /// forward and backward on the prediction (0 with `lpips_weight = 0`).
+    pub lpips: f64,
     /// Rasterization backward.
     pub render_backward: f64,
     /// Model backward (networks, blend, deformation) plus skinning and AIAP losses.
@@ -38,6 +41,8 @@ pub struct StepReport {
     pub l1: f32,
     /// SSIM (not 1 − SSIM).
     pub ssim: f32,
+    /// The weighted perceptual loss λ_lpips·LPIPS (0 with `lpips_weight = 0`).
+    pub lpips: f32,
     /// The weighted skinning loss.
     pub skinning: f32,
     /// The weighted AIAP loss (positions + covariances).
@@ -66,6 +71,7 @@ impl StageTimes {
         self.pose
             + self.render
             + self.loss
+            + self.lpips
             + self.render_backward
             + self.model_backward
             + self.adam
