@@ -256,10 +256,14 @@ training_options! {
     /// training frame, additive corrections of the 24 joint rotations (axis-angle, radians) and the
     /// translation (m) at mid exposure and, with `blur_model = exposure`, of their change over the
     /// exposure, regularised towards zero and towards the neighbouring frames' corrections.
-    /// Held-out frames take corrections interpolated from their neighbouring training frames.
+    /// Held-out frames take corrections interpolated from their neighbouring training frames. Off
+    /// by default: on the `realistic` benchmark it has not yet recovered the PSNR a fitter's pose
+    /// error costs (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction: bool = false,
-    /// Adam learning rate of the pose corrections (radians or metres).
+    /// Adam learning rate of the pose corrections (radians or metres). 3e-3 is the best of 3e-3 /
+    /// 3e-2 / 1e-1 on the `realistic` benchmark's `quick` preset; the faster rates push the body out
+    /// of the frame (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
     lr_pose_correction: f32 = 3e-3,
     /// λ₀ of the pose-correction prior: weight of ‖δ_k‖² (radians², m²) pulling each training
     /// frame's correction towards zero.
