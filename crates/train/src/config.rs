@@ -271,6 +271,10 @@ training_options! {
     /// λ_s of the pose-correction prior: weight of ‖δ_k − δ_{k±1}‖² between consecutive training
     /// frames' corrections.
     pose_correction_smooth_weight: f32 = 1e-3,
+    /// Whether pose correction also corrects the root (global orientation and translation); off:
+    /// only the 23 body joints are corrected.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    pose_correction_root: bool = true,
     /// The pose corrections stay zero before this step (while the model is still a blur of
     /// Gaussians, its gradients do not say where the limbs are).
     pose_correction_from: usize = 300,

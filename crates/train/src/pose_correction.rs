@@ -48,6 +48,15 @@ pub fn correct_pose<T: Float>(
     (pose, transl)
 }
 
+/// The indices, within a slot's [`CORRECTION_VALUES`], of the root's values: the global orientation
+/// (axis-angle values 0..3) and the translation, in both the mid-exposure part and its change.
+pub fn root_indices() -> impl Iterator<Item = usize> {
+    let n = 3 * NUM_JOINTS;
+    [0, 1, 2, n, n + 1, n + 2]
+        .into_iter()
+        .flat_map(|k| [k, k + POSE_VALUES])
+}
+
 /// Backward of [`correct_pose`]: adds `∂L/∂correction` to `grad` ([`CORRECTION_VALUES`] values) from
 /// `∂L/∂pose` (72) and `∂L/∂transl` of a pose corrected at `offset`.
 pub fn correct_pose_backward<T: Float>(d_pose: &[T], d_transl: [T; 3], offset: T, grad: &mut [T]) {

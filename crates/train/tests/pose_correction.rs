@@ -122,3 +122,24 @@ fn held_out_frames_are_rendered_with_interpolated_corrections() {
         held_out.smpl
     );
 }
+
+#[test]
+fn without_the_root_only_the_body_joints_are_corrected() {
+    let ctx = context();
+    let mut t = Trainer::new(
+        &ctx,
+        TrainConfig {
+            pose_correction_root: false,
+            ..correction_config(8)
+        },
+    )
+    .unwrap();
+    t.run(&ctx, 8, |_, _| Ok(())).unwrap();
+    let c = &t.model.pose_corrections;
+    for slot in c.chunks(CORRECTION_VALUES) {
+        for k in train::pose_correction::root_indices() {
+            assert_eq!(slot[k], 0.0, "root value {k}");
+        }
+    }
+    assert!(c.iter().any(|&v| v != 0.0));
+}

@@ -6,8 +6,8 @@ use crate::body::{Body, PoseTape, PreparedPose};
 use crate::data::TrainingData;
 use crate::model::Model;
 use crate::pose_correction::{
-    correct_pose_backward, corrected_params, exposure_offset, prior_terms, CorrectionPrior,
-    CORRECTION_VALUES,
+    correct_pose_backward, corrected_params, exposure_offset, prior_terms, root_indices,
+    CorrectionPrior, CORRECTION_VALUES,
 };
 use crate::TrainError;
 use smpl_deform::math::Affine;
@@ -58,10 +58,12 @@ impl CorrectedPoses {
 
     /// Adds ∂L/∂correction of these poses' slot to `grad` (every slot's, [`CORRECTION_VALUES`] per
     /// slot) from each pass's ∂L/∂bones and ∂L/∂pose code (same order as the poses; an empty code
-    /// gradient for a pass that re-posed another's networks).
+    /// gradient for a pass that re-posed another's networks); the root's values get none unless
+    /// `correct_root`.
     pub fn add_gradient(
         &self,
         body: &Body,
+        correct_root: bool,
         d_bones: &[&[Affine<f32>]],
         d_pose_codes: &[&[f32]],
         grad: &mut [f32],
@@ -76,6 +78,11 @@ impl CorrectedPoses {
         {
             let (d_pose, d_transl) = body.pose_backward(tape, bones, code);
             correct_pose_backward(&d_pose, d_transl, f64::from(offset), &mut slot_grad);
+        }
+        if !correct_root {
+            for k in root_indices() {
+                slot_grad[k] = 0.0;
+            }
         }
         let out = &mut grad[self.slot * CORRECTION_VALUES..(self.slot + 1) * CORRECTION_VALUES];
         for (o, g) in out.iter_mut().zip(slot_grad) {

@@ -371,7 +371,13 @@ impl Trainer {
             let mut g = vec![0.0f32; model.pose_corrections.len()];
             let bones: Vec<&[_]> = pass_bones.iter().map(Vec::as_slice).collect();
             let codes: Vec<&[f32]> = pass_codes.iter().map(Vec::as_slice).collect();
-            c.add_gradient(&data.body, &bones, &codes, &mut g);
+            c.add_gradient(
+                &data.body,
+                config.pose_correction_root,
+                &bones,
+                &codes,
+                &mut g,
+            );
             g
         });
 
@@ -385,7 +391,13 @@ impl Trainer {
             let grads2 = pass.model_backward(&posed2)?;
             grads.add_shared(&grads2);
             if let (Some(next), Some(g)) = (&next_corrected, correction_grads.as_mut()) {
-                next.add_gradient(&data.body, &[&grads2.bones], &[&grads2.pose_code], g);
+                next.add_gradient(
+                    &data.body,
+                    config.pose_correction_root,
+                    &[&grads2.bones],
+                    &[&grads2.pose_code],
+                    g,
+                );
             }
             for (o, &g) in opacity_grads.iter_mut().zip(&posed2.opacity_logits) {
                 *o += g;
