@@ -23,23 +23,9 @@ pub struct Args {
     pub levels: usize,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Runs the benchmark cases.
 pub fn run(args: Args) -> Result<()> {
-    let threads = if args.threads.is_empty() {
-        let all = std::thread::available_parallelism().map_or(1, |n| n.get());
-        if all > 1 {
-            vec![1, all]
-        } else {
-            vec![1]
-        }
-    } else {
-        args.threads.clone()
-    };
+    let threads = crate::common::bench_threads(&args.threads);
     let repeats = if args.quick { 3 } else { 9 };
     let net = flow::SpyNet::<f32>::random(args.levels, 1);
     for (name, size) in [("pair_64", 64usize), ("pair_256", 256)] {
@@ -71,7 +57,7 @@ pub fn run(args: Args) -> Result<()> {
                 "{}",
                 serde_json::json!({
                     "case": name, "width": size, "height": size, "levels": args.levels,
-                    "threads": t, "fwd_ms": median(fwd), "fwd_bwd_ms": median(both),
+                    "threads": t, "fwd_ms": crate::common::median(fwd), "fwd_bwd_ms": crate::common::median(both),
                     "steal_pct": steal.percent(),
                 })
             );

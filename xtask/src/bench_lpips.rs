@@ -22,11 +22,6 @@ pub struct Args {
     pub threads: Vec<usize>,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Milliseconds of `f`.
 fn ms<T>(f: impl FnOnce() -> Result<T>) -> Result<f64> {
     let s = Instant::now();
@@ -36,16 +31,7 @@ fn ms<T>(f: impl FnOnce() -> Result<T>) -> Result<f64> {
 
 /// Runs the benchmark cases.
 pub fn run(args: Args) -> Result<()> {
-    let threads = if args.threads.is_empty() {
-        let all = std::thread::available_parallelism().map_or(1, |n| n.get());
-        if all > 1 {
-            vec![1, all]
-        } else {
-            vec![1]
-        }
-    } else {
-        args.threads.clone()
-    };
+    let threads = crate::common::bench_threads(&args.threads);
     let repeats = if args.quick { 3 } else { 9 };
     let weights = shipped_lpips_weights();
     let net = lpips::load_safetensors(&weights)
@@ -73,7 +59,7 @@ pub fn run(args: Args) -> Result<()> {
                 }
                 Ok(times)
             })?;
-            let [features, distance, gradient] = times.map(median);
+            let [features, distance, gradient] = times.map(crate::common::median);
             println!(
                 "{}",
                 serde_json::json!({

@@ -51,16 +51,7 @@ pub fn run(args: Args) -> Result<()> {
             args.only.iter().any(|c| c == name)
         }
     });
-    let threads = if args.threads.is_empty() {
-        let all = std::thread::available_parallelism().map_or(1, |n| n.get());
-        if all > 1 {
-            vec![1, all]
-        } else {
-            vec![1]
-        }
-    } else {
-        args.threads.clone()
-    };
+    let threads = crate::common::bench_threads(&args.threads);
     for (name, n, w, h, repeats) in cases {
         let scene =
             SyntheticScene::new(n, w, h, args.seed).context("building the benchmark scene")?;

@@ -174,3 +174,23 @@ pub fn remove_stamp(dir: &std::path::Path) -> Result<()> {
         Err(e) => Err(e).with_context(|| format!("removing {}", marker.display())),
     }
 }
+
+/// The thread counts a benchmark runs at: those given, else 1 and every available core (just 1 on
+/// a one-core machine).
+pub fn bench_threads(given: &[usize]) -> Vec<usize> {
+    if !given.is_empty() {
+        return given.to_vec();
+    }
+    let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if all > 1 {
+        vec![1, all]
+    } else {
+        vec![1]
+    }
+}
+
+/// The median of timings (the upper one of an even count).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}

@@ -464,7 +464,8 @@ pub fn conv2d_backward_weight<T: Real>(
 }
 
 /// Slow, obviously-correct direct convolution (the oracle for tests): same contract as
-/// [`conv2d_forward`], one multiply-add per loop iteration.
+/// [`conv2d_forward`], one multiply-add per loop iteration — the strided oracle
+/// ([`crate::conv_strided::conv2d_strided_reference`]) at stride 1.
 pub fn conv2d_reference<T: Real>(
     s: Conv2dShape,
     input: &[T],
@@ -473,40 +474,20 @@ pub fn conv2d_reference<T: Real>(
     output: &mut [T],
 ) -> Result<(), NnError> {
     s.validate()?;
-    check_len("conv2d input", s.input_len(), input.len())?;
-    check_len("conv2d weight", s.weight_len(), weight.len())?;
-    check_len("conv2d output", s.output_len(), output.len())?;
-    let (h, w, k, p) = (
-        s.height as isize,
-        s.width as isize,
-        s.kernel,
-        s.pad as isize,
-    );
-    let (ho, wo) = (s.out_height(), s.out_width());
-    for b in 0..s.batch {
-        for o in 0..s.c_out {
-            for y in 0..ho {
-                for x in 0..wo {
-                    let mut acc = bias.map_or(T::zero(), |bb| bb[o]);
-                    for c in 0..s.c_in {
-                        for ky in 0..k {
-                            for kx in 0..k {
-                                let iy = y as isize + ky as isize - p;
-                                let ix = x as isize + kx as isize - p;
-                                if iy < 0 || ix < 0 || iy >= h || ix >= w {
-                                    continue;
-                                }
-                                let iv = input[((b * s.c_in + c) * s.height + iy as usize)
-                                    * s.width
-                                    + ix as usize];
-                                acc = acc + weight[((o * s.c_in + c) * k + ky) * k + kx] * iv;
-                            }
-                        }
-                    }
-                    output[((b * s.c_out + o) * ho + y) * wo + x] = acc;
-                }
-            }
-        }
-    }
-    Ok(())
+    crate::conv_strided::conv2d_strided_reference(
+        crate::conv_strided::StridedConv2dShape {
+            batch: s.batch,
+            c_in: s.c_in,
+            c_out: s.c_out,
+            height: s.height,
+            width: s.width,
+            kernel: s.kernel,
+            stride: 1,
+            pad: s.pad,
+        },
+        input,
+        weight,
+        bias,
+        output,
+    )
 }
