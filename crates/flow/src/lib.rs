@@ -98,3 +98,22 @@ pub enum FlowError {
         source: std::io::Error,
     },
 }
+
+impl From<nn::tensors::TensorError> for FlowError {
+    fn from(e: nn::tensors::TensorError) -> Self {
+        use nn::tensors::TensorError as T;
+        match e {
+            T::Missing { name } => Self::MissingTensor { name },
+            T::WrongDtype { name, dtype } => Self::WrongDtype { name, dtype },
+            T::WrongShape {
+                name,
+                expected,
+                actual,
+            } => Self::WrongShape {
+                name,
+                expected,
+                actual,
+            },
+        }
+    }
+}

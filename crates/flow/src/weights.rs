@@ -97,27 +97,11 @@ pub fn read_safetensors(bytes: &[u8]) -> Result<SpyNet<f32>, FlowError> {
         let mut convs = Vec::with_capacity(5);
         for (i, &(ci, co)) in LAYER_CHANNELS.iter().enumerate() {
             let read = |what: &str, shape: Vec<usize>| -> Result<Vec<f32>, FlowError> {
-                let name = tensor_name(l, i, what);
-                let t = st
-                    .tensor(&name)
-                    .map_err(|_| FlowError::MissingTensor { name: name.clone() })?;
-                if t.dtype() != Dtype::F32 {
-                    return Err(FlowError::WrongDtype {
-                        name,
-                        dtype: format!("{:?}", t.dtype()),
-                    });
-                }
-                if t.shape() != shape.as_slice() {
-                    return Err(FlowError::WrongShape {
-                        name,
-                        expected: shape,
-                        actual: t.shape().to_vec(),
-                    });
-                }
-                Ok(t.data()
-                    .chunks_exact(4)
-                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                    .collect())
+                Ok(nn::tensors::read_f32(
+                    &st,
+                    &tensor_name(l, i, what),
+                    &shape,
+                )?)
             };
             convs.push(Conv {
                 weight: read("weight", vec![co, ci, KERNEL, KERNEL])?,

@@ -4,7 +4,6 @@
 
 use crate::net::{ALEXNET_CHANNELS, KERNELS};
 use crate::{Lpips, LpipsError};
-use safetensors::tensor::Dtype;
 use safetensors::SafeTensors;
 use std::path::Path;
 
@@ -12,27 +11,7 @@ use std::path::Path;
 pub fn read_safetensors(bytes: &[u8]) -> Result<Lpips<f32>, LpipsError> {
     let st = SafeTensors::deserialize(bytes)?;
     let read = |name: String, shape: Vec<usize>| -> Result<Vec<f32>, LpipsError> {
-        let t = st
-            .tensor(&name)
-            .map_err(|_| LpipsError::MissingTensor { name: name.clone() })?;
-        if t.dtype() != Dtype::F32 {
-            return Err(LpipsError::WrongDtype {
-                name,
-                dtype: format!("{:?}", t.dtype()),
-            });
-        }
-        if t.shape() != shape.as_slice() {
-            return Err(LpipsError::WrongShape {
-                name,
-                expected: shape,
-                actual: t.shape().to_vec(),
-            });
-        }
-        // The container has checked that the data spans exactly the shape's F32 values.
-        Ok(t.data()
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect())
+        Ok(nn::tensors::read_f32(&st, &name, &shape)?)
     };
     let mut weights: [Vec<f32>; 5] = Default::default();
     let mut biases: [Vec<f32>; 5] = Default::default();

@@ -26,6 +26,8 @@ mod gemm_avx512;
 pub mod mlp;
 mod pool;
 mod resize;
+#[cfg(feature = "safetensors")]
+pub mod tensors;
 mod warp;
 
 pub use activation::{
