@@ -6,7 +6,8 @@
 //! pre-activation; `f_rest` is channel-major (`f_rest[c·(K−1) + k]` is coefficient k+1 of channel c).
 //!
 //! Reading accepts binary little/big-endian and ASCII files, any property order, unknown extra properties
-//! (skipped) and other elements before or after `vertex` (skipped, scalar properties only when binary).
+//! (skipped) and other elements before or after `vertex` (skipped, scalar properties only when binary),
+//! and the PlayCanvas / SuperSplat compressed layout (`crate::ply_compressed`).
 //! It never trusts the header for an allocation: the claimed vertex count is checked against the bytes
 //! that actually follow before anything is reserved. Every error names the file and the property.
 
@@ -116,14 +117,14 @@ pub enum PlyError {
 const MAX_HEADER_BYTES: usize = 1 << 20;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Format {
+pub(crate) enum Format {
     Ascii,
     BinaryLe,
     BinaryBe,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scalar {
+pub(crate) enum Scalar {
     I8,
     U8,
     I16,
@@ -149,7 +150,7 @@ impl Scalar {
         })
     }
 
-    fn size(self) -> usize {
+    pub(crate) fn size(self) -> usize {
         match self {
             Self::I8 | Self::U8 => 1,
             Self::I16 | Self::U16 => 2,
@@ -158,7 +159,7 @@ impl Scalar {
         }
     }
 
-    fn is_float(self) -> bool {
+    pub(crate) fn is_float(self) -> bool {
         matches!(self, Self::F32 | Self::F64)
     }
 
@@ -188,7 +189,7 @@ impl Scalar {
     }
 
     /// Decodes one f32 exactly (no round trip through f64 for f32 data).
-    fn read_f32(self, bytes: &[u8], format: Format) -> f32 {
+    pub(crate) fn read_f32(self, bytes: &[u8], format: Format) -> f32 {
         if self == Self::F32 {
             let mut b4 = [0u8; 4];
             b4.copy_from_slice(&bytes[..4]);
@@ -204,29 +205,29 @@ impl Scalar {
 }
 
 #[derive(Clone, Debug)]
-enum PropertyKind {
+pub(crate) enum PropertyKind {
     Scalar(Scalar),
     /// A list property (skipped; only ASCII bodies can skip lists).
     List,
 }
 
 #[derive(Clone, Debug)]
-struct Property {
-    name: String,
-    kind: PropertyKind,
+pub(crate) struct Property {
+    pub(crate) name: String,
+    pub(crate) kind: PropertyKind,
 }
 
 #[derive(Clone, Debug)]
-struct Element {
-    name: String,
-    count: u64,
-    properties: Vec<Property>,
+pub(crate) struct Element {
+    pub(crate) name: String,
+    pub(crate) count: u64,
+    pub(crate) properties: Vec<Property>,
 }
 
-struct Header {
-    format: Format,
-    elements: Vec<Element>,
-    data_offset: usize,
+pub(crate) struct Header {
+    pub(crate) format: Format,
+    pub(crate) elements: Vec<Element>,
+    pub(crate) data_offset: usize,
 }
 
 fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, PlyError> {
@@ -494,6 +495,9 @@ pub fn read_ply(path: impl AsRef<Path>) -> Result<GaussianSet, PlyError> {
 pub fn read_ply_bytes(bytes: &[u8], path: impl AsRef<Path>) -> Result<GaussianSet, PlyError> {
     let path = path.as_ref();
     let header = parse_header(path, bytes)?;
+    if crate::ply_compressed::is_compressed(&header) {
+        return crate::ply_compressed::read_compressed(path, &bytes[header.data_offset..], &header);
+    }
     let vertex_pos = header
         .elements
         .iter()
@@ -537,7 +541,7 @@ fn scalar_row_bytes(path: &Path, element: &Element) -> Result<u64, PlyError> {
         })
 }
 
-fn check_fits(
+pub(crate) fn check_fits(
     path: &Path,
     element: &Element,
     row_bytes: u64,
