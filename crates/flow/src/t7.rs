@@ -14,6 +14,8 @@ use crate::net::{Conv, KERNEL, LAYER_CHANNELS};
 use crate::{FlowError, SpyNet};
 use std::path::Path;
 
+/// Most elements a tensor may have (2^28, 1 GiB of f32; SPyNet's largest layer has 50 176).
+const MAX_ELEMENTS: usize = 1 << 28;
 const TYPE_NIL: i32 = 0;
 const TYPE_TORCH: i32 = 4;
 
@@ -115,8 +117,15 @@ pub fn parse_float_tensor(bytes: &[u8], name: &str) -> Result<T7Tensor, FlowErro
     for _ in 0..ndim {
         strides.push(r.long("stride")?);
     }
-    let offset = r.long("storage offset")? - 1;
-    let count: usize = shape.iter().product();
+    let offset = r
+        .long("storage offset")?
+        .checked_sub(1)
+        .ok_or_else(|| r.err("implausible storage offset"))?;
+    let count = shape
+        .iter()
+        .try_fold(1usize, |acc, &s| acc.checked_mul(s))
+        .filter(|&c| c <= MAX_ELEMENTS)
+        .ok_or_else(|| r.err(format!("implausible tensor sizes {shape:?}")))?;
     let storage_type = r.int("storage object")?;
     if storage_type == TYPE_NIL {
         if count == 0 || ndim == 0 {
@@ -157,14 +166,15 @@ pub fn parse_float_tensor(bytes: &[u8], name: &str) -> Result<T7Tensor, FlowErro
         });
     }
     // Validate the strided view against the storage, then gather row-major.
-    let mut max = offset;
+    // In i128: sizes are at most MAX_ELEMENTS and strides fit i64, so nothing here can overflow.
+    let mut max = i128::from(offset);
     for d in 0..ndim {
         if strides[d] < 0 {
             return Err(r.err(format!("negative stride {} in dimension {d}", strides[d])));
         }
-        max += (shape[d] as i64 - 1) * strides[d];
+        max += (shape[d] as i128 - 1) * i128::from(strides[d]);
     }
-    if offset < 0 || max >= n as i64 {
+    if offset < 0 || max >= n as i128 {
         return Err(r.err(format!(
             "view (offset {offset}, sizes {shape:?}, strides {strides:?}) exceeds storage of {n} values"
         )));
