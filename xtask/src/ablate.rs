@@ -290,10 +290,20 @@ pub fn run(args: Args) -> Result<()> {
     }
     write_table(&out, &scene_name, preset_name, &results)?;
     write_grid(&out, &results)?;
+    let md = std::fs::read_to_string(out.join("ablation.md"))
+        .with_context(|| format!("reading {}", out.join("ablation.md").display()))?;
+    let runs: Vec<String> = results.iter().map(|(label, ..)| label.clone()).collect();
+    let report = crate::report::write_ablation_report(
+        &out,
+        &format!("E-Sem3DGS ablation: {scene_name}, {preset_name} preset"),
+        &md,
+        &runs,
+    )?;
     println!(
-        "ablation: {} and {}",
+        "ablation: {}, {} and {}",
         out.join("ablation.md").display(),
-        out.join("ablation_grid.png").display()
+        out.join("ablation_grid.png").display(),
+        report.display()
     );
     Ok(())
 }
@@ -405,7 +415,7 @@ fn write_grid(out: &Path, results: &[Outcome<'_>]) -> Result<()> {
     let mut y = 0;
     for (number, img) in &rows {
         image::imageops::replace(&mut grid, img, i64::from(LABEL_W), i64::from(y));
-        crate::curve::text(
+        crate::pixel_font::text(
             &mut grid,
             4,
             y + img.height() / 2 - 5,

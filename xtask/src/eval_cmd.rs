@@ -139,7 +139,18 @@ pub fn write_evaluation(
         "| Gaussians (human + scene)    | {:>10} | {:>9} |",
         summary.gaussians_human, summary.gaussians_scene
     );
-    println!("metrics: {}; strips: {}", path.display(), strips.display());
+    let title = out
+        .canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "run".into());
+    let report = crate::report::write_run_report(out, &format!("E-Sem3DGS run: {title}"))?;
+    println!(
+        "metrics: {}; strips: {}; report: {}",
+        path.display(),
+        strips.display(),
+        report.display()
+    );
     Ok(())
 }
 

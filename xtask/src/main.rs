@@ -5,6 +5,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod ablate;
+mod animate;
 mod bench_deform;
 mod bench_events;
 mod bench_flow;
@@ -13,17 +14,20 @@ mod bench_raster;
 mod body;
 mod body_convert;
 mod common;
-mod curve;
 mod eval_cmd;
 mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
+mod fuzz;
 mod lpips_cmd;
+mod pixel_font;
 mod ply_info;
 mod pose_report;
 mod reconstruct;
 mod render;
 mod render_pose;
+mod report;
+mod run_pictures;
 mod steal;
 mod synth;
 mod train_flow;
@@ -46,7 +50,7 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Train E-Sem3DGS (person + scene) on a scene directory — by default the synthetic benchmark —
-    /// then evaluate the test split and write the model, metrics.json, strips and a curve.
+    /// then evaluate the test split and write the model, metrics.json, strips and report.html.
     ///
     /// Every training option below overrides the preset and the --config file. The default is the
     /// best method measured: the physical model of the blur (each training frame the mean of renders
@@ -85,6 +89,10 @@ enum Command {
     Render(render::Args),
     /// Event streams: info, convert, voxelize, simulate, flow (contrast maximisation).
     Events(events_cmd::Args),
+    /// Fuzz the parsers of user files with mutated inputs (worker processes under a memory and a
+    /// time limit); any panic, abort, hang or over-allocation fails, its input saved under
+    /// target/fuzz/TARGET/.
+    Fuzz(fuzz::Args),
     /// Benchmarks, printed as JSON lines.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -127,5 +135,6 @@ fn main() -> Result<()> {
         Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
         Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
         Command::Render(args) => render::run(args),
+        Command::Fuzz(args) => fuzz::run(args),
     }
 }

@@ -457,8 +457,21 @@ pub fn run(args: Args) -> Result<()> {
                 .collect::<serde_json::Map<_, _>>(),
         }),
     };
+    if config.event_loss {
+        crate::run_pictures::write_event_picture(&data, &out)?;
+    }
+    if config.flow_loss {
+        let kind = match config.flow_source {
+            FlowSource::GroundTruth => Some(scene::FlowKind::GroundTruth),
+            FlowSource::Events => Some(scene::FlowKind::EventsCm),
+            FlowSource::File => Some(scene::FlowKind::External),
+            FlowSource::SharpNetwork => None,
+        };
+        if let Some(kind) = kind {
+            crate::run_pictures::write_flow_picture(&data, kind, &out)?;
+        }
+    }
     write_evaluation(model, &ctx.body, &data, &out, &summary)?;
-    crate::curve::write_curve(&log_path, &out.join("curve.png"))?;
     if let Some(report) = &pose_error {
         println!("{}", crate::pose_report::summary_line(report));
     }

@@ -4,12 +4,16 @@
 //! `POSES.json` is one object or a list of objects `{"pose": [72 floats, axis-angle], "transl": [3],
 //! "latent_frame": N (optional: whose appearance latent to use; default the first training frame)}`.
 //! `pose` may also be 24 axis-angle triples, as `scene.json` writes a frame's pose.
+//!
+//! With `--motion FILE` (an AMASS or PeopleSnapshot `.npz`) it animates the person inside the
+//! reconstructed scene instead: see [`crate::animate`].
 
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 
 /// Arguments of `render-pose`.
 #[derive(clap::Args, Debug)]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["poses", "motion"])))]
 pub struct Args {
     /// Model directory (the `model/` folder written by `cargo xtask reconstruct`).
     #[arg(long)]
@@ -17,13 +21,23 @@ pub struct Args {
     /// JSON file with one pose or a list of poses: `{"pose": 72 axis-angle values or 24 [x, y, z]
     /// triples as scene.json writes them, "transl": [x, y, z], "latent_frame": N (optional)}`.
     #[arg(long)]
-    pub poses: PathBuf,
-    /// Output directory (created).
+    pub poses: Option<PathBuf>,
+    /// A motion to animate the person with: an AMASS-style `.npz` (`poses` N×72 SMPL or N×156
+    /// SMPL-H, `trans`, optional `mocap_framerate`), a PeopleSnapshot / InstantAvatar `.npz`
+    /// (`global_orient`, `body_pose`, `transl`) or an EasyMocap `smpl/` folder of per-frame JSON
+    /// (`Rh`, `Th`, `poses`). Writes an animated GIF (or, when `--out` does not end in `.gif`, a
+    /// folder of PNG frames).
+    #[arg(long)]
+    pub motion: Option<PathBuf>,
+    /// Output directory (`--poses`), or the GIF file or PNG folder (`--motion`).
     #[arg(long)]
     pub out: PathBuf,
     /// Also write `posed_NNNN.ply` per pose (INRIA's degree-3 3DGS layout, colours in the DC term).
     #[arg(long)]
     pub ply: bool,
+    /// Options of `--motion`.
+    #[command(flatten)]
+    pub animation: crate::animate::AnimationArgs,
 }
 
 #[derive(serde::Deserialize)]
@@ -73,16 +87,26 @@ fn read_entry(v: serde_json::Value) -> Result<(Vec<f32>, [f32; 3], Option<u32>)>
 pub fn run(args: Args) -> Result<()> {
     let loaded = train::export::load_model(&args.model)
         .with_context(|| format!("loading the model {}", args.model.display()))?;
-    let text = std::fs::read_to_string(&args.poses)
-        .with_context(|| format!("reading {}", args.poses.display()))?;
+    let poses_path = match (&args.poses, &args.motion) {
+        (_, Some(motion)) => {
+            if args.ply {
+                bail!("--ply writes one PLY per pose of --poses; it does not apply to --motion");
+            }
+            return crate::animate::run(&loaded, motion, &args.out, &args.animation);
+        }
+        (Some(p), None) => p,
+        (None, None) => bail!("give --poses POSES.json or --motion FILE.npz"),
+    };
+    let text = std::fs::read_to_string(poses_path)
+        .with_context(|| format!("reading {}", poses_path.display()))?;
     let value: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not JSON", args.poses.display()))?;
+        .with_context(|| format!("{}: not JSON", poses_path.display()))?;
     let list = match value {
         serde_json::Value::Array(a) => a,
         v => vec![v],
     };
     if list.is_empty() {
-        bail!("{}: no poses", args.poses.display());
+        bail!("{}: no poses", poses_path.display());
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
@@ -90,7 +114,7 @@ pub fn run(args: Args) -> Result<()> {
     let first = t.frame_indices.first().copied().unwrap_or(0);
     for (k, v) in list.into_iter().enumerate() {
         let (pose, transl, latent_frame) =
-            read_entry(v).with_context(|| format!("{}: pose {k}", args.poses.display()))?;
+            read_entry(v).with_context(|| format!("{}: pose {k}", poses_path.display()))?;
         let params = smpl_deform::SmplParams {
             pose,
             betas: loaded.manifest.betas.clone(),

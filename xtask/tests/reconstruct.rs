@@ -60,7 +60,9 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         "log.jsonl",
         "checkpoint.safetensors",
         "metrics.json",
-        "curve.png",
+        "report.html",
+        "curves.svg",
+        "per_frame.svg",
         "model/model.json",
         "model/canonical.ply",
         "model/networks.safetensors",
@@ -104,12 +106,17 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         .filter(|f| f["split"] == "test")
         .count();
     assert!(test_frames > 0);
-    let strips = std::fs::read_dir(out.join("eval")).unwrap().count();
+    let strips = std::fs::read_dir(out.join("eval"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("strip_"))
+        .count();
     assert_eq!(
         strips, test_frames,
         "one strip per test frame of the fixture"
     );
     assert_eq!(metrics["test_frames"], test_frames);
+    assert_report_is_whole(&out, test_frames);
     let posed: Vec<_> = std::fs::read_dir(out.join("model"))
         .unwrap()
         .filter_map(|e| e.ok())
@@ -178,6 +185,92 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         .unwrap();
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("poses.json"));
+    render_motions(&out.join("model"), dir.path());
+}
+
+fn motion_fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../data-fixtures/motion")
+        .join(name)
+}
+
+fn render_pose_motion(
+    model: &Path,
+    motion: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> std::process::Output {
+    xtask()
+        .args(["render-pose", "--model"])
+        .arg(model)
+        .arg("--motion")
+        .arg(motion)
+        .arg("--data")
+        .arg(fixture())
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+/// `render-pose --motion`: the AMASS fixture (numpy-written, SMPL-H, 60 fps) to a GIF with the
+/// frames resampled to 30 fps, the PeopleSnapshot fixture to a PNG folder, and a wrong-shaped file
+/// refused naming the array.
+fn render_motions(model: &Path, dir: &Path) {
+    let gif = dir.join("walk.gif");
+    let o = render_pose_motion(
+        model,
+        &motion_fixture("walk_amass.npz"),
+        &gif,
+        &["--frames", "12"],
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains("AMASS motion, 120 frames at 60 fps: rendering 12"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("finger joints"),
+        "what was dropped is said: {stdout}"
+    );
+    let decoder = image::codecs::gif::GifDecoder::new(std::io::BufReader::new(
+        std::fs::File::open(&gif).unwrap(),
+    ))
+    .unwrap();
+    let frames = image::AnimationDecoder::into_frames(decoder)
+        .collect_frames()
+        .unwrap();
+    assert_eq!(frames.len(), 12);
+    assert_ne!(
+        frames[0].buffer().as_raw(),
+        frames[6].buffer().as_raw(),
+        "the person moves"
+    );
+    let pngs = dir.join("wave");
+    let o = render_pose_motion(
+        model,
+        &motion_fixture("wave_people_snapshot.npz"),
+        &pngs,
+        &["--frames", "5"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("PeopleSnapshot motion, 40 frames"));
+    assert!(pngs.join("frame_0004.png").is_file() && !pngs.join("frame_0005.png").exists());
+    // Wrong shapes: named.
+    let bad = dir.join("bad.npz");
+    let mut w = smpl_deform::npz::NpzWriter::new(std::fs::File::create(&bad).unwrap(), false);
+    w.add_f32("poses", &[4, 63], &[0.0; 252]).unwrap();
+    w.add_f32("trans", &[4, 3], &[0.0; 12]).unwrap();
+    w.finish().unwrap();
+    let o = render_pose_motion(model, &bad, &dir.join("bad.gif"), &[]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("bad.npz") && e.contains("`poses`") && e.contains("[4, 63]"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -575,4 +668,33 @@ fn assert_inria_degree3_layout(path: &std::path::Path, count: usize) {
     assert!(header.contains("format binary_little_endian 1.0"));
     assert!(header.contains(&format!("element vertex {count}\n")));
     assert_eq!(bytes.len() - header_len, count * 248);
+}
+
+/// `report.html` has its sections, one strip per test frame, and every file it references exists.
+fn assert_report_is_whole(out: &Path, test_frames: usize) {
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
+    for section in [
+        "<h2>Summary</h2>",
+        "<h2>Training</h2>",
+        "<h2>Test frames</h2>",
+        "<h2>Comparison strips</h2>",
+    ] {
+        assert!(html.contains(section), "report.html lacks {section}");
+    }
+    let refs: Vec<&str> = html
+        .split("src=\"")
+        .skip(1)
+        .filter_map(|r| r.split('"').next())
+        .collect();
+    assert_eq!(
+        refs.iter().filter(|r| r.starts_with("eval/strip_")).count(),
+        test_frames
+    );
+    for r in refs {
+        assert!(
+            out.join(r).is_file(),
+            "report.html references {r}, which does not exist"
+        );
+    }
 }

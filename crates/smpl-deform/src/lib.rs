@@ -17,6 +17,7 @@ pub mod io;
 pub mod lbs;
 pub mod makehuman;
 pub mod math;
+pub mod motion;
 pub mod npz;
 pub mod pose_blend;
 pub mod sample;

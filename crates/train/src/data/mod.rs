@@ -8,8 +8,8 @@
 mod training;
 
 pub use training::{
-    consecutive_training_pairs, read_pair_flow, sharp_flow_pairs, EventPair, FlowPair, PairFlow,
-    SharpFlowPair, TrainingData, TrainingFrame,
+    consecutive_training_pairs, event_read_options, read_pair_flow, sharp_flow_pairs, EventPair,
+    FlowPair, PairFlow, SharpFlowPair, TrainingData, TrainingFrame,
 };
 
 use crate::TrainError;

@@ -383,11 +383,9 @@ impl TrainingData {
     }
 }
 
-/// The events of frame `p`'s `events` file ([t_p, t_{p+1})); a frame without one is an error naming
-/// the frame, the field and what needed it (`needed_by`).
 /// How a frame's event file is read: a Prophesee `.raw` file with the scene's recorded encoding
 /// (`events_raw_format`) for headers that do not state it; other formats as they are.
-fn event_read_options(data: &Dataset, path: &std::path::Path) -> events::io::ReadOptions {
+pub fn event_read_options(data: &Dataset, path: &std::path::Path) -> events::io::ReadOptions {
     let raw = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("raw"));
@@ -404,6 +402,8 @@ fn event_read_options(data: &Dataset, path: &std::path::Path) -> events::io::Rea
     }
 }
 
+/// The events of frame `p`'s `events` file ([t_p, t_{p+1})); a frame without one is an error naming
+/// the frame, the field and what needed it (`needed_by`).
 fn read_frame_events(
     data: &Dataset,
     p: usize,
