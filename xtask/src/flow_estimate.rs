@@ -47,7 +47,8 @@ pub fn run(args: Args) -> Result<()> {
     let t = std::time::Instant::now();
     let tape = net.forward(&a, &b, h1, w1)?;
     eprintln!(
-        "flow: {w1}x{h1}, {} levels, {:.1} ms",
+        "flow: {w1}x{h1}, {} of {} levels, {:.1} ms",
+        net.levels_run(h1, w1),
         net.num_levels(),
         t.elapsed().as_secs_f64() * 1e3
     );

@@ -51,7 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let net = flow::load_safetensors(&weights)?;
     let cfg = PairConfig::default();
     let (mut by_kind, mut by_motion) = ([Tally::default(); 2], [Tally::default(); 5]);
-    let levels = net.num_levels();
+    let levels = net.levels_run(cfg.size, cfg.size);
     let mut by_level = vec![Tally::default(); levels];
     // [substituted level][shortfall] → the final flow's tally.
     let mut substituted = vec![[Tally::default(); SHORTFALLS.len()]; levels.saturating_sub(1)];

@@ -38,9 +38,12 @@ pub mod train;
 mod weights;
 
 pub use net::{
-    SpyNet, Tape, IMAGENET_MEAN, IMAGENET_STD, KERNEL, LAYER_CHANNELS, PAIRED_DIFF_GAIN,
+    PyramidDepth, SpyNet, Tape, IMAGENET_MEAN, IMAGENET_STD, KERNEL, LAYER_CHANNELS,
+    PAIRED_DIFF_GAIN,
 };
-pub use weights::{load_safetensors, read_safetensors, save_safetensors, write_safetensors};
+pub use weights::{
+    load_safetensors, read_safetensors, save_safetensors, write_safetensors, PYRAMID_KEY,
+};
 
 /// Errors of the `flow` crate.
 #[derive(Debug, thiserror::Error)]
@@ -74,6 +77,16 @@ pub enum FlowError {
         name: String,
         /// Element type found.
         dtype: String,
+    },
+    /// A weights file's metadata entry has a value this crate does not know.
+    #[error("metadata entry `{key}` is `{value}`; expected {expected}")]
+    Metadata {
+        /// The metadata key.
+        key: String,
+        /// The value found.
+        value: String,
+        /// What the key may hold.
+        expected: String,
     },
     /// A weights file has no level at all.
     #[error("weights contain no level (no tensor named level0.conv0.weight)")]

@@ -33,12 +33,49 @@ pub struct Conv<T> {
     pub bias: Vec<T>,
 }
 
+/// How many pyramid levels a pass runs at a given (resized) image size.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PyramidDepth {
+    /// Every level the weights hold, whatever the image size. The project's own weights were
+    /// trained this way (four levels at the flow loss's 64×64, coarsest 8×8).
+    #[default]
+    AllLevels,
+    /// The reference SPyNet rule (the authors' code and the public PyTorch port): halve the image
+    /// while a side exceeds `n` pixels (32 in the reference, [`PyramidDepth::REFERENCE`]), at most
+    /// `L − 1` times. The coarsest weights run on the coarsest image built, so on a small image the
+    /// finest weights go unused (e.g. 5 of 6 levels at 512×384).
+    HalveWhileAbove(usize),
+}
+
+impl PyramidDepth {
+    /// The rule of the original SPyNet weights: [`PyramidDepth::HalveWhileAbove`]`(32)`.
+    pub const REFERENCE: Self = Self::HalveWhileAbove(32);
+
+    /// Levels run on a `h × w` image (already resized to a multiple of `2^(levels−1)`) by a network
+    /// of `levels` levels: between 1 and `levels`.
+    pub fn levels_run(self, levels: usize, h: usize, w: usize) -> usize {
+        match self {
+            Self::AllLevels => levels,
+            Self::HalveWhileAbove(side) => {
+                let (mut h, mut w, mut run) = (h, w, 1);
+                while run < levels && (h > side || w > side) {
+                    (h, w) = (pooled_size(h), pooled_size(w));
+                    run += 1;
+                }
+                run
+            }
+        }
+    }
+}
+
 /// A SPyNet-style network: `levels[l][i]` is convolution `i` (0..5) of level `l` (0 = coarsest).
 /// Also used, zero-initialised, as the container for weight gradients.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SpyNet<T> {
     /// Per level, the five convolutions (shapes from [`LAYER_CHANNELS`]).
     pub levels: Vec<Vec<Conv<T>>>,
+    /// Which levels a pass runs ([`PyramidDepth::AllLevels`] unless the weights say otherwise).
+    pub depth: PyramidDepth,
 }
 
 /// Everything the backward pass needs from one forward pass, plus its result.
@@ -48,7 +85,8 @@ pub struct Tape<T> {
     pub size: (usize, usize),
     /// Size the network ran at (multiples of `2^(L−1)`).
     pub work_size: (usize, usize),
-    /// Pyramid level sizes, index 0 = coarsest.
+    /// Pyramid level sizes, index 0 = coarsest; as many as the pass's [`PyramidDepth`] runs
+    /// (weights level `l` ran on `level_sizes[l]`).
     pub level_sizes: Vec<(usize, usize)>,
     /// Normalised image-2 pyramid (for the warp's backward pass), per level `(3, h, w)`.
     pyr2: Vec<Vec<T>>,
@@ -212,6 +250,7 @@ impl<T: Real> SpyNet<T> {
         };
         Self {
             levels: (0..levels).map(|_| level()).collect(),
+            depth: PyramidDepth::AllLevels,
         }
     }
 
@@ -292,7 +331,22 @@ impl<T: Real> SpyNet<T> {
 
     /// The same network with all parameters zero (a gradient accumulator).
     pub fn zeros_like(&self) -> Self {
-        Self::zeros(self.num_levels())
+        Self {
+            depth: self.depth,
+            ..Self::zeros(self.num_levels())
+        }
+    }
+
+    /// This network with another pyramid rule.
+    pub fn with_depth(self, depth: PyramidDepth) -> Self {
+        Self { depth, ..self }
+    }
+
+    /// Levels a pass on an `h × w` input runs (after the resize to [`SpyNet::size_multiple`]).
+    pub fn levels_run(&self, h: usize, w: usize) -> usize {
+        let m = self.size_multiple();
+        self.depth
+            .levels_run(self.num_levels(), h.div_ceil(m) * m, w.div_ceil(m) * m)
     }
 
     /// Converts the parameters to another scalar type (e.g. `f32` → `f64` for gradient checks).
@@ -311,6 +365,7 @@ impl<T: Real> SpyNet<T> {
                         .collect()
                 })
                 .collect(),
+            depth: self.depth,
         }
     }
 
@@ -368,12 +423,12 @@ impl<T: Real> SpyNet<T> {
         h: usize,
         w: usize,
     ) -> Result<Tape<T>, FlowError> {
-        self.forward_impl(img1, img2, h, w, self.num_levels().saturating_sub(1), None)
+        self.forward_impl(img1, img2, h, w, None, None)
     }
 
     /// Runs only levels `0..=last_level` (coarse-to-fine training): [`Tape::flow`] is that level's
     /// output `(2, h_l, w_l)` at the level's own resolution. `h` and `w` must be multiples of
-    /// [`SpyNet::size_multiple`].
+    /// [`SpyNet::size_multiple`], and `last_level` below [`SpyNet::levels_run`].
     pub fn forward_to_level(
         &self,
         img1: &[T],
@@ -383,13 +438,13 @@ impl<T: Real> SpyNet<T> {
         last_level: usize,
     ) -> Result<Tape<T>, FlowError> {
         let m = self.size_multiple();
-        if !h.is_multiple_of(m) || !w.is_multiple_of(m) || last_level >= self.num_levels() {
+        let run = self.levels_run(h, w);
+        if !h.is_multiple_of(m) || !w.is_multiple_of(m) || last_level >= run {
             return Err(FlowError::Size(format!(
-                "forward_to_level needs sides that are multiples of {m} and a level < {} (got {h}x{w}, level {last_level})",
-                self.num_levels()
+                "forward_to_level needs sides that are multiples of {m} and a level < {run} (got {h}x{w}, level {last_level})"
             )));
         }
-        self.forward_impl(img1, img2, h, w, last_level, None)
+        self.forward_impl(img1, img2, h, w, Some(last_level), None)
     }
 
     /// Diagnostic: a full forward pass in which the output of pyramid level `level` (0 = coarsest) is
@@ -409,27 +464,20 @@ impl<T: Real> SpyNet<T> {
         level_flow: &[T],
     ) -> Result<(Vec<Vec<T>>, Vec<T>), FlowError> {
         let m = self.size_multiple();
-        let shift = self.num_levels().saturating_sub(1).saturating_sub(level);
+        let run = self.levels_run(h, w);
+        let shift = run.saturating_sub(1).saturating_sub(level);
         let expected = 2 * (h >> shift) * (w >> shift);
         if !h.is_multiple_of(m)
             || !w.is_multiple_of(m)
-            || level >= self.num_levels()
+            || level >= run
             || level_flow.len() != expected
         {
             return Err(FlowError::Size(format!(
-                "forward_with_level_flow needs sides that are multiples of {m}, a level < {} and a (2, h_l, w_l) flow of that level (got {h}x{w}, level {level}, {} values)",
-                self.num_levels(),
+                "forward_with_level_flow needs sides that are multiples of {m}, a level < {run} and a (2, h_l, w_l) flow of that level (got {h}x{w}, level {level}, {} values)",
                 level_flow.len()
             )));
         }
-        let tape = self.forward_impl(
-            img1,
-            img2,
-            h,
-            w,
-            self.num_levels() - 1,
-            Some((level, level_flow)),
-        )?;
+        let tape = self.forward_impl(img1, img2, h, w, None, Some((level, level_flow)))?;
         let outputs = tape
             .levels
             .into_iter()
@@ -439,16 +487,16 @@ impl<T: Real> SpyNet<T> {
         Ok((outputs, tape.flow))
     }
 
-    /// The forward pass up to `last_level`; with `given = Some((k, flow))`, levels `0..=k` are not
-    /// run and level `k`'s output is `flow` (the tape of those levels is then empty, so such a tape
-    /// must not reach [`SpyNet::backward`]).
+    /// The forward pass up to `last_level` (`None`: every level the [`PyramidDepth`] runs); with
+    /// `given = Some((k, flow))`, levels `0..=k` are not run and level `k`'s output is `flow` (the
+    /// tape of those levels is then empty, so such a tape must not reach [`SpyNet::backward`]).
     fn forward_impl(
         &self,
         img1: &[T],
         img2: &[T],
         h: usize,
         w: usize,
-        last_level: usize,
+        last_level: Option<usize>,
         given: Option<(usize, &[T])>,
     ) -> Result<Tape<T>, FlowError> {
         self.check_structure()?;
@@ -460,9 +508,10 @@ impl<T: Real> SpyNet<T> {
                 img2.len()
             )));
         }
-        let levels = self.num_levels();
         let m = self.size_multiple();
         let (hp, wp) = (h.div_ceil(m) * m, w.div_ceil(m) * m);
+        let levels = self.depth.levels_run(self.num_levels(), hp, wp);
+        let last_level = last_level.unwrap_or(levels - 1).min(levels - 1);
         let resized = (hp, wp) != (h, w);
         let prep = |img: &[T]| -> Result<Vec<T>, FlowError> {
             let mut v = if resized {
@@ -571,7 +620,7 @@ impl<T: Real> SpyNet<T> {
         grad_flow: &[T],
         weight_grads: Option<&mut SpyNet<T>>,
     ) -> Result<(Vec<T>, Vec<T>), FlowError> {
-        if tape.levels.len() != self.num_levels() {
+        if tape.levels.len() != tape.level_sizes.len() {
             return Err(FlowError::Size(
                 "backward needs the tape of a full forward pass".into(),
             ));

@@ -206,7 +206,9 @@ pub fn file_name(level: usize, variant: &str, conv: usize, what: &str) -> String
 
 /// Imports a whole network from a directory of per-layer Torch7 files of one variant. The number of
 /// levels is the number of consecutive levels whose first weight file exists (5 or 6 for the
-/// published variants). Errors name the missing, malformed or wrongly shaped file.
+/// published variants). The network runs with the reference pyramid rule the weights were trained
+/// and published with ([`crate::PyramidDepth::REFERENCE`]). Errors name the missing, malformed or
+/// wrongly shaped file.
 pub fn import_dir(dir: &Path, variant: &str) -> Result<SpyNet<f32>, FlowError> {
     let mut levels = 0;
     while dir.join(file_name(levels, variant, 0, "weight")).is_file() {
@@ -254,7 +256,7 @@ pub fn import_dir(dir: &Path, variant: &str) -> Result<SpyNet<f32>, FlowError> {
         }
         net.levels[l] = convs;
     }
-    Ok(net)
+    Ok(net.with_depth(crate::PyramidDepth::REFERENCE))
 }
 
 /// Serialises a tensor as a binary Torch7 `torch.FloatTensor` (contiguous, offset 1, version "V 1").

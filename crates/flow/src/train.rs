@@ -423,8 +423,8 @@ impl Trainer {
     /// finest level (full-resolution pixels).
     pub fn step_joint(&mut self) -> Result<StepReport, FlowError> {
         use rayon::prelude::*;
-        let levels = self.net.num_levels();
         let n = self.cfg.pairs.size;
+        let levels = self.net.levels_run(n, n);
         let batch = self.cfg.batch.max(1);
         let scale = 1.0 / batch as f64;
         let t = self.level_steps.first().copied().unwrap_or(0);
@@ -623,5 +623,6 @@ pub fn replicate_level(src: &SpyNet<f32>, src_level: usize, levels: usize) -> Sp
     }
     SpyNet {
         levels: vec![level; levels],
+        depth: src.depth,
     }
 }

@@ -3,7 +3,7 @@
 //! dtype and shape and names the offending tensor in the error.
 
 use crate::net::{Conv, KERNEL, LAYER_CHANNELS};
-use crate::{FlowError, SpyNet};
+use crate::{FlowError, PyramidDepth, SpyNet};
 use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 use std::collections::HashMap;
@@ -14,7 +14,13 @@ fn tensor_name(l: usize, i: usize, what: &str) -> String {
     format!("level{l}.conv{i}.{what}")
 }
 
-/// Serialises `net` to safetensors bytes (metadata: `format = spynet`, `levels = L`).
+/// Metadata key of the pyramid rule: `halve-while-above:N` for [`PyramidDepth::HalveWhileAbove`];
+/// absent for [`PyramidDepth::AllLevels`] (so files written before the key existed read as they
+/// were trained).
+pub const PYRAMID_KEY: &str = "pyramid";
+
+/// Serialises `net` to safetensors bytes (metadata: `format = spynet`, `levels = L`, and
+/// [`PYRAMID_KEY`] unless the rule is [`PyramidDepth::AllLevels`]).
 pub fn write_safetensors(net: &SpyNet<f32>) -> Result<Vec<u8>, FlowError> {
     let mut buffers: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
     for (l, level) in net.levels.iter().enumerate() {
@@ -33,10 +39,13 @@ pub fn write_safetensors(net: &SpyNet<f32>) -> Result<Vec<u8>, FlowError> {
         .iter()
         .map(|(n, s, b)| Ok((n.clone(), TensorView::new(Dtype::F32, s.clone(), b)?)))
         .collect::<Result<Vec<_>, FlowError>>()?;
-    let meta = HashMap::from([
+    let mut meta = HashMap::from([
         ("format".to_string(), "spynet".to_string()),
         ("levels".to_string(), net.num_levels().to_string()),
     ]);
+    if let PyramidDepth::HalveWhileAbove(side) = net.depth {
+        meta.insert(PYRAMID_KEY.into(), format!("halve-while-above:{side}"));
+    }
     let bytes = safetensors::serialize(views, Some(meta))?;
     Ok(with_sorted_metadata(bytes))
 }
@@ -79,10 +88,32 @@ fn with_sorted_metadata(bytes: Vec<u8>) -> Vec<u8> {
     out
 }
 
+/// The pyramid rule recorded in a file's metadata (see [`PYRAMID_KEY`]).
+fn read_depth(bytes: &[u8]) -> Result<PyramidDepth, FlowError> {
+    let (_, meta) = SafeTensors::read_metadata(bytes)?;
+    let Some(value) = meta.metadata().as_ref().and_then(|m| m.get(PYRAMID_KEY)) else {
+        return Ok(PyramidDepth::AllLevels);
+    };
+    let side = match value.as_str() {
+        "all-levels" => return Ok(PyramidDepth::AllLevels),
+        v => v
+            .strip_prefix("halve-while-above:")
+            .and_then(|n| n.parse::<usize>().ok())
+            .filter(|&n| n > 0),
+    };
+    side.map(PyramidDepth::HalveWhileAbove)
+        .ok_or_else(|| FlowError::Metadata {
+            key: PYRAMID_KEY.into(),
+            value: value.clone(),
+            expected: "all-levels or halve-while-above:N (N > 0)".into(),
+        })
+}
+
 /// Parses safetensors bytes into a network; the number of levels is the number of consecutive
-/// `level{l}.conv0.weight` tensors present.
+/// `level{l}.conv0.weight` tensors present, the pyramid rule the [`PYRAMID_KEY`] metadata entry.
 pub fn read_safetensors(bytes: &[u8]) -> Result<SpyNet<f32>, FlowError> {
     let st = SafeTensors::deserialize(bytes)?;
+    let depth = read_depth(bytes)?;
     let names: std::collections::HashSet<String> =
         st.names().into_iter().map(str::to_string).collect();
     let mut levels = 0;
@@ -110,7 +141,7 @@ pub fn read_safetensors(bytes: &[u8]) -> Result<SpyNet<f32>, FlowError> {
         }
         net.levels[l] = convs;
     }
-    Ok(net)
+    Ok(net.with_depth(depth))
 }
 
 /// Writes `net` to a safetensors file atomically: to a temporary file beside `path`, synced, then

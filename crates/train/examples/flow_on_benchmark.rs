@@ -46,7 +46,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut counts = [0usize; 2];
     let mut pairs = 0;
     // Sharp frames, over M: the network's EPE with level l's output replaced by the pooled truth.
-    let levels = net.num_levels();
+    let levels = net.levels_run(ho, wo);
     let mut substituted = vec![0.0f64; levels.saturating_sub(1)];
     for pair in sharp_flow_pairs(&data, (ho, wo), tau)? {
         let (a, b) = pair.frames;

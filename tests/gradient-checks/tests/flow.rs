@@ -108,7 +108,11 @@ fn probe_conv(
 }
 
 fn check_case(levels: usize, h: usize, w: usize, seed: u64, probes: Option<usize>) {
-    let net = network(levels, seed);
+    check_case_with(network(levels, seed), h, w, seed, probes);
+}
+
+fn check_case_with(net: SpyNet<f64>, h: usize, w: usize, seed: u64, probes: Option<usize>) {
+    let levels = net.num_levels();
     let mut rng = rng(seed ^ 0xF10);
     let n = 3 * h * w;
     let imgs: Vec<f64> = (0..2 * n).map(|_| rng.gen::<f64>()).collect();
@@ -169,6 +173,16 @@ fn two_level_network_all_input_coordinates() {
 fn three_level_network_resized_input_sampled_coordinates() {
     // 7x10 is not a multiple of 4: exercises the resize-in / resize-back path.
     check_case(3, 7, 10, 23, Some(120));
+}
+
+#[test]
+fn reference_pyramid_rule_running_two_of_three_levels() {
+    // Halving while a side exceeds 6: 7x10 is resized to 8x12, pooled once to 4x6, and stops, so
+    // the finest weights are unused; the resize-in / resize-back path and the shorter pyramid's
+    // pooling backward are both exercised.
+    let net = network(3, 31).with_depth(flow::PyramidDepth::HalveWhileAbove(6));
+    assert_eq!(net.levels_run(7, 10), 2);
+    check_case_with(net, 7, 10, 31, Some(120));
 }
 
 #[test]
