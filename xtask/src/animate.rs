@@ -176,7 +176,10 @@ pub fn run(
         };
         let prepared = loaded.body.prepare(&params)?;
         let r = t.render(&loaded.camera, &prepared, latent)?;
-        frames.push(srgb8(&r.rgb, w as usize, h as usize));
+        frames.push(scene::image_io::srgb8_interleaved(
+            &r.rgb,
+            w as usize * h as usize,
+        ));
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -196,19 +199,6 @@ pub fn run(
     }
     println!("{}", crate::common::shown(out).display());
     Ok(())
-}
-
-/// Planar linear `(3, H, W)` to interleaved sRGB bytes.
-fn srgb8(planar: &[f32], w: usize, h: usize) -> Vec<u8> {
-    let n = w * h;
-    let mut out = vec![0u8; 3 * n];
-    for p in 0..n {
-        for c in 0..3 {
-            let v = scene::image_io::srgb_from_linear(planar[c * n + p]);
-            out[3 * p + c] = (v * 255.0).round() as u8;
-        }
-    }
-    out
 }
 
 /// Writes an endlessly looping GIF (each frame quantised to its own 256-colour palette).

@@ -67,6 +67,18 @@ fn write_png(path: &Path, bytes: &[u8], w: u32, h: u32, color: ExtendedColorType
         .map_err(|e| img_err(path, e.to_string()))
 }
 
+/// Planar linear RGB `(3, n)` to interleaved 8-bit sRGB bytes (`3n`, values clamped to [0, 1]): the
+/// form image encoders and viewers take.
+pub fn srgb8_interleaved(planar: &[f32], n: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(3 * n);
+    for i in 0..n {
+        for c in 0..3 {
+            out.push((srgb_from_linear(planar[c * n + i]) * 255.0).round() as u8);
+        }
+    }
+    out
+}
+
 /// Writes a planar linear RGB image as PNG with the given encoding (values clamped to [0, 1]).
 pub fn write_rgb(path: &Path, img: &Rgb, enc: ImageEncoding) -> Result<()> {
     let n = img.width as usize * img.height as usize;

@@ -82,16 +82,6 @@ impl Canvas {
     }
 }
 
-fn srgb8(planar: &[f32], n: usize) -> Vec<u8> {
-    let mut out = Vec::with_capacity(3 * n);
-    for i in 0..n {
-        for c in 0..3 {
-            out.push((scene::image_io::srgb_from_linear(planar[c * n + i]) * 255.0).round() as u8);
-        }
-    }
-    out
-}
-
 /// Writes the contact sheet for `rows` of `w × h` frames.
 pub(crate) fn write(path: &Path, rows: &[PreviewRow], w: usize, h: usize) -> Result<()> {
     let n = w * h;
@@ -131,8 +121,22 @@ pub(crate) fn write(path: &Path, rows: &[PreviewRow], w: usize, h: usize) -> Res
     for (k, r) in rows.iter().enumerate() {
         let y0 = header + k * (th + GAP);
         let x = |c: usize| GAP + c * (tw + GAP);
-        cv.tile(x(0), y0, w, h, s, &srgb8(&r.blurred, n));
-        cv.tile(x(1), y0, w, h, s, &srgb8(&r.sharp, n));
+        cv.tile(
+            x(0),
+            y0,
+            w,
+            h,
+            s,
+            &scene::image_io::srgb8_interleaved(&r.blurred, n),
+        );
+        cv.tile(
+            x(1),
+            y0,
+            w,
+            h,
+            s,
+            &scene::image_io::srgb8_interleaved(&r.sharp, n),
+        );
         let mask: Vec<u8> = r
             .mask
             .iter()
