@@ -19,6 +19,7 @@ mod events_cmd;
 mod flow_estimate;
 mod flow_import_t7;
 mod fuzz;
+mod import;
 mod lpips_cmd;
 mod pixel_font;
 mod ply_info;
@@ -89,6 +90,9 @@ enum Command {
     Render(render::Args),
     /// Event streams: info, convert, voxelize, simulate, flow (contrast maximisation).
     Events(events_cmd::Args),
+    /// Bring your own data: a scene (format v1) from the layouts people have.
+    #[command(subcommand)]
+    Import(import::Command),
     /// Fuzz the parsers of user files with mutated inputs (worker processes under a memory and a
     /// time limit); any panic, abort, hang or over-allocation fails, its input saved under
     /// target/fuzz/TARGET/.
@@ -136,5 +140,6 @@ fn main() -> Result<()> {
         Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
         Command::Render(args) => render::run(args),
         Command::Fuzz(args) => fuzz::run(args),
+        Command::Import(command) => import::run(command),
     }
 }

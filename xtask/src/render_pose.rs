@@ -67,7 +67,7 @@ impl PoseValues {
 }
 
 /// Reads one entry of `POSES.json`: its 72 pose values and translation, checked.
-fn read_entry(v: serde_json::Value) -> Result<(Vec<f32>, [f32; 3], Option<u32>)> {
+pub(crate) fn read_entry(v: serde_json::Value) -> Result<(Vec<f32>, [f32; 3], Option<u32>)> {
     let e: PoseEntry = serde_json::from_value(v).context(
         "expected {\"pose\": 72 numbers or 24 [x, y, z] triples, \"transl\": [x, y, z], \
          \"latent_frame\": N (optional)}",

@@ -13,6 +13,7 @@ pub mod camera;
 pub mod config;
 pub mod error;
 pub mod flow;
+pub mod from_frames;
 pub mod generate;
 pub mod mesh;
 pub mod motion;

@@ -1,0 +1,315 @@
+//! `cargo xtask import frames`: a PNG folder + SMPL poses + a camera → scene format v1, through
+//! [`synth::from_frames`] (blur windows, ESIM events, the benchmark's 7/3 split).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use smpl_deform::motion::{read_easymocap, read_motion};
+use smpl_deform::BodyRef;
+use synth::from_frames::{write_scene_from_frames, FramesToScene, InputFrame};
+
+/// Arguments of `import frames`.
+#[derive(clap::Args, Debug)]
+#[command(after_help = "\
+The poses are used as they are, in the camera file's world frame: give a camera whose \
+`world_to_camera` maps that frame to the camera (PeopleSnapshot / InstantAvatar poses are in the \
+camera frame: identity extrinsics). One pose per frame, in frame order; the counts must agree.
+
+Examples:
+  cargo xtask import frames --images clip/ --fps 30 --poses fits.npz --camera cam.json --out scene
+  cargo xtask import frames --images clip/ --fps 120 --poses smpl/ --camera cam.json \\
+      --blur 7 --events simulate --out scene-blur   # the ZJU-MoCap-Blur recipe")]
+pub struct Args {
+    /// Folder of frames, PNG (8 or 16 bit, grey, RGB or RGBA; alpha ignored) or PPM, in file-name
+    /// order.
+    #[arg(long)]
+    pub images: PathBuf,
+    /// Frame rate of the frames (frames per second).
+    #[arg(long)]
+    pub fps: f64,
+    /// SMPL poses, one per frame: a JSON list of `{"pose": 72 values or 24 triples, "transl": [3]}`,
+    /// an AMASS-style `.npz` (`poses`, `trans`), a PeopleSnapshot / InstantAvatar `.npz`
+    /// (`global_orient`, `body_pose`, `transl`, `betas`) or an EasyMocap `smpl/` folder.
+    #[arg(long)]
+    pub poses: PathBuf,
+    /// With an EasyMocap folder: the `id` of the person to follow (default the first person).
+    #[arg(long)]
+    pub person: Option<i64>,
+    /// The camera: the project's camera JSON, a scene's `scene.json`, or an INRIA `cameras.json`
+    /// list (see `--cam-index`). Its size must be the frames' size.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Index into an INRIA `cameras.json` list.
+    #[arg(long, default_value_t = 0)]
+    pub cam_index: usize,
+    /// Optional folder of human masks (single-channel PNG, non-zero = human), one per frame, in
+    /// file-name order.
+    #[arg(long)]
+    pub masks: Option<PathBuf>,
+    /// Body model: `builtin:makehuman` or the path of your SMPL `.npz` (its licence is yours; the
+    /// scene references it, it is not copied).
+    #[arg(long, default_value = "builtin:makehuman")]
+    pub body: String,
+    /// Average K consecutive frames (odd) into one observed frame, keeping the middle one as the
+    /// sharp reference: output rate fps / K, exposure K / fps. 1 = the frames are the observations.
+    #[arg(long, default_value_t = 1)]
+    pub blur: usize,
+    /// The camera's exposure per frame (seconds, ≤ 1/fps) when `--blur 1`; default 1/fps.
+    #[arg(long)]
+    pub exposure_s: Option<f64>,
+    /// `simulate`: events by ESIM over the frames, split per output frame; `none`: no events.
+    #[arg(long, default_value = "none", value_parser = ["none", "simulate"])]
+    pub events: String,
+    /// ESIM contrast threshold C (both polarities, log-intensity units).
+    #[arg(long, default_value_t = 0.2)]
+    pub threshold: f32,
+    /// Seed of the simulator's per-pixel threshold noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// How the frames' pixel codes relate to intensity: `srgb` (video, photographs) or `linear`.
+    #[arg(long, default_value = "srgb", value_parser = ["srgb", "linear"])]
+    pub transfer: String,
+    /// Output scene directory.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// The image files of a folder in file-name order (PNG or PPM/PNM).
+fn image_files(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading the {what} folder {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| ["png", "ppm", "pnm"].contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!("{}: no PNG or PPM {what} found", dir.display());
+    }
+    Ok(files)
+}
+
+/// One pose per frame, as 24 triples and a translation, plus the file's betas if it has them.
+#[allow(clippy::type_complexity)]
+fn read_poses(
+    path: &Path,
+    body: &smpl_deform::BodyModel,
+    person: Option<i64>,
+) -> Result<(Vec<(Vec<[f32; 3]>, [f32; 3])>, Option<Vec<f32>>)> {
+    let triples = |flat: &[f32]| flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    if path.extension().and_then(|e| e.to_str()) == Some("json") {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+        let serde_json::Value::Array(list) = value else {
+            bail!("{}: expected a JSON list of poses", path.display());
+        };
+        let poses = list
+            .into_iter()
+            .enumerate()
+            .map(|(k, v)| {
+                let (pose, transl, _) = crate::render_pose::read_entry(v)
+                    .with_context(|| format!("{}: pose {k}", path.display()))?;
+                Ok((triples(&pose), transl))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        return Ok((poses, None));
+    }
+    let motion = if path.is_dir() {
+        let shaped = body.shaped_vertices(&[])?;
+        let root = body
+            .rest_joints(&shaped)
+            .first()
+            .copied()
+            .unwrap_or([0.0; 3]);
+        read_easymocap(path, root.map(f64::from), person)
+    } else {
+        read_motion(path)
+    }
+    .with_context(|| format!("reading the poses {}", path.display()))?;
+    for note in &motion.dropped {
+        eprintln!("note: {}: {note}", path.display());
+    }
+    let poses = motion
+        .poses
+        .iter()
+        .zip(&motion.transl)
+        .map(|(p, t)| (triples(p), *t))
+        .collect();
+    Ok((poses, motion.betas))
+}
+
+/// Reads frame `path` as linear planar RGB of the camera's size.
+fn read_frame(path: &Path, camera: &scene::Camera, linear: bool) -> Result<Vec<f32>> {
+    let (mut rgb, h, w) = crate::common::read_rgb(path)?;
+    if (w, h) != (camera.width as usize, camera.height as usize) {
+        bail!(
+            "{}: {w}x{h}, the camera is {}x{}",
+            path.display(),
+            camera.width,
+            camera.height
+        );
+    }
+    if !linear {
+        rgb.iter_mut()
+            .for_each(|v| *v = scene::image_io::linear_from_srgb(*v));
+    }
+    Ok(rgb)
+}
+
+fn read_mask_any(path: &Path, camera: &scene::Camera) -> Result<Vec<bool>> {
+    let img = image::open(path)
+        .with_context(|| format!("reading the mask {}", path.display()))?
+        .to_luma16();
+    if (img.width(), img.height()) != (camera.width, camera.height) {
+        bail!(
+            "{}: {}x{}, the camera is {}x{}",
+            path.display(),
+            img.width(),
+            img.height(),
+            camera.width,
+            camera.height
+        );
+    }
+    Ok(img.pixels().map(|p| p.0[0] > 0).collect())
+}
+
+/// Runs `import frames`.
+pub fn run(args: Args) -> Result<()> {
+    let camera = scene::camera_files::read_any(&args.camera, args.cam_index)
+        .with_context(|| format!("reading the camera {}", args.camera.display()))?;
+    let images = image_files(&args.images, "frames")?;
+    let masks = match &args.masks {
+        Some(dir) => Some(image_files(dir, "masks")?),
+        None => None,
+    };
+    let body_ref = BodyRef::parse(&args.body)?;
+    let body = body_ref
+        .load()
+        .with_context(|| format!("loading the body model {}", args.body))?;
+    let (poses, betas) = read_poses(&args.poses, &body, args.person)?;
+    if poses.len() != images.len() {
+        bail!(
+            "{} holds {} poses but {} holds {} frames: one pose per frame is needed",
+            args.poses.display(),
+            poses.len(),
+            args.images.display(),
+            images.len()
+        );
+    }
+    if let Some(m) = &masks {
+        if m.len() != images.len() {
+            bail!(
+                "{} holds {} masks but {} holds {} frames: one mask per frame is needed",
+                args.masks.as_deref().unwrap_or(Path::new("")).display(),
+                m.len(),
+                args.images.display(),
+                images.len()
+            );
+        }
+    }
+    let cfg = FramesToScene {
+        fps: args.fps,
+        blur: args.blur,
+        exposure_s: args.exposure_s,
+        events: (args.events == "simulate").then(|| events::EsimConfig {
+            c_pos: args.threshold,
+            c_neg: args.threshold,
+            seed: args.seed,
+            ..events::EsimConfig::default()
+        }),
+        ..FramesToScene::default()
+    };
+    cfg.check(images.len())?;
+    if args.out.join(scene::SCENE_FILE).exists() {
+        bail!(
+            "{} already holds a scene: choose another --out or remove it",
+            args.out.display()
+        );
+    }
+    let model = match &body_ref {
+        BodyRef::BuiltinMakehuman => args.body.clone(),
+        BodyRef::SmplFile(p) => std::fs::canonicalize(p)
+            .unwrap_or_else(|_| p.clone())
+            .display()
+            .to_string(),
+    };
+    let spec = scene::BodySpec {
+        model,
+        betas: betas.unwrap_or_default(),
+    };
+    let generator = serde_json::json!({
+        "name": "xtask import frames",
+        "config": {
+            "images": args.images.display().to_string(),
+            "poses": args.poses.display().to_string(),
+            "camera": args.camera.display().to_string(),
+            "fps": args.fps, "blur": args.blur, "events": args.events,
+            "threshold": args.threshold, "seed": args.seed, "transfer": args.transfer,
+        }
+    });
+    let linear = args.transfer == "linear";
+    let used = images.len() / args.blur * args.blur;
+    let bar = crate::common::progress_bar(used as u64, "frames")?;
+    let report = write_scene_from_frames(
+        &args.out,
+        camera.clone(),
+        spec,
+        images.len(),
+        &cfg,
+        generator,
+        |i| {
+            let rgb =
+                read_frame(&images[i], &camera, linear).map_err(|e| synth::SynthError::Knob {
+                    knob: "images",
+                    value: images[i].display().to_string(),
+                    reason: format!("{e:#}"),
+                })?;
+            let mask =
+                match &masks {
+                    Some(m) => Some(read_mask_any(&m[i], &camera).map_err(|e| {
+                        synth::SynthError::Knob {
+                            knob: "masks",
+                            value: m[i].display().to_string(),
+                            reason: format!("{e:#}"),
+                        }
+                    })?),
+                    None => None,
+                };
+            let (pose, transl) = poses[i].clone();
+            Ok(InputFrame {
+                rgb,
+                mask,
+                pose,
+                transl,
+            })
+        },
+        |_| bar.inc(1),
+    )
+    .with_context(|| format!("writing the scene {}", args.out.display()))?;
+    bar.finish_and_clear();
+    if report.dropped_frames > 0 {
+        eprintln!(
+            "note: the last {} frame(s) do not fill a window of {} and were not used",
+            report.dropped_frames, args.blur
+        );
+    }
+    if cfg.events.is_some() {
+        eprintln!(
+            "{} events ({} before the first frame's time, not written)",
+            report.events, report.events_before_first_frame
+        );
+    }
+    eprintln!(
+        "{} frames at {:.3} fps, exposure {:.4} s",
+        report.frames,
+        args.fps / args.blur as f64,
+        cfg.exposure()
+    );
+    println!("{}", crate::common::shown(&args.out).display());
+    Ok(())
+}
