@@ -62,10 +62,7 @@ pub fn write_evaluation(
                 height: *h as u32,
                 data: data.clone(),
             },
-            scene::ImageEncoding {
-                bit_depth: 8,
-                transfer: scene::Transfer::Srgb,
-            },
+            scene::ImageEncoding::rgb(8, scene::Transfer::Srgb),
         )
         .with_context(|| format!("writing {}", path.display()))?;
     }

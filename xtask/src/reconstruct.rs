@@ -291,11 +291,17 @@ pub fn run(args: Args) -> Result<()> {
     if config.blur_model == BlurModel::Exposure {
         ctx.enable_exposure(&data, config.subframes)
             .context("preparing the exposure model")?;
+        let (shortest, longest) = data.frames.iter().fold((f64::MAX, 0.0f64), |(a, b), f| {
+            (a.min(f.exposure_s), b.max(f.exposure_s))
+        });
+        let span = if longest - shortest > 1e-9 {
+            format!("{:.1}–{:.1} ms", 1e3 * shortest, 1e3 * longest)
+        } else {
+            format!("{:.1} ms", 1e3 * longest)
+        };
         println!(
-            "exposure model: each training frame is the mean of {} renders over its {:.1} ms \
-             exposure",
-            config.subframes,
-            1e3 * data.scene.exposure_s
+            "exposure model: each training frame is the mean of {} renders over its {span} exposure",
+            config.subframes
         );
     }
     if config.event_loss {

@@ -134,10 +134,7 @@ pub fn run(args: Args) -> Result<()> {
                 height: loaded.camera.height,
                 data: r.rgb.clone(),
             },
-            scene::ImageEncoding {
-                bit_depth: 8,
-                transfer: scene::Transfer::Srgb,
-            },
+            scene::ImageEncoding::rgb(8, scene::Transfer::Srgb),
         )
         .with_context(|| format!("writing {}", path.display()))?;
         if args.ply {

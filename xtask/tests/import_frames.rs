@@ -31,10 +31,14 @@ fn write_poses(path: &Path, count: usize) {
 }
 
 fn import(out: &Path, poses: &Path, extra: &[&str]) -> Output {
+    import_from(&fixture().join("sharp"), out, poses, extra)
+}
+
+fn import_from(images: &Path, out: &Path, poses: &Path, extra: &[&str]) -> Output {
     let fx = fixture();
     xtask()
         .args(["import", "frames", "--fps", "30", "--images"])
-        .arg(fx.join("sharp"))
+        .arg(images)
         .arg("--masks")
         .arg(fx.join("masks"))
         .arg("--camera")
@@ -83,7 +87,15 @@ fn frames_and_poses_become_a_scene_that_trains() {
         .iter()
         .all(|f| f.sharp.is_some() && f.events.is_some()));
     // It trains (exposure model + event loss, the default) for a few steps.
-    let config = dir.path().join("tiny.toml");
+    let config = tiny_config(dir.path());
+    let run = dir.path().join("run");
+    let out = reconstruct(&blurred, &run, &config);
+    assert!(out.contains("event loss: "), "{out}");
+    assert!(run.join("model").is_dir());
+}
+
+fn tiny_config(dir: &Path) -> PathBuf {
+    let config = dir.join("tiny.toml");
     std::fs::write(
         &config,
         "steps = 4\nhuman_gaussians = 200\nscene_gaussians = 400\nmax_gaussians = 2000\n\
@@ -91,22 +103,68 @@ fn frames_and_poses_become_a_scene_that_trains() {
          densify_from = 8\ndensify_until = 8\n",
     )
     .unwrap();
-    let run = dir.path().join("run");
+    config
+}
+
+/// Runs `reconstruct` and returns its standard output.
+fn reconstruct(data: &Path, run: &Path, config: &Path) -> String {
     let o = xtask()
         .arg("reconstruct")
         .arg("--data")
-        .arg(&blurred)
+        .arg(data)
         .arg("--out")
-        .arg(&run)
+        .arg(run)
         .arg("--config")
-        .arg(&config)
+        .arg(config)
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("event loss: "), "{out}");
-    assert!(run.join("model").is_dir());
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+#[test]
+fn grey_frames_make_a_grey_scene_that_trains_with_per_frame_exposures() {
+    let dir = tempfile::tempdir().unwrap();
+    let poses = dir.path().join("poses.json");
+    write_poses(&poses, 15);
+    // The fixture's sharp frames as 16-bit grey PNGs, as a DAVIS APS would record them.
+    let fx = fixture();
+    let text = std::fs::read_to_string(fx.join("scene.json")).unwrap();
+    let tiny: scene::Scene = serde_json::from_str(&text).unwrap();
+    let grey_dir = dir.path().join("grey");
+    std::fs::create_dir_all(&grey_dir).unwrap();
+    let grey = scene::ImageEncoding {
+        channels: 1,
+        ..tiny.images
+    };
+    for f in &tiny.frames {
+        let rgb = scene::read_rgb(&fx.join(f.sharp.as_ref().unwrap()), tiny.images).unwrap();
+        scene::write_rgb(&grey_dir.join(format!("{:06}.png", f.index)), &rgb, grey).unwrap();
+    }
+    let out = dir.path().join("scene");
+    let o = import_from(
+        &grey_dir,
+        &out,
+        &poses,
+        &["--exposure-s", "0.03", "--events", "simulate"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut s = scene::load(&out).unwrap();
+    assert!(s.images.is_grey());
+    // Auto-exposure: frame 1 has its own, shorter exposure.
+    s.frames[1].exposure_s = Some(0.015);
+    s.write(&out).unwrap();
+    assert_eq!(scene::load(&out).unwrap().exposure_of(1), 0.015);
+    let run = dir.path().join("run");
+    let stdout = reconstruct(&out, &run, &tiny_config(dir.path()));
+    assert!(stdout.contains("15.0–30.0 ms exposure"), "{stdout}");
+    // The test split (3 frames) is evaluated on the renders' luminance against the grey frames.
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["test_frames"].as_u64(), Some(3), "{metrics}");
+    let psnr = metrics["test_psnr_full"].as_f64().unwrap();
+    assert!(psnr.is_finite() && psnr > 5.0, "{metrics}");
 }
 
 #[test]

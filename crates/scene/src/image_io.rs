@@ -79,7 +79,20 @@ pub fn srgb8_interleaved(planar: &[f32], n: usize) -> Vec<u8> {
     out
 }
 
-/// Writes a planar linear RGB image as PNG with the given encoding (values clamped to [0, 1]).
+/// Rec. 601 luma weights `(R, G, B)`, applied to *linear* intensities: how a colour render is
+/// compared with a grey frame (`images.channels = 1`).
+pub const REC601_LUMA: [f32; 3] = [0.299, 0.587, 0.114];
+
+/// Rec. 601 luminance of planar linear RGB `(3, n)`: `n` values.
+pub fn luminance(planar: &[f32], n: usize) -> Vec<f32> {
+    let [wr, wg, wb] = REC601_LUMA;
+    (0..n)
+        .map(|i| wr * planar[i] + wg * planar[n + i] + wb * planar[2 * n + i])
+        .collect()
+}
+
+/// Writes a planar linear RGB image as PNG with the given encoding (values clamped to [0, 1]); with
+/// `enc.channels = 1` the file holds the image's Rec. 601 luminance ([`luminance`]), one channel.
 pub fn write_rgb(path: &Path, img: &Rgb, enc: ImageEncoding) -> Result<()> {
     let n = img.width as usize * img.height as usize;
     if img.data.len() != 3 * n {
@@ -97,6 +110,26 @@ pub fn write_rgb(path: &Path, img: &Rgb, enc: ImageEncoding) -> Result<()> {
         Transfer::Linear => x.clamp(0.0, 1.0),
         Transfer::Srgb => srgb_from_linear(x),
     };
+    if enc.is_grey() {
+        let y = luminance(&img.data, n);
+        return match enc.bit_depth {
+            8 => {
+                let bytes: Vec<u8> = y.iter().map(|&v| (code(v) * 255.0).round() as u8).collect();
+                write_png(path, &bytes, img.width, img.height, ExtendedColorType::L8)
+            }
+            16 => {
+                let bytes: Vec<u8> = y
+                    .iter()
+                    .flat_map(|&v| ((code(v) * 65535.0).round() as u16).to_ne_bytes())
+                    .collect();
+                write_png(path, &bytes, img.width, img.height, ExtendedColorType::L16)
+            }
+            b => Err(SceneError::Arg {
+                name: "bit_depth".into(),
+                message: format!("{b} is not 8 or 16"),
+            }),
+        };
+    }
     match enc.bit_depth {
         8 => {
             let mut bytes = Vec::with_capacity(3 * n);
@@ -130,8 +163,9 @@ pub fn write_rgb(path: &Path, img: &Rgb, enc: ImageEncoding) -> Result<()> {
     }
 }
 
-/// Reads an RGB PNG written with `enc` into planar linear f32. The file's bit depth must match
-/// `enc.bit_depth` and it must have exactly three channels.
+/// Reads a PNG written with `enc` into planar linear f32 `(3, H, W)`. The file's bit depth must
+/// match `enc.bit_depth` and its channels `enc.channels`; a grey frame is returned as three equal
+/// planes.
 pub fn read_rgb(path: &Path, enc: ImageEncoding) -> Result<Rgb> {
     let img = image::ImageReader::open(path)
         .map_err(|source| SceneError::Io {
@@ -148,24 +182,40 @@ pub fn read_rgb(path: &Path, enc: ImageEncoding) -> Result<Rgb> {
     };
     let mut data = vec![0.0f32; 3 * n];
     match (&img, enc.bit_depth) {
-        (DynamicImage::ImageRgb8(b), 8) => {
+        (DynamicImage::ImageRgb8(b), 8) if !enc.is_grey() => {
             for (i, p) in b.pixels().enumerate() {
                 for c in 0..3 {
                     data[c * n + i] = decode(f32::from(p.0[c]) / 255.0);
                 }
             }
         }
-        (DynamicImage::ImageRgb16(b), 16) => {
+        (DynamicImage::ImageRgb16(b), 16) if !enc.is_grey() => {
             for (i, p) in b.pixels().enumerate() {
                 for c in 0..3 {
                     data[c * n + i] = decode(f32::from(p.0[c]) / 65535.0);
                 }
             }
         }
+        (DynamicImage::ImageLuma8(b), 8) if enc.is_grey() => {
+            for (i, p) in b.pixels().enumerate() {
+                let v = decode(f32::from(p.0[0]) / 255.0);
+                (0..3).for_each(|c| data[c * n + i] = v);
+            }
+        }
+        (DynamicImage::ImageLuma16(b), 16) if enc.is_grey() => {
+            for (i, p) in b.pixels().enumerate() {
+                let v = decode(f32::from(p.0[0]) / 65535.0);
+                (0..3).for_each(|c| data[c * n + i] = v);
+            }
+        }
         (other, bits) => {
             return Err(img_err(
                 path,
-                format!("pixel format {:?}, expected {bits}-bit RGB", other.color()),
+                format!(
+                    "pixel format {:?}, expected {bits}-bit {}",
+                    other.color(),
+                    if enc.is_grey() { "grey" } else { "RGB" }
+                ),
             ))
         }
     }

@@ -124,7 +124,7 @@ pub struct BodySpec {
     pub betas: Vec<f32>,
 }
 
-/// On-disk encoding of the RGB images.
+/// On-disk encoding of the frames (inputs and sharp references).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ImageEncoding {
@@ -132,6 +132,35 @@ pub struct ImageEncoding {
     pub bit_depth: u8,
     /// Transfer function from linear intensity to the stored code values.
     pub transfer: Transfer,
+    /// Channels of the PNG files: 3 (RGB, the default, not written) or 1 (grey: a DAVIS APS or
+    /// CeleX-V intensity frame). Grey frames are read into memory as three equal planes
+    /// ([`crate::read_rgb`]); a trainer compares them with the luminance of its renders.
+    #[serde(default = "three", skip_serializing_if = "is_three")]
+    pub channels: u8,
+}
+
+fn three() -> u8 {
+    3
+}
+
+fn is_three(c: &u8) -> bool {
+    *c == 3
+}
+
+impl ImageEncoding {
+    /// RGB frames of `bit_depth` bits with `transfer`.
+    pub fn rgb(bit_depth: u8, transfer: Transfer) -> Self {
+        Self {
+            bit_depth,
+            transfer,
+            channels: 3,
+        }
+    }
+
+    /// True for single-channel (grey) frames.
+    pub fn is_grey(&self) -> bool {
+        self.channels == 1
+    }
 }
 
 /// Transfer function of stored code values.
@@ -230,6 +259,10 @@ pub struct Frame {
     /// Raw events with timestamps in `[time_s, next time_s)` (`.npz`, `events` crate layout).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub events: Option<String>,
+    /// This frame's own exposure (seconds, `0 < e ≤ 1/fps`) when it differs from the scene's
+    /// (auto-exposure); absent = [`Scene::exposure_s`]. Use [`Scene::exposure_of`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_s: Option<f64>,
     /// Train or test.
     pub split: Split,
 }
@@ -252,6 +285,14 @@ impl Scene {
         (0..self.frames.len())
             .filter(|&i| self.frames[i].split == split)
             .collect()
+    }
+
+    /// The exposure of frame `k` (seconds): its own `exposure_s`, else the scene's.
+    pub fn exposure_of(&self, k: usize) -> f64 {
+        self.frames
+            .get(k)
+            .and_then(|f| f.exposure_s)
+            .unwrap_or(self.exposure_s)
     }
 
     /// Absolute path of a file named in the scene.

@@ -77,6 +77,7 @@ struct Checker<'a> {
 #[derive(Clone, Copy)]
 enum PngKind {
     Rgb(u8),
+    Grey(u8),
     Mask,
 }
 
@@ -277,11 +278,16 @@ impl Checker<'_> {
         let ok = match kind {
             PngKind::Rgb(8) => ct == image::ColorType::Rgb8,
             PngKind::Rgb(_) => ct == image::ColorType::Rgb16,
+            PngKind::Grey(8) => ct == image::ColorType::L8,
+            PngKind::Grey(_) => ct == image::ColorType::L16,
             PngKind::Mask => matches!(ct, image::ColorType::L8 | image::ColorType::L16),
         };
         if !ok {
             let want = match kind {
                 PngKind::Rgb(b) => format!("{b}-bit RGB (images.bit_depth)"),
+                PngKind::Grey(b) => {
+                    format!("{b}-bit single channel (images.bit_depth, images.channels = 1)")
+                }
                 PngKind::Mask => "8- or 16-bit single channel".into(),
             };
             self.bad(
@@ -415,8 +421,18 @@ impl Checker<'_> {
             }
         }
         let mut bits = None;
+        let mut grey = false;
         if let Some(im) = m.get("images") {
-            if let Some(imm) = self.obj(im, "images", &["bit_depth", "transfer"], &[]) {
+            if let Some(imm) = self.obj(im, "images", &["bit_depth", "transfer"], &["channels"]) {
+                if let Some(c) = imm.get("channels") {
+                    match self.uint(c, "images.channels", 255) {
+                        Some(1) => grey = true,
+                        Some(3) | None => {}
+                        Some(c) => {
+                            self.bad("images.channels", format!("{c} is not 1 (grey) or 3 (RGB)"))
+                        }
+                    }
+                }
                 if let Some(b) = imm
                     .get("bit_depth")
                     .and_then(|b| self.uint(b, "images.bit_depth", 255))
@@ -433,7 +449,8 @@ impl Checker<'_> {
             }
         }
         if let Some(frames) = m.get("frames") {
-            self.frames(frames, size, bits);
+            let max_exposure = fps.filter(|f| *f > 0.0).map(|f| 1.0 / f);
+            self.frames(frames, size, bits, grey, max_exposure);
         }
     }
 
@@ -513,7 +530,14 @@ impl Checker<'_> {
         }
     }
 
-    fn frames(&mut self, v: &Value, size: Option<(u32, u32)>, bits: Option<u8>) {
+    fn frames(
+        &mut self,
+        v: &Value,
+        size: Option<(u32, u32)>,
+        bits: Option<u8>,
+        grey: bool,
+        max_exposure: Option<f64>,
+    ) {
         let Some(a) = v.as_array() else {
             self.bad(
                 "frames",
@@ -534,10 +558,23 @@ impl Checker<'_> {
                 f,
                 &p,
                 &["index", "time_s", "image", "pose", "transl", "split"],
-                &["sharp", "mask", "flow_to_next", "events"],
+                &["sharp", "mask", "flow_to_next", "events", "exposure_s"],
             ) else {
                 continue;
             };
+            if let Some(e) = m
+                .get("exposure_s")
+                .and_then(|x| self.num(x, &format!("{p}.exposure_s")))
+            {
+                if e <= 0.0 {
+                    self.bad(&format!("{p}.exposure_s"), format!("{e} must be > 0"));
+                } else if let Some(max) = max_exposure.filter(|&max| e > max * (1.0 + 1e-9)) {
+                    self.bad(
+                        &format!("{p}.exposure_s"),
+                        format!("{e} s is longer than the frame interval 1/fps = {max} s"),
+                    );
+                }
+            }
             if let Some(i) = m
                 .get("index")
                 .and_then(|x| self.uint(x, &format!("{p}.index"), u64::from(u32::MAX)))
@@ -566,7 +603,11 @@ impl Checker<'_> {
                 }
                 last_time = Some(t);
             }
-            let rgb = PngKind::Rgb(bits.unwrap_or(16));
+            let rgb = if grey {
+                PngKind::Grey(bits.unwrap_or(16))
+            } else {
+                PngKind::Rgb(bits.unwrap_or(16))
+            };
             let check_rgb = bits.is_some();
             for key in ["image", "sharp"] {
                 if let Some(x) = m.get(key) {

@@ -21,10 +21,7 @@ fn write_flo(path: &Path, w: u32, h: u32) {
 }
 
 fn make_scene(dir: &Path, frames: usize) -> Scene {
-    let enc = ImageEncoding {
-        bit_depth: 16,
-        transfer: Transfer::Srgb,
-    };
+    let enc = ImageEncoding::rgb(16, Transfer::Srgb);
     for sub in ["images", "masks", "flow"] {
         std::fs::create_dir_all(dir.join(sub)).unwrap();
     }
@@ -55,6 +52,7 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
         out.push(Frame {
             index: k as u32,
             time_s: k as f64 / 30.0,
+            exposure_s: None,
             image,
             sharp: None,
             mask: Some(mask),
@@ -188,4 +186,79 @@ fn writer_refuses_bad_values() {
     let err = s.write(tmp.path()).unwrap_err().to_string();
     assert!(err.contains("frames[1].pose[0][0]"), "{err}");
     assert!(err.contains("no frame has split"), "{err}");
+}
+
+#[test]
+fn grey_frames_and_per_frame_exposures_round_trip_and_are_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut s = make_scene(tmp.path(), 3);
+    let grey = ImageEncoding {
+        channels: 1,
+        ..ImageEncoding::rgb(8, Transfer::Linear)
+    };
+    let n = (W * H) as usize;
+    let img = Rgb {
+        width: W,
+        height: H,
+        data: (0..3 * n).map(|i| (i % n) as f32 / n as f32).collect(),
+    };
+    for f in &s.frames {
+        write_rgb(&tmp.path().join(&f.image), &img, grey).unwrap();
+    }
+    s.images = grey;
+    s.frames[1].exposure_s = Some(0.01);
+    s.write(tmp.path()).unwrap();
+    let text = std::fs::read_to_string(tmp.path().join("scene.json")).unwrap();
+    assert!(text.contains("\"channels\": 1"), "{text}");
+    let back = scene::load(tmp.path()).unwrap();
+    assert_eq!(back, s);
+    assert_eq!(back.exposure_of(0), 1.0 / 30.0);
+    assert_eq!(back.exposure_of(1), 0.01);
+    // A grey frame reads as three equal planes holding the stored luminance (of three equal
+    // planes: the value itself, to the 8-bit step).
+    let read = read_rgb(&tmp.path().join(&s.frames[0].image), grey).unwrap();
+    for i in 0..n {
+        let want = i as f32 / n as f32;
+        assert!(
+            (read.data[i] - want).abs() <= 0.5 / 255.0 + 1e-6,
+            "pixel {i}"
+        );
+        for c in 1..3 {
+            assert_eq!(read.data[c * n + i], read.data[i], "pixel {i} plane {c}");
+        }
+    }
+    // An RGB scene's files read as grey are refused, and the reverse; bad values name the field.
+    assert!(read_rgb(
+        &tmp.path().join(&s.frames[0].image),
+        ImageEncoding::rgb(8, Transfer::Linear)
+    )
+    .is_err());
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value["images"]["channels"] = serde_json::json!(2);
+    value["frames"][2]["exposure_s"] = serde_json::json!(0.5);
+    std::fs::write(tmp.path().join("scene.json"), value.to_string()).unwrap();
+    let msg = scene::load(tmp.path()).unwrap_err().to_string();
+    assert!(
+        msg.contains("images.channels: 2 is not 1 (grey) or 3 (RGB)"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("frames[2].exposure_s: 0.5 s is longer"),
+        "{msg}"
+    );
+    // A grey scene whose frame is an RGB file is refused naming the frame.
+    value["images"]["channels"] = serde_json::json!(1);
+    value["frames"][2]["exposure_s"] = serde_json::json!(0.02);
+    std::fs::write(tmp.path().join("scene.json"), value.to_string()).unwrap();
+    write_rgb(
+        &tmp.path().join(&s.frames[2].image),
+        &img,
+        ImageEncoding::rgb(8, Transfer::Linear),
+    )
+    .unwrap();
+    let msg = scene::load(tmp.path()).unwrap_err().to_string();
+    assert!(
+        msg.contains("frames[2].image") && msg.contains("single channel"),
+        "{msg}"
+    );
 }

@@ -53,10 +53,7 @@ impl Default for FramesToScene {
             blur: 1,
             exposure_s: None,
             events: None,
-            encoding: ImageEncoding {
-                bit_depth: 16,
-                transfer: Transfer::Srgb,
-            },
+            encoding: ImageEncoding::rgb(16, Transfer::Srgb),
         }
     }
 }
@@ -243,6 +240,7 @@ pub fn write_scene_from_frames(
             let mut f = Frame {
                 index: j as u32,
                 time_s: time_of(j) as f64 * 1e-6,
+                exposure_s: None,
                 image: format!("images/{j:06}.png"),
                 sharp: None,
                 mask: None,

@@ -480,10 +480,7 @@ pub fn generate_with_body(
         let blurred: Vec<f32> = blur_sum.iter().map(|v| v * inv).collect();
 
         // Files of frame k.
-        let enc = scene::ImageEncoding {
-            bit_depth: 16,
-            transfer: scene::Transfer::Srgb,
-        };
+        let enc = scene::ImageEncoding::rgb(16, scene::Transfer::Srgb);
         let image = format!("images/{k:06}.png");
         let sharp_rel = format!("sharp/{k:06}.png");
         let mask_rel = format!("masks/{k:06}.png");
@@ -608,6 +605,7 @@ pub fn generate_with_body(
         scene_frames.push(scene::Frame {
             index: k as u32,
             time_s: tk,
+            exposure_s: None,
             image,
             sharp: Some(sharp_rel),
             mask: Some(mask_rel),
@@ -678,10 +676,7 @@ pub fn generate_with_body(
         },
         fps,
         exposure_s: exposure,
-        images: scene::ImageEncoding {
-            bit_depth: 16,
-            transfer: scene::Transfer::Srgb,
-        },
+        images: scene::ImageEncoding::rgb(16, scene::Transfer::Srgb),
         frames: scene_frames,
         generator: Some(generator),
     };

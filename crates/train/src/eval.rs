@@ -268,11 +268,17 @@ pub fn evaluate_split(
     for f in data.frames.iter().filter(|f| f.split == split) {
         let pose = body.prepare(&model.corrected_params(f.index, &f.smpl))?;
         let r = model.render(&data.camera, &pose, model.latent_for(f.index))?;
+        // Grey frames are compared with the render's luminance, as in training.
+        let grey_render = data
+            .scene
+            .images
+            .is_grey()
+            .then(|| crate::image_loss::luminance3(&r.rgb, w * h));
         let no_mask = vec![false; w * h];
         let frame = EvalFrame {
             width: w,
             height: h,
-            render: &r.rgb,
+            render: grey_render.as_deref().unwrap_or(&r.rgb),
             reference: f.sharp.as_deref().unwrap_or(&f.image),
             blurred: &f.image,
             mask: f.mask.as_deref().unwrap_or(&no_mask),

@@ -46,7 +46,9 @@ pub struct ExposureLoss<T> {
 /// The terms of one frame: `renders` are S planar (3, H, W) linear RGB images (each may carry
 /// further planes, ignored), `observed` the frame (3, H, W), `ssim_weight` λ; the cotangents are
 /// laid out with `channels` ≥ 3 planes (the trainer's renders carry the human probability as a
-/// fourth).
+/// fourth). With `grey` the frame is a grey one (three equal planes) and the photometric terms
+/// compare the luminance of the mean render ([`crate::image_loss::luminance3`]); the prediction
+/// returned is that luminance. The event terms always use the renders' colour.
 pub fn exposure_loss<T: Real>(
     renders: &[&[T]],
     observed: &[T],
@@ -54,9 +56,15 @@ pub fn exposure_loss<T: Real>(
     ssim_weight: T,
     events: Option<ExposureEvents<'_, T>>,
     channels: usize,
+    grey: bool,
 ) -> ExposureLoss<T> {
     let hw = shape.height * shape.width;
-    let prediction = mean_image(renders, 3 * hw);
+    let mean = mean_image(renders, 3 * hw);
+    let prediction = if grey {
+        crate::image_loss::luminance3(&mean, hw)
+    } else {
+        mean
+    };
     let mut d_l1 = vec![T::zero(); 3 * hw];
     let mut d_ssim = vec![T::zero(); 3 * hw];
     let l1_value = l1(&prediction, observed, Some(&mut d_l1));
@@ -66,6 +74,9 @@ pub fn exposure_loss<T: Real>(
     let mut d_mean = vec![T::zero(); channels.max(3) * hw];
     for (o, (&a, &b)) in d_mean.iter_mut().zip(d_l1.iter().zip(&d_ssim)) {
         *o = (T::one() - w) * a - w * b;
+    }
+    if grey {
+        d_mean = crate::image_loss::luminance3_backward(&d_mean, hw);
     }
     let mut d_renders = if renders.len() == 1 {
         vec![d_mean]

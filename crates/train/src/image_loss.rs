@@ -281,6 +281,35 @@ pub fn mask_iou(pred: &[f32], target: &[f32]) -> f64 {
     }
 }
 
+/// Grey frames (`images.channels = 1`, held in memory as three equal planes): the Rec. 601
+/// luminance `Y = 0.299 R + 0.587 G + 0.114 B` of planar linear RGB `(3, hw)`, written to all
+/// three planes, so a colour render compares with a grey frame plane by plane.
+pub fn luminance3<T: Float>(rgb: &[T], hw: usize) -> Vec<T> {
+    let w = scene::image_io::REC601_LUMA.map(|v| T::from(v).unwrap_or_else(T::zero));
+    let mut out = vec![T::zero(); 3 * hw];
+    for i in 0..hw {
+        let y = w[0] * rgb[i] + w[1] * rgb[hw + i] + w[2] * rgb[2 * hw + i];
+        for c in 0..3 {
+            out[c * hw + i] = y;
+        }
+    }
+    out
+}
+
+/// The adjoint of [`luminance3`]: `∂L/∂rgb_c = w_c · Σ_c' ∂L/∂out_c'` per pixel. Planes of
+/// `grad` past the third are returned unchanged.
+pub fn luminance3_backward<T: Float>(grad: &[T], hw: usize) -> Vec<T> {
+    let w = scene::image_io::REC601_LUMA.map(|v| T::from(v).unwrap_or_else(T::zero));
+    let mut out = grad.to_vec();
+    for i in 0..hw {
+        let s = grad[i] + grad[hw + i] + grad[2 * hw + i];
+        for c in 0..3 {
+            out[c * hw + i] = w[c] * s;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

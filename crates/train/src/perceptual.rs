@@ -88,7 +88,10 @@ pub fn lpips_loss<T: Real>(
 /// The perceptual training term of one frame: `weight · LPIPS(prediction, observed)` with
 /// `prediction` the mean of the frame's S renders (linear planar (3, H, W)), its cotangent added to
 /// every render's `d_renders[s]` (whose first 3·H·W values are its RGB planes) scaled like the
-/// photometric loss's: by `weight / S`, or `weight` for one render. Returns the weighted value.
+/// photometric loss's: by `weight / S`, or `weight` for one render. With `grey` (grey frames),
+/// `prediction` is the luminance of the mean render, as [`crate::exposure_loss::exposure_loss`]
+/// returns it, and the cotangent goes back through [`crate::image_loss::luminance3`]. Returns the
+/// weighted value.
 pub fn perceptual_term<T: Real>(
     net: &Lpips<T>,
     prediction: &[T],
@@ -97,9 +100,13 @@ pub fn perceptual_term<T: Real>(
     width: usize,
     weight: T,
     d_renders: &mut [Vec<T>],
+    grey: bool,
 ) -> Result<T, TrainError> {
     let reference = reference_features(net, observed, height, width)?;
-    let (value, d_prediction) = lpips_loss(net, prediction, height, width, &reference)?;
+    let (value, mut d_prediction) = lpips_loss(net, prediction, height, width, &reference)?;
+    if grey {
+        d_prediction = crate::image_loss::luminance3_backward(&d_prediction, height * width);
+    }
     let share = match d_renders.len() {
         1 => weight,
         s => weight * (T::one() / T::of(s as f64)),

@@ -7,10 +7,7 @@ use std::path::Path;
 
 fn write_scene(dir: &Path, frames: usize) -> Scene {
     let (w, h) = (8u32, 6u32);
-    let enc = ImageEncoding {
-        bit_depth: 16,
-        transfer: Transfer::Srgb,
-    };
+    let enc = ImageEncoding::rgb(16, Transfer::Srgb);
     std::fs::create_dir_all(dir.join("images")).unwrap();
     std::fs::create_dir_all(dir.join("masks")).unwrap();
     let mut list = Vec::new();
@@ -31,6 +28,7 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
         list.push(Frame {
             index: k as u32,
             time_s: k as f64 / 30.0,
+            exposure_s: None,
             image: rel,
             sharp: None,
             mask: Some(mrel),

@@ -3,6 +3,8 @@
 //! observed frame, plus the weighted event-generation loss between consecutive renders, or between
 //! every pair of renders (some intervals without events), w.r.t. every render, for S = 1, 2, 3 and 5. Each render carries a fourth plane
 //! (the trainer's human probability) that the terms ignore: its cotangent must be exactly zero.
+//! With a grey frame (three equal planes) the photometric terms compare the mean render's Rec. 601
+//! luminance; the colour cotangent (without the luminance's adjoint) fails that case.
 //!
 //! Tolerance in f64 with h = 1e-6: the loss is O(1), so rounding is ≈ ε·|L|/h ≈ 2e-10; the terms are
 //! smooth (SSIM, log of luma ≥ 0.05) except at L1's kinks where the mean equals the observed value,
@@ -30,6 +32,7 @@ fn value(
     expected: &[Option<Vec<f64>>],
     event_weight: f64,
     all_pairs: bool,
+    grey: bool,
 ) -> (f64, Vec<Vec<f64>>) {
     let renders: Vec<&[f64]> = x.chunks(PLANES * HW).collect();
     let shape = ImageShape {
@@ -49,6 +52,7 @@ fn value(
             all_pairs,
         }),
         PLANES,
+        grey,
     );
     (out.photometric + out.events, out.d_renders)
 }
@@ -57,27 +61,37 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(8))]
 
     #[test]
-    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4, all_pairs in any::<bool>()) {
+    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4, all_pairs in any::<bool>(), grey in any::<bool>()) {
         let subframes = [1, 2, 3, 5][which];
         let mut rng = rng(seed);
         let x: Vec<f64> = (0..subframes * PLANES * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
-        let observed: Vec<f64> = (0..3 * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
+        let mut observed: Vec<f64> = (0..3 * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
+        if grey {
+            let (first, rest) = observed.split_at_mut(HW);
+            rest[..HW].copy_from_slice(first);
+            rest[HW..].copy_from_slice(first);
+        }
         // Every other pair has events (C·E with C = 0.2); the first pair has none.
         let expected: Vec<Option<Vec<f64>>> = (0..subframes.saturating_sub(1))
             .map(|s| (s % 2 == 1 || subframes == 2).then(|| (0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
             .collect();
-        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs);
+        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs, grey);
         let analytic: Vec<f64> = d.concat();
-        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs).0, &x, H);
+        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs, grey).0, &x, H);
         let mut checker = GradientChecker::new();
-        checker.check(&format!("exposure terms, S = {subframes}, all pairs {all_pairs}"), &numeric, &analytic, TOL);
+        checker.check(&format!("exposure terms, S = {subframes}, all pairs {all_pairs}, grey {grey}"), &numeric, &analytic, TOL);
+        if grey {
+            // The luminance's adjoint is needed: the colour cotangent fails a grey frame.
+            let (_, colour) = value(&x, &observed, &expected, 0.7, all_pairs, false);
+            prop_assert!(!compare("colour cotangent on a grey frame", &numeric, &colour.concat(), TOL).passed());
+        }
         // The probability plane is not part of the terms.
         for render in &d {
             prop_assert!(render[3 * HW..].iter().all(|&v| v == 0.0));
         }
         if subframes > 1 {
             // The mean's 1/S is needed: the unscaled photometric cotangent fails.
-            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs);
+            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs, grey);
             let unscaled: Vec<f64> = d.iter().zip(&d_no_events).flat_map(|(with, without)| {
                 with.iter().zip(without).map(move |(&a, &b)| a + (subframes as f64 - 1.0) * b)
             }).collect();

@@ -54,6 +54,7 @@ fn perceptual_term_gradient_reaches_every_render() {
             width,
             weight,
             &mut d_renders,
+            false,
         )
         .expect("sizes");
         for (s, d) in d_renders.iter().enumerate() {
@@ -72,6 +73,7 @@ fn perceptual_term_gradient_reaches_every_render() {
                         width,
                         weight,
                         &mut scratch,
+                        false,
                     )
                     .expect("sizes")
                 },

@@ -21,7 +21,8 @@ Examples:
       --blur 7 --events simulate --out scene-blur   # the ZJU-MoCap-Blur recipe")]
 pub struct Args {
     /// Folder of frames, PNG (8 or 16 bit, grey, RGB or RGBA; alpha ignored) or PPM, in file-name
-    /// order.
+    /// order. Grey frames (a DAVIS APS or CeleX-V camera) make a grey scene (`images.channels =
+    /// 1`), which trains on the renders' luminance.
     #[arg(long)]
     pub images: PathBuf,
     /// Frame rate of the frames (frames per second).
@@ -143,6 +144,20 @@ fn read_poses(
     Ok((poses, motion.betas))
 }
 
+/// True if the image file at `path` has one channel (grey, 8 or 16 bit).
+fn is_grey_file(path: &Path) -> Result<bool> {
+    let decoder = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .with_context(|| format!("reading {}", path.display()))?
+        .into_decoder()
+        .with_context(|| format!("reading {}", path.display()))?;
+    use image::ImageDecoder;
+    Ok(matches!(
+        decoder.color_type(),
+        image::ColorType::L8 | image::ColorType::L16
+    ))
+}
+
 /// Reads frame `path` as linear planar RGB of the camera's size.
 fn read_frame(path: &Path, camera: &scene::Camera, linear: bool) -> Result<Vec<f32>> {
     let (mut rgb, h, w) = crate::common::read_rgb(path)?;
@@ -212,7 +227,7 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
-    let cfg = FramesToScene {
+    let mut cfg = FramesToScene {
         fps: args.fps,
         blur: args.blur,
         exposure_s: args.exposure_s,
@@ -224,6 +239,10 @@ pub fn run(args: Args) -> Result<()> {
         }),
         ..FramesToScene::default()
     };
+    if is_grey_file(&images[0])? {
+        cfg.encoding.channels = 1;
+        eprintln!("grey frames: the scene trains on the renders' luminance (Rec. 601)");
+    }
     cfg.check(images.len())?;
     if args.out.join(scene::SCENE_FILE).exists() {
         bail!(

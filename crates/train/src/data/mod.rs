@@ -25,6 +25,8 @@ pub struct TrainFrame {
     pub index: u32,
     /// Mid-exposure time (s).
     pub time_s: f64,
+    /// The frame's exposure (s): its own `exposure_s` in `scene.json`, else the scene's.
+    pub exposure_s: f64,
     /// Train or test.
     pub split: Split,
     /// Observed (blurred) image, planar (3, H, W) linear.
@@ -64,7 +66,7 @@ pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
     let camera = scene.camera.clone();
     let (w, h) = (scene.camera.width, scene.camera.height);
     let mut frames = Vec::with_capacity(scene.frames.len());
-    for f in &scene.frames {
+    for (k, f) in scene.frames.iter().enumerate() {
         let read = |rel: &str| -> Result<Vec<f32>, TrainError> {
             let path = Scene::resolve(dir, rel);
             let img = scene::read_rgb(&path, scene.images)?;
@@ -85,6 +87,7 @@ pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
         frames.push(TrainFrame {
             index: f.index,
             time_s: f.time_s,
+            exposure_s: scene.exposure_of(k),
             split: f.split,
             image: read(&f.image)?,
             sharp: f.sharp.as_deref().map(read).transpose()?,

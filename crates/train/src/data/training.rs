@@ -60,6 +60,9 @@ pub struct TrainingData {
     pub camera: Camera,
     /// Training frames in time order (their position is the latent slot).
     pub frames: Vec<TrainingFrame>,
+    /// The frames are grey (`images.channels = 1`): the photometric and perceptual losses compare
+    /// the renders' Rec. 601 luminance with them.
+    pub grey: bool,
     /// The body.
     pub body: Body,
     /// Canonical surface samples for the skinning loss.
@@ -118,6 +121,7 @@ impl TrainingData {
         Ok(Self {
             camera: data.camera.clone(),
             frames,
+            grey: data.scene.images.is_grey(),
             body,
             skin_points: samples.points,
             skin_weights: samples.weights,
@@ -149,16 +153,20 @@ impl TrainingData {
     }
 
     /// Prepares the exposure model: for every training frame, the body poses at `subframes`
-    /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the scene's
-    /// `exposure_s`), interpolated from the SMPL parameters of every frame of the scene
-    /// ([`crate::exposure::PoseTrack`]).
+    /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the frame's
+    /// exposure: its own `exposure_s`, else the scene's), interpolated from the SMPL parameters of
+    /// every frame of the scene ([`crate::exposure::PoseTrack`]).
     pub fn enable_exposure(&mut self, data: &Dataset, subframes: usize) -> Result<(), TrainError> {
-        let exposure = data.scene.exposure_s;
-        if !(exposure.is_finite() && exposure > 0.0) {
+        if let Some(f) = data
+            .frames
+            .iter()
+            .find(|f| !(f.exposure_s.is_finite() && f.exposure_s > 0.0))
+        {
             return Err(TrainError::Config(format!(
-                "{}: scene.json exposure_s = {exposure}: the exposure model needs a positive \
-                 exposure time",
-                data.dir.display()
+                "{}: frame {}: exposure_s = {}: the exposure model needs a positive exposure time",
+                data.dir.display(),
+                f.index,
+                f.exposure_s
             )));
         }
         let keys: Vec<(f64, &smpl_deform::SmplParams)> =
@@ -167,7 +175,7 @@ impl TrainingData {
         let mut poses = Vec::with_capacity(self.frames.len());
         let mut exposure_params = Vec::with_capacity(self.frames.len());
         for frame in data.frames.iter().filter(|f| f.split == Split::Train) {
-            let times = crate::exposure::subframe_times(frame.time_s, exposure, subframes);
+            let times = crate::exposure::subframe_times(frame.time_s, frame.exposure_s, subframes);
             let params: Vec<smpl_deform::SmplParams> = times.iter().map(|&t| track.at(t)).collect();
             poses.push(
                 params
@@ -232,7 +240,6 @@ impl TrainingData {
         config: &TrainConfig,
     ) -> Result<(), TrainError> {
         let sensor = events::SensorSize::new(self.camera.width, self.camera.height);
-        let exposure = data.scene.exposure_s;
         // Each file is read once: an exposure reaches at most one file back, so the streams of
         // frames before p − 1 are dropped as the loop moves on.
         let mut loaded: std::collections::BTreeMap<usize, events::EventStream> = Default::default();
@@ -242,7 +249,8 @@ impl TrainingData {
             if frame.split != Split::Train {
                 continue;
             }
-            let times = crate::exposure::subframe_times(frame.time_s, exposure, config.subframes);
+            let times =
+                crate::exposure::subframe_times(frame.time_s, frame.exposure_s, config.subframes);
             // The files this exposure reaches into, joined in time order, and the span they cover.
             let (first, last) = (times[0], times[times.len() - 1]);
             let mut files = Vec::new();

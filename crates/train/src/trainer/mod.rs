@@ -251,6 +251,7 @@ impl Trainer {
             config.ssim_weight,
             events,
             RENDER_CHANNELS,
+            data.grey,
         );
         let exposure_events = photo.events;
         let prediction = photo.prediction;
@@ -268,6 +269,7 @@ impl Trainer {
                 width,
                 config.lpips_weight,
                 &mut d_images,
+                data.grey,
             )?,
             _ => 0.0,
         };
