@@ -26,7 +26,9 @@ pub struct Args {
 
 /// Training facts recorded next to the figures.
 pub struct EvalSummary {
-    /// Wall-clock training time (s).
+    /// Wall-clock training time (s); NaN when unknown (`eval` of a saved model), and then the
+    /// entries of an existing `metrics.json` in the output folder that the evaluation does not
+    /// write (the run's configuration and training time) are kept.
     pub train_seconds: f64,
     /// Optimisation steps.
     pub steps: usize,
@@ -96,6 +98,22 @@ pub fn write_evaluation(
         }
     }
     let path = out.join("metrics.json");
+    // Re-scoring a run in its own folder keeps what the run recorded and this evaluation does
+    // not know (the training configuration, the step breakdown, the training time).
+    if summary.train_seconds.is_nan() {
+        if let Some(serde_json::Value::Object(mut previous)) = std::fs::read_to_string(&path)
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok())
+        {
+            if let Some(obj) = metrics.as_object_mut() {
+                obj.remove("train_seconds");
+                for (k, v) in std::mem::take(obj) {
+                    previous.insert(k, v);
+                }
+                *obj = previous;
+            }
+        }
+    }
     std::fs::write(&path, serde_json::to_string_pretty(&metrics)?)
         .with_context(|| format!("writing {}", path.display()))?;
     println!();

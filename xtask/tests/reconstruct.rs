@@ -149,6 +149,33 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         again["blurred_lpips_human_box"],
         metrics["blurred_lpips_human_box"]
     );
+    // Re-scored in the run's own folder (the default --out), the run's own entries stay.
+    let o = xtask()
+        .args(["eval", "--model"])
+        .arg(out.join("model"))
+        .arg("--data")
+        .arg(fixture())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let in_place: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(in_place["test_psnr_full"], metrics["test_psnr_full"]);
+    // (Floats to 1e-12: serde_json's default parsing is not exactly rounded, so a value read and
+    // written again may differ in its last digit.)
+    for kept in ["blur_model", "seed"] {
+        assert_eq!(in_place[kept], metrics[kept], "{kept}");
+        assert!(!metrics[kept].is_null(), "{kept}");
+    }
+    let close = |a: &serde_json::Value, b: &serde_json::Value| {
+        let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+        (a - b).abs() <= 1e-12 * a.abs().max(b.abs())
+    };
+    assert!(close(&in_place["train_seconds"], &metrics["train_seconds"]));
+    assert!(close(
+        &in_place["step_seconds_breakdown"]["total"],
+        &metrics["step_seconds_breakdown"]["total"]
+    ));
 
     // render-pose: a new pose renders to a PNG and a posed PLY.
     let poses = dir.path().join("poses.json");
