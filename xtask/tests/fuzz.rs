@@ -33,6 +33,7 @@ fn every_parser_survives_a_few_thousand_mutated_inputs() {
         "flo",
         "flow-png",
         "aedat4",
+        "aedat4-frames",
         "events-raw",
         "dat",
         "events-text",

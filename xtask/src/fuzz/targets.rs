@@ -29,7 +29,7 @@ pub struct Target {
 }
 
 /// Every target, in the order `--target all` runs them.
-pub const TARGETS: [Target; 13] = [
+pub const TARGETS: [Target; 14] = [
     Target {
         name: "ply",
         extension: "ply",
@@ -92,6 +92,13 @@ pub const TARGETS: [Target; 13] = [
         seeds: aedat4_seeds,
         prepare: plain::<6>,
         parse: parse_events,
+    },
+    Target {
+        name: "aedat4-frames",
+        extension: "aedat4",
+        seeds: aedat4_frames_seeds,
+        prepare: plain::<6>,
+        parse: |p| events::io::aedat4_frames::read_aedat4_frames(&p.input).is_ok(),
     },
     Target {
         name: "events-raw",
@@ -380,6 +387,44 @@ fn aedat4_seeds() -> Result<Vec<Vec<u8>>> {
         seeds.push(written(
             |p| Ok(write_aedat4(p, &small_events(), c)?),
             "e.aedat4",
+        )?);
+    }
+    Ok(seeds)
+}
+
+fn aedat4_frames_seeds() -> Result<Vec<Vec<u8>>> {
+    use events::io::aedat4::Compression;
+    use events::io::aedat4_frames::{write_aedat4_with_frames, ApsFrame, FrameFormat};
+    let frame = |k: i64, format: FrameFormat| ApsFrame {
+        t_us: 1000 * k,
+        exposure_begin_us: 1000 * k - 200,
+        exposure_end_us: 1000 * k + 200,
+        format,
+        width: 4,
+        height: 3,
+        offset_x: 0,
+        offset_y: 0,
+        pixels: (0..12 * format.bytes_per_pixel())
+            .map(|i| (i * 13) as u8)
+            .collect(),
+    };
+    let mut seeds = Vec::new();
+    for (c, format) in [
+        (Compression::None, FrameFormat::Gray),
+        (Compression::Lz4, FrameFormat::Bgr),
+        (Compression::Zstd, FrameFormat::Gray16),
+    ] {
+        seeds.push(written(
+            |p| {
+                Ok(write_aedat4_with_frames(
+                    p,
+                    &small_events(),
+                    &[frame(1, format), frame(2, format)],
+                    events::SensorSize::new(4, 3),
+                    c,
+                )?)
+            },
+            "f.aedat4",
         )?);
     }
     Ok(seeds)

@@ -4,8 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use smpl_deform::motion::{read_easymocap, read_motion};
 use smpl_deform::BodyRef;
+
+use super::{image_files, read_mask_any, read_poses};
 use synth::from_frames::{write_scene_from_frames, FramesToScene, InputFrame};
 
 /// Arguments of `import frames`.
@@ -75,75 +76,6 @@ pub struct Args {
     pub out: PathBuf,
 }
 
-/// The image files of a folder in file-name order (PNG or PPM/PNM).
-fn image_files(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading the {what} folder {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| ["png", "ppm", "pnm"].contains(&e.to_ascii_lowercase().as_str()))
-        })
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        bail!("{}: no PNG or PPM {what} found", dir.display());
-    }
-    Ok(files)
-}
-
-/// One pose per frame, as 24 triples and a translation, plus the file's betas if it has them.
-#[allow(clippy::type_complexity)]
-fn read_poses(
-    path: &Path,
-    body: &smpl_deform::BodyModel,
-    person: Option<i64>,
-) -> Result<(Vec<(Vec<[f32; 3]>, [f32; 3])>, Option<Vec<f32>>)> {
-    let triples = |flat: &[f32]| flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    if path.extension().and_then(|e| e.to_str()) == Some("json") {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let value: serde_json::Value =
-            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-        let serde_json::Value::Array(list) = value else {
-            bail!("{}: expected a JSON list of poses", path.display());
-        };
-        let poses = list
-            .into_iter()
-            .enumerate()
-            .map(|(k, v)| {
-                let (pose, transl, _) = crate::render_pose::read_entry(v)
-                    .with_context(|| format!("{}: pose {k}", path.display()))?;
-                Ok((triples(&pose), transl))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        return Ok((poses, None));
-    }
-    let motion = if path.is_dir() {
-        let shaped = body.shaped_vertices(&[])?;
-        let root = body
-            .rest_joints(&shaped)
-            .first()
-            .copied()
-            .unwrap_or([0.0; 3]);
-        read_easymocap(path, root.map(f64::from), person)
-    } else {
-        read_motion(path)
-    }
-    .with_context(|| format!("reading the poses {}", path.display()))?;
-    for note in &motion.dropped {
-        eprintln!("note: {}: {note}", path.display());
-    }
-    let poses = motion
-        .poses
-        .iter()
-        .zip(&motion.transl)
-        .map(|(p, t)| (triples(p), *t))
-        .collect();
-    Ok((poses, motion.betas))
-}
-
 /// True if the image file at `path` has one channel (grey, 8 or 16 bit).
 fn is_grey_file(path: &Path) -> Result<bool> {
     let decoder = image::ImageReader::open(path)
@@ -174,23 +106,6 @@ fn read_frame(path: &Path, camera: &scene::Camera, linear: bool) -> Result<Vec<f
             .for_each(|v| *v = scene::image_io::linear_from_srgb(*v));
     }
     Ok(rgb)
-}
-
-fn read_mask_any(path: &Path, camera: &scene::Camera) -> Result<Vec<bool>> {
-    let img = image::open(path)
-        .with_context(|| format!("reading the mask {}", path.display()))?
-        .to_luma16();
-    if (img.width(), img.height()) != (camera.width, camera.height) {
-        bail!(
-            "{}: {}x{}, the camera is {}x{}",
-            path.display(),
-            img.width(),
-            img.height(),
-            camera.width,
-            camera.height
-        );
-    }
-    Ok(img.pixels().map(|p| p.0[0] > 0).collect())
 }
 
 /// Runs `import frames`.

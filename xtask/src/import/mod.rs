@@ -1,9 +1,13 @@
 //! `cargo xtask import <layout>`: a scene (format v1) from the data people have. Each layout writes
 //! a validated scene directory that `cargo xtask reconstruct --data SCENE` trains on.
 
-use anyhow::Result;
-use clap::Subcommand;
+use std::path::{Path, PathBuf};
 
+use anyhow::{bail, Context, Result};
+use clap::Subcommand;
+use smpl_deform::motion::{read_easymocap, read_motion};
+
+mod aedat4;
 mod frames;
 
 /// The layouts `import` reads.
@@ -13,11 +17,102 @@ pub enum Command {
     /// paper synthesised for ZJU-MoCap-Blur: blur by averaging K consecutive frames (the middle
     /// frame kept as the sharp reference) and events by ESIM over the frames.
     Frames(frames::Args),
+    /// A DAVIS recording (AEDAT 4 with an intensity-frame stream and an event stream) plus one SMPL
+    /// pose per frame: the frames at their own exposure times, the events split per frame.
+    Aedat4(aedat4::Args),
 }
 
 /// Runs `import`.
 pub fn run(command: Command) -> Result<()> {
     match command {
         Command::Frames(args) => frames::run(args),
+        Command::Aedat4(args) => aedat4::run(args),
     }
+}
+
+/// The image files of a folder in file-name order (PNG or PPM/PNM).
+pub(super) fn image_files(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading the {what} folder {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| ["png", "ppm", "pnm"].contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!("{}: no PNG or PPM {what} found", dir.display());
+    }
+    Ok(files)
+}
+
+/// One pose per frame, as 24 triples and a translation, plus the file's betas if it has them.
+#[allow(clippy::type_complexity)]
+pub(super) fn read_poses(
+    path: &Path,
+    body: &smpl_deform::BodyModel,
+    person: Option<i64>,
+) -> Result<(Vec<(Vec<[f32; 3]>, [f32; 3])>, Option<Vec<f32>>)> {
+    let triples = |flat: &[f32]| flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    if path.extension().and_then(|e| e.to_str()) == Some("json") {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+        let serde_json::Value::Array(list) = value else {
+            bail!("{}: expected a JSON list of poses", path.display());
+        };
+        let poses = list
+            .into_iter()
+            .enumerate()
+            .map(|(k, v)| {
+                let (pose, transl, _) = crate::render_pose::read_entry(v)
+                    .with_context(|| format!("{}: pose {k}", path.display()))?;
+                Ok((triples(&pose), transl))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        return Ok((poses, None));
+    }
+    let motion = if path.is_dir() {
+        let shaped = body.shaped_vertices(&[])?;
+        let root = body
+            .rest_joints(&shaped)
+            .first()
+            .copied()
+            .unwrap_or([0.0; 3]);
+        read_easymocap(path, root.map(f64::from), person)
+    } else {
+        read_motion(path)
+    }
+    .with_context(|| format!("reading the poses {}", path.display()))?;
+    for note in &motion.dropped {
+        eprintln!("note: {}: {note}", path.display());
+    }
+    let poses = motion
+        .poses
+        .iter()
+        .zip(&motion.transl)
+        .map(|(p, t)| (triples(p), *t))
+        .collect();
+    Ok((poses, motion.betas))
+}
+
+/// Reads a single-channel (or any) mask image as `non-zero = human`, checked against the camera.
+pub(super) fn read_mask_any(path: &Path, camera: &scene::Camera) -> Result<Vec<bool>> {
+    let img = image::open(path)
+        .with_context(|| format!("reading the mask {}", path.display()))?
+        .to_luma16();
+    if (img.width(), img.height()) != (camera.width, camera.height) {
+        bail!(
+            "{}: {}x{}, the camera is {}x{}",
+            path.display(),
+            img.width(),
+            img.height(),
+            camera.width,
+            camera.height
+        );
+    }
+    Ok(img.pixels().map(|p| p.0[0] > 0).collect())
 }

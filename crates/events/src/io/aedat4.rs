@@ -22,7 +22,7 @@ pub const MAGIC: &[u8; 14] = b"#!AER-DAT4.0\r\n";
 /// Largest header accepted (bytes).
 const MAX_HEADER: u64 = 16 << 20;
 /// Largest packet accepted, compressed or not (bytes).
-const MAX_PACKET: u64 = 512 << 20;
+pub(super) const MAX_PACKET: u64 = 512 << 20;
 /// Packets read ahead and decompressed in parallel at a time.
 const READ_AHEAD: usize = 16;
 /// Compressed bytes read ahead at most (besides the one packet that crosses it).
@@ -66,6 +66,18 @@ pub enum Compression {
 }
 
 impl Compression {
+    /// The name DV writes in a stream's description (`NONE`, `LZ4`, `LZ4_HIGH`, `ZSTD`,
+    /// `ZSTD_HIGH`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Compression::None => "NONE",
+            Compression::Lz4 => "LZ4",
+            Compression::Lz4High => "LZ4_HIGH",
+            Compression::Zstd => "ZSTD",
+            Compression::ZstdHigh => "ZSTD_HIGH",
+        }
+    }
+
     fn from_i32(v: i32) -> Option<Self> {
         Some(match v {
             0 => Self::None,
@@ -79,32 +91,32 @@ impl Compression {
 }
 
 /// Bounds-checked little-endian reads in a FlatBuffers byte slice.
-struct Fb<'a>(&'a [u8]);
+pub(super) struct Fb<'a>(pub(super) &'a [u8]);
 
 impl<'a> Fb<'a> {
-    fn bytes(&self, at: usize, n: usize) -> Option<&'a [u8]> {
+    pub(super) fn bytes(&self, at: usize, n: usize) -> Option<&'a [u8]> {
         self.0.get(at..at.checked_add(n)?)
     }
-    fn u16(&self, at: usize) -> Option<u16> {
+    pub(super) fn u16(&self, at: usize) -> Option<u16> {
         let b = self.bytes(at, 2)?;
         Some(u16::from_le_bytes([b[0], b[1]]))
     }
-    fn u32(&self, at: usize) -> Option<u32> {
+    pub(super) fn u32(&self, at: usize) -> Option<u32> {
         let b = self.bytes(at, 4)?;
         Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     }
-    fn i64(&self, at: usize) -> Option<i64> {
+    pub(super) fn i64(&self, at: usize) -> Option<i64> {
         let b = self.bytes(at, 8)?;
         Some(i64::from_le_bytes([
             b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7],
         ]))
     }
     /// Follows a uoffset stored at `at`.
-    fn deref(&self, at: usize) -> Option<usize> {
+    pub(super) fn deref(&self, at: usize) -> Option<usize> {
         at.checked_add(self.u32(at)? as usize)
     }
     /// Absolute position of field `i` of the table at `table`, or None when absent.
-    fn field(&self, table: usize, i: usize) -> Option<Option<usize>> {
+    pub(super) fn field(&self, table: usize, i: usize) -> Option<Option<usize>> {
         let soff = self.u32(table)? as i32 as i64;
         let vt = usize::try_from(table as i64 - soff).ok()?;
         let vt_size = self.u16(vt)? as usize;
@@ -118,10 +130,45 @@ impl<'a> Fb<'a> {
 }
 
 /// What the IOHeader says.
-struct Header {
-    compression: Compression,
-    data_table_position: i64,
-    description: String,
+pub(super) struct Header {
+    pub(super) compression: Compression,
+    pub(super) data_table_position: i64,
+    pub(super) description: String,
+}
+
+/// Reads and checks the magic, the header length and the IOHeader of an AEDAT 4 file of
+/// `file_len` bytes; returns the header and the file position after it.
+pub(super) fn read_header<R: Read>(
+    reader: &mut R,
+    file_len: u64,
+    path: &Path,
+) -> Result<(Header, u64)> {
+    let mut magic = [0u8; 14];
+    reader
+        .read_exact(&mut magic)
+        .map_err(|_| EventsError::format(path, "truncated before the AEDAT 4 magic"))?;
+    if &magic != MAGIC {
+        return Err(EventsError::format(
+            path,
+            format!("magic {magic:?} is not #!AER-DAT4.0"),
+        ));
+    }
+    let mut lb = [0u8; 4];
+    reader
+        .read_exact(&mut lb)
+        .map_err(|_| EventsError::format(path, "truncated header length"))?;
+    let hlen = u32::from_le_bytes(lb) as u64;
+    if hlen > MAX_HEADER || 18 + hlen > file_len {
+        return Err(EventsError::format(
+            path,
+            format!("header length {hlen} exceeds the file ({file_len} bytes) or {MAX_HEADER}"),
+        ));
+    }
+    let mut hbuf = vec![0u8; hlen as usize];
+    reader
+        .read_exact(&mut hbuf)
+        .map_err(|_| EventsError::format(path, "truncated header"))?;
+    Ok((parse_ioheader(&hbuf, path)?, 18 + hlen))
 }
 
 fn parse_ioheader(buf: &[u8], path: &Path) -> Result<Header> {
@@ -181,9 +228,10 @@ fn attr<'s>(s: &'s str, key: &str) -> Option<&'s str> {
     Some(rest[start..end].trim())
 }
 
-/// Finds the first EVTS stream in the XML description: (stream id, sensor size if stated).
-/// A tolerant scan, not a full XML parser: the DV description is machine-written.
-fn find_event_stream(desc: &str) -> Option<(u32, Option<SensorSize>)> {
+/// Finds the first stream of type `type_id` (`EVTS`, `FRME`, …) in the XML description: (stream
+/// id, sensor size if stated). A tolerant scan, not a full XML parser: the DV description is
+/// machine-written.
+pub(super) fn find_stream(desc: &str, type_id: &str) -> Option<(u32, Option<SensorSize>)> {
     let out = desc.find("name=\"outInfo\"")?;
     let body = &desc[out..];
     let mut search = 0;
@@ -207,7 +255,7 @@ fn find_event_stream(desc: &str) -> Option<(u32, Option<SensorSize>)> {
             })
             .unwrap_or(body.len());
         let node = &body[end..next_stream];
-        if attr(node, "typeIdentifier") == Some("EVTS") {
+        if attr(node, "typeIdentifier") == Some(type_id) {
             let w = attr(node, "sizeX").and_then(|v| v.parse::<u32>().ok());
             let h = attr(node, "sizeY").and_then(|v| v.parse::<u32>().ok());
             let size = match (w, h) {
@@ -265,33 +313,8 @@ impl<R: Read> Aedat4Reader<R> {
     /// A reader over `reader` holding `file_len` bytes (`path` names it in errors).
     pub fn new(mut reader: R, file_len: u64, path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
-        let mut magic = [0u8; 14];
-        reader
-            .read_exact(&mut magic)
-            .map_err(|_| EventsError::format(&path, "truncated before the AEDAT 4 magic"))?;
-        if &magic != MAGIC {
-            return Err(EventsError::format(
-                &path,
-                format!("magic {magic:?} is not #!AER-DAT4.0"),
-            ));
-        }
-        let mut lb = [0u8; 4];
-        reader
-            .read_exact(&mut lb)
-            .map_err(|_| EventsError::format(&path, "truncated header length"))?;
-        let hlen = u32::from_le_bytes(lb) as u64;
-        if hlen > MAX_HEADER || 18 + hlen > file_len {
-            return Err(EventsError::format(
-                &path,
-                format!("header length {hlen} exceeds the file ({file_len} bytes) or {MAX_HEADER}"),
-            ));
-        }
-        let mut hbuf = vec![0u8; hlen as usize];
-        reader
-            .read_exact(&mut hbuf)
-            .map_err(|_| EventsError::format(&path, "truncated header"))?;
-        let h = parse_ioheader(&hbuf, &path)?;
-        let (stream_id, sensor) = find_event_stream(&h.description).ok_or_else(|| {
+        let (h, position) = read_header(&mut reader, file_len, &path)?;
+        let (stream_id, sensor) = find_stream(&h.description, "EVTS").ok_or_else(|| {
             EventsError::format(
                 &path,
                 "description has no EVTS stream in outInfo".to_string(),
@@ -304,7 +327,7 @@ impl<R: Read> Aedat4Reader<R> {
             data_table_position: h.data_table_position,
             stream_id,
             sensor,
-            position: 18 + hlen,
+            position,
             file_len,
             raw: Vec::new(),
             packet: Vec::new(),
@@ -530,7 +553,7 @@ impl<R: Read> Aedat4Reader<R> {
 }
 
 /// Decompresses `raw` into `out` with at most `cap` bytes of output (+1 to detect overflow).
-fn decompress(
+pub(super) fn decompress(
     compression: Compression,
     raw: &[u8],
     ctx: Option<&mut zstd::zstd_safe::DCtx<'static>>,
@@ -679,7 +702,7 @@ impl<R: Read> EventReader for Aedat4Reader<R> {
     }
 }
 
-fn ioheader_bytes(compression: Compression, description: &str) -> Vec<u8> {
+pub(super) fn ioheader_bytes(compression: Compression, description: &str) -> Vec<u8> {
     let mut b = Vec::new();
     b.extend_from_slice(&24u32.to_le_bytes()); // root table at 24
     b.extend_from_slice(b"IOHE");
@@ -700,7 +723,7 @@ fn ioheader_bytes(compression: Compression, description: &str) -> Vec<u8> {
     b
 }
 
-fn event_packet_bytes(ev: &EventStream, range: std::ops::Range<usize>) -> Vec<u8> {
+pub(super) fn event_packet_bytes(ev: &EventStream, range: std::ops::Range<usize>) -> Vec<u8> {
     let n = range.len();
     let mut b = Vec::with_capacity(32 + 16 * n);
     b.extend_from_slice(&((28 + 16 * n) as u32).to_le_bytes()); // size prefix
@@ -720,6 +743,30 @@ fn event_packet_bytes(ev: &EventStream, range: std::ops::Range<usize>) -> Vec<u8
         b.extend_from_slice(&[u8::from(ev.p[i] > 0), 0, 0, 0]);
     }
     b
+}
+
+/// A packet payload compressed as the file says (`path` names the file in errors).
+pub(super) fn compress(compression: Compression, raw: Vec<u8>, path: &Path) -> Result<Vec<u8>> {
+    let io = |e: std::io::Error| EventsError::io(path, e);
+    Ok(match compression {
+        Compression::None => raw,
+        Compression::Lz4 | Compression::Lz4High => {
+            let mut enc = lz4_flex::frame::FrameEncoder::new(Vec::new());
+            enc.write_all(&raw).map_err(io)?;
+            enc.finish()
+                .map_err(|e| EventsError::format(path, format!("LZ4 encode: {e}")))?
+        }
+        Compression::Zstd | Compression::ZstdHigh => {
+            let level = if compression == Compression::ZstdHigh {
+                19
+            } else {
+                3
+            };
+            // One-shot compression: the frame header states the decompressed size, which lets
+            // readers decode it in one call.
+            zstd::bulk::compress(&raw, level).map_err(io)?
+        }
+    })
 }
 
 /// Writes an AEDAT 4 file with one EVTS stream (id 0), packets of up to 8192 events, the given
@@ -747,13 +794,7 @@ pub fn write_aedat4(
         .sensor
         .or_else(|| events.bounding_sensor())
         .unwrap_or(SensorSize::new(1, 1));
-    let name = match compression {
-        Compression::None => "NONE",
-        Compression::Lz4 => "LZ4",
-        Compression::Lz4High => "LZ4_HIGH",
-        Compression::Zstd => "ZSTD",
-        Compression::ZstdHigh => "ZSTD_HIGH",
-    };
+    let name = compression.name();
     let desc = format!(
         "<dv version=\"2.0\"><node name=\"outInfo\" path=\"/mainloop/Recorder/outInfo/\">\
          <node name=\"0\" path=\"/mainloop/Recorder/outInfo/0/\">\
@@ -777,25 +818,7 @@ pub fn write_aedat4(
     while start < events.len() {
         let end = (start + 8192).min(events.len());
         let raw = event_packet_bytes(events, start..end);
-        let payload = match compression {
-            Compression::None => raw,
-            Compression::Lz4 | Compression::Lz4High => {
-                let mut enc = lz4_flex::frame::FrameEncoder::new(Vec::new());
-                enc.write_all(&raw).map_err(io)?;
-                enc.finish()
-                    .map_err(|e| EventsError::format(path, format!("LZ4 encode: {e}")))?
-            }
-            Compression::Zstd | Compression::ZstdHigh => {
-                let level = if compression == Compression::ZstdHigh {
-                    19
-                } else {
-                    3
-                };
-                // One-shot compression: the frame header states the decompressed size, which lets
-                // readers decode it in one call.
-                zstd::bulk::compress(&raw, level).map_err(io)?
-            }
-        };
+        let payload = compress(compression, raw, path)?;
         w.write_all(&0u32.to_le_bytes()).map_err(io)?;
         w.write_all(&(payload.len() as u32).to_le_bytes())
             .map_err(io)?;

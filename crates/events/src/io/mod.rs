@@ -15,6 +15,7 @@ use crate::error::{EventsError, Result};
 use crate::stream::{EventStream, SensorSize};
 
 pub mod aedat4;
+pub mod aedat4_frames;
 pub mod npz;
 pub mod prophesee;
 pub mod text;

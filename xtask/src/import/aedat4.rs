@@ -1,0 +1,369 @@
+//! `cargo xtask import aedat4`: a DAVIS recording (AEDAT 4: intensity frames + events) and one
+//! SMPL pose per frame → scene format v1. Each frame keeps its own exposure (auto-exposure); the
+//! events are split per frame as the format defines (`[time_s, next time_s)`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use events::io::aedat4_frames::{read_aedat4_frames, ApsFrame, FrameFormat};
+use events::io::EventReader;
+use smpl_deform::BodyRef;
+
+use super::{image_files, read_mask_any, read_poses};
+
+/// Arguments of `import aedat4`.
+#[derive(clap::Args, Debug)]
+#[command(after_help = "\
+Times: the scene's time 0 is the first frame's exposure start; a frame's time is the middle of \
+its exposure and its exposure its own (the scene's `exposure_s` is the median, frames that differ \
+carry their own). The frames' values are taken as linear intensity (an APS pixel's output is, to \
+first order, proportional to the light it collected). Events before the first frame's time \
+belong to no frame and are not written (their count is printed).
+
+The poses are used as they are, in the camera file's world frame; one pose per frame, in frame \
+order.
+
+Example:
+  cargo xtask import aedat4 --file rec.aedat4 --poses fits.npz --camera davis346.json --out scene")]
+pub struct Args {
+    /// The AEDAT 4 recording (a `FRME` stream and an `EVTS` stream).
+    #[arg(long)]
+    pub file: PathBuf,
+    /// SMPL poses, one per frame (the layouts of `import frames --poses`).
+    #[arg(long)]
+    pub poses: PathBuf,
+    /// With an EasyMocap folder: the `id` of the person to follow.
+    #[arg(long)]
+    pub person: Option<i64>,
+    /// The camera (the project's camera JSON, a `scene.json`, or an INRIA `cameras.json` entry);
+    /// its size must be the frames' size.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Index into an INRIA `cameras.json` list.
+    #[arg(long, default_value_t = 0)]
+    pub cam_index: usize,
+    /// Optional folder of human masks, one per frame, in file-name order.
+    #[arg(long)]
+    pub masks: Option<PathBuf>,
+    /// Body model: `builtin:makehuman` or the path of your SMPL `.npz` (its licence is yours).
+    #[arg(long, default_value = "builtin:makehuman")]
+    pub body: String,
+    /// Output scene directory.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Checks the frames: one full-sensor size and format, exposures that are intervals, midpoints
+/// that increase. Returns (width, height, format).
+fn check_frames(frames: &[ApsFrame], file: &Path) -> Result<(u32, u32, FrameFormat)> {
+    let Some(first) = frames.first() else {
+        bail!("{}: the frames stream holds no frame", file.display());
+    };
+    if frames.len() < 2 {
+        bail!(
+            "{}: one frame only; a scene needs at least two",
+            file.display()
+        );
+    }
+    let mut last_mid = None;
+    for (k, f) in frames.iter().enumerate() {
+        if (f.width, f.height, f.format) != (first.width, first.height, first.format) {
+            bail!(
+                "{}: frame {k} is {}x{} {:?}, frame 0 {}x{} {:?}: frames of one size and format are needed",
+                file.display(),
+                f.width,
+                f.height,
+                f.format,
+                first.width,
+                first.height,
+                first.format
+            );
+        }
+        if f.offset_x != 0 || f.offset_y != 0 {
+            bail!(
+                "{}: frame {k} is a region of interest at ({}, {}); full frames are needed",
+                file.display(),
+                f.offset_x,
+                f.offset_y
+            );
+        }
+        if f.exposure_end_us <= f.exposure_begin_us {
+            bail!(
+                "{}: frame {k}: exposure_end_t {} µs is not after exposure_begin_t {} µs",
+                file.display(),
+                f.exposure_end_us,
+                f.exposure_begin_us
+            );
+        }
+        let mid = f.exposure_begin_us + (f.exposure_end_us - f.exposure_begin_us) / 2;
+        if let Some(prev) = last_mid {
+            if mid <= prev {
+                bail!(
+                    "{}: frame {k}'s exposure midpoint {mid} µs is not after frame {}'s {prev} µs",
+                    file.display(),
+                    k - 1
+                );
+            }
+        }
+        last_mid = Some(mid);
+    }
+    Ok((first.width, first.height, first.format))
+}
+
+/// Runs `import aedat4`.
+pub fn run(args: Args) -> Result<()> {
+    let (frames, _) = read_aedat4_frames(&args.file)
+        .with_context(|| format!("reading the frames of {}", args.file.display()))?;
+    let (w, h, format) = check_frames(&frames, &args.file)?;
+    let camera = scene::camera_files::read_any(&args.camera, args.cam_index)
+        .with_context(|| format!("reading the camera {}", args.camera.display()))?;
+    if (camera.width, camera.height) != (w, h) {
+        bail!(
+            "the camera {} is {}x{}, the frames of {} are {w}x{h}",
+            args.camera.display(),
+            camera.width,
+            camera.height,
+            args.file.display()
+        );
+    }
+    let body_ref = BodyRef::parse(&args.body)?;
+    let body = body_ref
+        .load()
+        .with_context(|| format!("loading the body model {}", args.body))?;
+    let (poses, betas) = read_poses(&args.poses, &body, args.person)?;
+    if poses.len() != frames.len() {
+        bail!(
+            "{} holds {} poses but {} holds {} frames: one pose per frame is needed",
+            args.poses.display(),
+            poses.len(),
+            args.file.display(),
+            frames.len()
+        );
+    }
+    let masks = match &args.masks {
+        Some(dir) => {
+            let m = image_files(dir, "masks")?;
+            if m.len() != frames.len() {
+                bail!(
+                    "{} holds {} masks but {} holds {} frames: one mask per frame is needed",
+                    dir.display(),
+                    m.len(),
+                    args.file.display(),
+                    frames.len()
+                );
+            }
+            Some(m)
+        }
+        None => None,
+    };
+    if args.out.join(scene::SCENE_FILE).exists() {
+        bail!(
+            "{} already holds a scene: choose another --out or remove it",
+            args.out.display()
+        );
+    }
+    for sub in ["images", "masks", "events"] {
+        std::fs::create_dir_all(args.out.join(sub))
+            .with_context(|| format!("creating {}", args.out.join(sub).display()))?;
+    }
+
+    // Times (s from the first exposure's start) and exposures.
+    let t0 = frames[0].exposure_begin_us;
+    let mid_us: Vec<i64> = frames
+        .iter()
+        .map(|f| f.exposure_begin_us + (f.exposure_end_us - f.exposure_begin_us) / 2 - t0)
+        .collect();
+    let exposures: Vec<f64> = frames
+        .iter()
+        .map(|f| (f.exposure_end_us - f.exposure_begin_us) as f64 * 1e-6)
+        .collect();
+    let mut sorted = exposures.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let longest = sorted[sorted.len() - 1];
+    let span = (mid_us[mid_us.len() - 1] - mid_us[0]) as f64 * 1e-6;
+    let mut fps = (frames.len() - 1) as f64 / span;
+    if longest > 1.0 / fps {
+        eprintln!(
+            "note: the longest exposure ({:.2} ms) exceeds the mean frame interval ({:.2} ms); \
+             the scene's nominal fps is set to 1 / longest exposure",
+            longest * 1e3,
+            1e3 / fps
+        );
+        fps = 1.0 / longest;
+    }
+
+    // Frames.
+    let grey = format.channels() == 1;
+    let encoding = scene::ImageEncoding {
+        channels: if grey { 1 } else { 3 },
+        ..scene::ImageEncoding::rgb(
+            if format == FrameFormat::Gray16 { 16 } else { 8 },
+            scene::Transfer::Linear,
+        )
+    };
+    let n = (w * h) as usize;
+    let bar = crate::common::progress_bar(frames.len() as u64, "frames")?;
+    let mut scene_frames = Vec::with_capacity(frames.len());
+    for (k, f) in frames.iter().enumerate() {
+        let planar = f.to_planar();
+        let data = if grey {
+            planar.iter().cycle().take(3 * n).copied().collect()
+        } else {
+            planar
+        };
+        let image = format!("images/{k:06}.png");
+        scene::write_rgb(
+            &args.out.join(&image),
+            &scene::Rgb {
+                width: w,
+                height: h,
+                data,
+            },
+            encoding,
+        )
+        .with_context(|| format!("writing {}", args.out.join(&image).display()))?;
+        let mask = match &masks {
+            Some(m) => {
+                let rel = format!("masks/{k:06}.png");
+                let set = read_mask_any(&m[k], &camera)?;
+                scene::write_mask(&args.out.join(&rel), w, h, &set)?;
+                Some(rel)
+            }
+            None => None,
+        };
+        let (pose, transl) = poses[k].clone();
+        scene_frames.push(scene::Frame {
+            index: k as u32,
+            time_s: mid_us[k] as f64 * 1e-6,
+            exposure_s: ((exposures[k] - median).abs() > 0.5e-6).then_some(exposures[k]),
+            image,
+            sharp: None,
+            mask,
+            pose,
+            transl,
+            flow_to_next: Vec::new(),
+            events: Some(format!("events/{k:06}.npz")),
+            split: if k % 10 < 7 {
+                scene::Split::Train
+            } else {
+                scene::Split::Test
+            },
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    // Events, streamed into per-frame files.
+    let (written, before) = split_events(&args.file, &args.out, t0, &mid_us, (w, h))?;
+
+    let model = match &body_ref {
+        BodyRef::BuiltinMakehuman => args.body.clone(),
+        BodyRef::SmplFile(p) => std::fs::canonicalize(p)
+            .unwrap_or_else(|_| p.clone())
+            .display()
+            .to_string(),
+    };
+    let s = scene::Scene {
+        format_version: scene::FORMAT_VERSION,
+        camera,
+        body: scene::BodySpec {
+            model,
+            betas: betas.unwrap_or_default(),
+        },
+        fps,
+        exposure_s: median,
+        images: encoding,
+        frames: scene_frames,
+        events_raw_format: None,
+        generator: Some(serde_json::json!({
+            "name": "xtask import aedat4",
+            "config": {
+                "file": args.file.display().to_string(),
+                "poses": args.poses.display().to_string(),
+                "camera": args.camera.display().to_string(),
+                "time_zero_us": t0,
+                "frame_format": format!("{format:?}"),
+            }
+        })),
+    };
+    s.write(&args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    scene::load(&args.out).with_context(|| format!("checking {}", args.out.display()))?;
+    eprintln!(
+        "{} frames ({}, {}x{w}x{h}), exposure {:.2}–{:.2} ms; {written} events ({before} before the first frame's time, not written)",
+        frames.len(),
+        if grey { "grey" } else { "colour" },
+        if grey { 1 } else { 3 },
+        sorted[0] * 1e3,
+        longest * 1e3
+    );
+    println!("{}", crate::common::shown(&args.out).display());
+    Ok(())
+}
+
+/// Streams the recording's events into `out/events/NNNNNN.npz`, frame `k` holding
+/// `[mid_k, mid_{k+1})` (µs from `t0`; the last frame every later event); returns (written, before
+/// the first frame).
+fn split_events(
+    file: &Path,
+    out: &Path,
+    t0: i64,
+    mid_us: &[i64],
+    (w, h): (u32, u32),
+) -> Result<(u64, u64)> {
+    let mut reader = events::io::aedat4::Aedat4Reader::open(file)
+        .with_context(|| format!("reading the events of {}", file.display()))?;
+    let sensor = events::SensorSize::new(w, h);
+    let mut bucket = events::EventStream::new();
+    bucket.sensor = Some(sensor);
+    let (mut k, mut written, mut before) = (0usize, 0u64, 0u64);
+    let flush = |k: usize, b: &mut events::EventStream| -> Result<u64> {
+        let p = out.join(format!("events/{k:06}.npz"));
+        events::write_events(&p, b).with_context(|| format!("writing {}", p.display()))?;
+        let n = b.len() as u64;
+        *b = events::EventStream::new();
+        b.sensor = Some(sensor);
+        Ok(n)
+    };
+    let mut chunk = events::EventStream::new();
+    loop {
+        chunk.clear();
+        let got = reader
+            .read_chunk(&mut chunk, 1 << 20)
+            .with_context(|| format!("reading the events of {}", file.display()))?;
+        if got == 0 {
+            break;
+        }
+        for i in 0..chunk.len() {
+            let t = chunk.t[i] - t0;
+            if t < mid_us[0] {
+                before += 1;
+                continue;
+            }
+            if chunk.x[i] as u32 >= w || chunk.y[i] as u32 >= h {
+                bail!(
+                    "{}: event at ({}, {}) lies outside the {w}x{h} frames",
+                    file.display(),
+                    chunk.x[i],
+                    chunk.y[i]
+                );
+            }
+            while k + 1 < mid_us.len() && t >= mid_us[k + 1] {
+                written += flush(k, &mut bucket)?;
+                k += 1;
+            }
+            bucket.push(events::Event {
+                t,
+                x: chunk.x[i],
+                y: chunk.y[i],
+                p: chunk.p[i],
+            });
+        }
+    }
+    while k < mid_us.len() {
+        written += flush(k, &mut bucket)?;
+        k += 1;
+    }
+    Ok((written, before))
+}
