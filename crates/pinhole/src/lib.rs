@@ -7,7 +7,12 @@
 //! the same checks to a camera built field by field (as `scene` reads it from a file). The rasterizer
 //! (`rasterize_cpu::Camera`) and the scene format (`scene::Camera`, `scene.json`'s `camera`) both use
 //! this type. This crate is a foundation: it knows nothing of Gaussians or images, reads no files
-//! and has no serialisation (the file formats are `scene`'s, `scene::camera_files`).
+//! and has no serialisation (the file formats are `scene`'s, `scene::camera_files`). Lens
+//! distortion, for importing data from distorting cameras, is [`distortion`].
+
+pub mod distortion;
+
+pub use distortion::Distortion;
 
 /// Largest accepted image side (pixels); larger requests are rejected, not attempted.
 pub const MAX_IMAGE_SIDE: u32 = 16384;

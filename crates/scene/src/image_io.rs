@@ -79,6 +79,75 @@ pub fn srgb8_interleaved(planar: &[f32], n: usize) -> Vec<u8> {
     out
 }
 
+/// How [`undistort`] samples the recorded image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sampling {
+    /// Bilinear (images; OpenCV's `INTER_LINEAR`).
+    Bilinear,
+    /// Nearest pixel (masks; OpenCV's `INTER_NEAREST`).
+    Nearest,
+}
+
+/// Undistorts a planar `(channels, H, W)` image recorded by `camera` (its intrinsics, in this
+/// workspace's convention: pixel `i`'s centre at `i + 0.5`) through the lens model `distortion`:
+/// output pixel `(i, j)` is the recorded image sampled where the lens put the ray of pixel
+/// centre `(i + 0.5, j + 0.5)`, with the same intrinsics (OpenCV's `undistort` with the camera
+/// matrix as the new one). Samples outside the recorded image are 0.
+pub fn undistort(
+    planar: &[f32],
+    channels: usize,
+    camera: &pinhole::Camera,
+    distortion: &pinhole::Distortion,
+    sampling: Sampling,
+) -> Vec<f32> {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let n = w * h;
+    if distortion.is_identity() {
+        return planar.to_vec();
+    }
+    let mut out = vec![0.0f32; channels * n];
+    for j in 0..h {
+        for i in 0..w {
+            let x = (i as f64 + 0.5 - camera.cx) / camera.fx;
+            let y = (j as f64 + 0.5 - camera.cy) / camera.fy;
+            let (xd, yd) = distortion.distort(x, y);
+            // Source position in pixel-index coordinates (pixel k's centre at k).
+            let u = xd * camera.fx + camera.cx - 0.5;
+            let v = yd * camera.fy + camera.cy - 0.5;
+            let p = j * w + i;
+            match sampling {
+                Sampling::Nearest => {
+                    let (ui, vi) = (u.round(), v.round());
+                    if ui >= 0.0 && vi >= 0.0 && (ui as usize) < w && (vi as usize) < h {
+                        let q = vi as usize * w + ui as usize;
+                        for c in 0..channels {
+                            out[c * n + p] = planar[c * n + q];
+                        }
+                    }
+                }
+                Sampling::Bilinear => {
+                    let (u0, v0) = (u.floor(), v.floor());
+                    let (fu, fv) = ((u - u0) as f32, (v - v0) as f32);
+                    let at = |uu: f64, vv: f64, c: usize| -> f32 {
+                        if uu < 0.0 || vv < 0.0 || uu as usize >= w || vv as usize >= h {
+                            0.0
+                        } else {
+                            planar[c * n + vv as usize * w + uu as usize]
+                        }
+                    };
+                    for c in 0..channels {
+                        let top = at(u0, v0, c) * (1.0 - fu) + at(u0 + 1.0, v0, c) * fu;
+                        let bottom =
+                            at(u0, v0 + 1.0, c) * (1.0 - fu) + at(u0 + 1.0, v0 + 1.0, c) * fu;
+                        out[c * n + p] = top * (1.0 - fv) + bottom * fv;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Rec. 601 luma weights `(R, G, B)`, applied to *linear* intensities: how a colour render is
 /// compared with a grey frame (`images.channels = 1`).
 pub const REC601_LUMA: [f32; 3] = [0.299, 0.587, 0.114];

@@ -24,7 +24,7 @@ pub mod validate;
 pub use error::{Problem, Result, SceneError};
 pub use image_io::{read_mask, read_rgb, write_mask, write_rgb, Rgb};
 pub use types::{
-    camera_json, BodySpec, Camera, FlowKind, FlowRef, Frame, ImageEncoding, RawEventsFormat, Scene,
-    Split, Transfer, FORMAT_VERSION, NUM_JOINTS, SCENE_FILE,
+    camera_json, BodySpec, Camera, Distortion, FlowKind, FlowRef, Frame, ImageEncoding,
+    RawEventsFormat, Scene, Split, Transfer, FORMAT_VERSION, NUM_JOINTS, SCENE_FILE,
 };
 pub use validate::{load, validate_dir};

@@ -63,7 +63,7 @@ pub enum RawEventsFormat {
 /// (`pinhole::Camera`, also `rasterize_cpu::Camera`). In `scene.json` its `world_to_camera` is the 3
 /// rows of `[R | t]` (`p_cam = R · p_world + t`, metres, R a rotation); in memory it is 4×4, the
 /// last row `[0, 0, 0, 1]`.
-pub use pinhole::Camera;
+pub use pinhole::{Camera, Distortion};
 
 /// The camera as `scene.json` stores it, for `#[serde(with = "scene::camera_json")]` (also used by
 /// the trained model's `model.json`): the fields of [`Camera`] with `world_to_camera` as its top 3

@@ -22,6 +22,7 @@ pub mod npz;
 pub mod pose_blend;
 pub mod sample;
 pub mod skeleton;
+pub mod zju;
 
 pub use body::{builtin_makehuman_path, BodyModel, BodyRef, PosedBody, SmplParams, UvMap};
 pub use canonical::{da_pose_params, CanonicalBody};

@@ -9,6 +9,7 @@ use smpl_deform::motion::{read_easymocap, read_motion};
 
 mod aedat4;
 mod frames;
+mod zju;
 
 /// The layouts `import` reads.
 #[derive(Subcommand, Debug)]
@@ -20,6 +21,10 @@ pub enum Command {
     /// A DAVIS recording (AEDAT 4 with an intensity-frame stream and an event stream) plus one SMPL
     /// pose per frame: the frames at their own exposure times, the events split per frame.
     Aedat4(aedat4::Args),
+    /// One view of a ZJU-MoCap subject as ARAH / 3DGS-Avatar preprocess it (cam_params.json,
+    /// models/*.npz, {view}/*.jpg + *.png masks): undistorted, SMPL fits mapped, optionally with
+    /// the ZJU-MoCap-Blur recipe (--blur K, --events simulate).
+    Zju(zju::Args),
 }
 
 /// Runs `import`.
@@ -27,6 +32,7 @@ pub fn run(command: Command) -> Result<()> {
     match command {
         Command::Frames(args) => frames::run(args),
         Command::Aedat4(args) => aedat4::run(args),
+        Command::Zju(args) => zju::run(args),
     }
 }
 
