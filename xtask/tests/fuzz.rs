@@ -34,6 +34,7 @@ fn every_parser_survives_a_few_thousand_mutated_inputs() {
         "flow-png",
         "aedat4",
         "aedat4-frames",
+        "zju-model",
         "events-raw",
         "dat",
         "events-text",

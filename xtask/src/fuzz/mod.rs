@@ -33,7 +33,7 @@ pub use targets::TARGETS;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The parser to fuzz (`all` for every one): ply, camera, scene, npz, motion, safetensors,
-    /// flo, flow-png, aedat4, aedat4-frames, events-raw, dat, events-text, t7.
+    /// flo, flow-png, aedat4, aedat4-frames, zju-model, events-raw, dat, events-text, t7.
     #[arg(long)]
     pub target: String,
     /// Number of inputs per target.

@@ -29,7 +29,7 @@ pub struct Target {
 }
 
 /// Every target, in the order `--target all` runs them.
-pub const TARGETS: [Target; 14] = [
+pub const TARGETS: [Target; 15] = [
     Target {
         name: "ply",
         extension: "ply",
@@ -99,6 +99,13 @@ pub const TARGETS: [Target; 14] = [
         seeds: aedat4_frames_seeds,
         prepare: plain::<6>,
         parse: |p| events::io::aedat4_frames::read_aedat4_frames(&p.input).is_ok(),
+    },
+    Target {
+        name: "zju-model",
+        extension: "npz",
+        seeds: zju_model_seeds,
+        prepare: plain::<2>,
+        parse: |p| smpl_deform::zju::read_zju_model(&p.input).is_ok(),
     },
     Target {
         name: "events-raw",
@@ -426,6 +433,28 @@ fn aedat4_frames_seeds() -> Result<Vec<Vec<u8>>> {
             },
             "f.aedat4",
         )?);
+    }
+    Ok(seeds)
+}
+
+fn zju_model_seeds() -> Result<Vec<Vec<u8>>> {
+    let mut seeds = Vec::new();
+    for (flat, betas) in [(false, true), (true, false)] {
+        let mut w = smpl_deform::npz::NpzWriter::new(std::io::Cursor::new(Vec::new()), false);
+        let shape = |n: u64| if flat { vec![n] } else { vec![1, n] };
+        let values = |n: usize| (0..n).map(|i| i as f32 * 0.01).collect::<Vec<f32>>();
+        for (key, n) in [
+            ("root_orient", 3),
+            ("pose_body", 63),
+            ("pose_hand", 6),
+            ("trans", 3),
+        ] {
+            w.add_f32(key, &shape(n as u64), &values(n))?;
+        }
+        if betas {
+            w.add_f32("betas", &shape(10), &values(10))?;
+        }
+        seeds.push(w.finish()?.into_inner());
     }
     Ok(seeds)
 }

@@ -21,7 +21,7 @@ Examples:
   cargo xtask import frames --images clip/ --fps 120 --poses smpl/ --camera cam.json \\
       --blur 7 --events simulate --out scene-blur   # the ZJU-MoCap-Blur recipe")]
 pub struct Args {
-    /// Folder of frames, PNG (8 or 16 bit, grey, RGB or RGBA; alpha ignored) or PPM, in file-name
+    /// Folder of frames, PNG (8 or 16 bit, grey, RGB or RGBA; alpha ignored), JPEG or PPM, in file-name
     /// order. Grey frames (a DAVIS APS or CeleX-V camera) make a grey scene (`images.channels =
     /// 1`), which trains on the renders' luminance.
     #[arg(long)]

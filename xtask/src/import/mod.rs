@@ -42,14 +42,14 @@ pub(super) fn image_files(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
         .with_context(|| format!("reading the {what} folder {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| ["png", "ppm", "pnm"].contains(&e.to_ascii_lowercase().as_str()))
+            p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+                ["png", "ppm", "pnm", "jpg", "jpeg"].contains(&e.to_ascii_lowercase().as_str())
+            })
         })
         .collect();
     files.sort();
     if files.is_empty() {
-        bail!("{}: no PNG or PPM {what} found", dir.display());
+        bail!("{}: no PNG, JPEG or PPM {what} found", dir.display());
     }
     Ok(files)
 }
