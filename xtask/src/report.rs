@@ -309,6 +309,81 @@ fn pictures(dir: &Path, prefix: &str) -> Vec<String> {
     names.into_iter().map(|n| format!("eval/{n}")).collect()
 }
 
+/// What the run was trained on: the scene's frames, size, channels, exposure and events, and —
+/// for an imported scene — the import command and its settings (`generator` in `scene.json`).
+/// Empty when the scene cannot be read.
+fn data_section(m: &serde_json::Value) -> String {
+    let Some(dir) = m.get("data").and_then(|d| d.as_str()) else {
+        return String::new();
+    };
+    let Ok(text) = std::fs::read_to_string(Path::new(dir).join(scene::SCENE_FILE)) else {
+        return String::new();
+    };
+    let Ok(s) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return String::new();
+    };
+    let frames = s["frames"].as_array().map_or(0, Vec::len);
+    let count = |pred: &dyn Fn(&serde_json::Value) -> bool| {
+        s["frames"]
+            .as_array()
+            .map_or(0, |a| a.iter().filter(|f| pred(f)).count())
+    };
+    let own_exposure = count(&|f| f.get("exposure_s").is_some());
+    let with_events = count(&|f| f.get("events").is_some());
+    let with_sharp = count(&|f| f.get("sharp").is_some());
+    let grey = s["images"]["channels"].as_u64() == Some(1);
+    let mut rows = vec![
+        ("scene".to_string(), dir.to_string()),
+        (
+            "frames".into(),
+            format!(
+                "{frames} ({}×{}, {}, {}-bit {})",
+                s["camera"]["width"],
+                s["camera"]["height"],
+                if grey { "grey" } else { "RGB" },
+                s["images"]["bit_depth"],
+                s["images"]["transfer"].as_str().unwrap_or("?")
+            ),
+        ),
+        (
+            "frame rate, exposure".into(),
+            format!(
+                "{:.3} fps, {:.2} ms{}",
+                s["fps"].as_f64().unwrap_or(f64::NAN),
+                1e3 * s["exposure_s"].as_f64().unwrap_or(f64::NAN),
+                if own_exposure > 0 {
+                    format!(" ({own_exposure} frames with their own exposure)")
+                } else {
+                    String::new()
+                }
+            ),
+        ),
+        (
+            "events, sharp references".into(),
+            format!("{with_events} frames with events, {with_sharp} with sharp references"),
+        ),
+    ];
+    if let Some(g) = s.get("generator") {
+        rows.push((
+            "made by".into(),
+            g["name"].as_str().unwrap_or("(unnamed)").to_string(),
+        ));
+        if let Some(cfg) = g.get("config").and_then(|c| c.as_object()) {
+            let settings: Vec<String> = cfg
+                .iter()
+                .filter(|(_, v)| !v.is_object() && !v.is_array())
+                .map(|(k, v)| format!("{k} = {v}"))
+                .collect();
+            rows.push(("settings".into(), settings.join(", ")));
+        }
+    }
+    let mut html = String::from("<h2>Data</h2>\n<table>\n");
+    for (k, v) in rows {
+        html += &format!("<tr><th>{}</th><td>{}</td></tr>\n", esc(&k), esc(&v));
+    }
+    html + "</table>\n"
+}
+
 fn figure(src: &str, caption: &str) -> String {
     format!(
         "<figure><img src=\"{}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>\n",
@@ -329,6 +404,7 @@ pub fn write_run_report(dir: &Path, title: &str) -> Result<PathBuf> {
     let mut body = String::new();
     body += "<h2>Summary</h2>\n";
     body += &summary_table(&m);
+    body += &data_section(&m);
     let log = dir.join("log.jsonl");
     if log.exists() {
         let svg = curves_svg(&log)?;

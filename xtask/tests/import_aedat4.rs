@@ -153,6 +153,17 @@ fn a_davis_recording_becomes_a_grey_scene_with_its_exposures_and_events_that_tra
         serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["test_frames"].as_u64(), Some(3));
     assert!(metrics["test_psnr_full"].as_f64().unwrap().is_finite());
+    // The report says what was imported.
+    let html = std::fs::read_to_string(run.join("report.html")).unwrap();
+    for needle in [
+        "<h2>Data</h2>",
+        "xtask import aedat4",
+        "grey",
+        "2 frames with their own exposure",
+        "15 frames with events",
+    ] {
+        assert!(html.contains(needle), "report lacks {needle}");
+    }
 }
 
 #[test]

@@ -35,6 +35,10 @@ fn import(out: &Path, poses: &Path, extra: &[&str]) -> Output {
 }
 
 fn import_from(images: &Path, out: &Path, poses: &Path, extra: &[&str]) -> Output {
+    import_with(images, &fixture().join("scene.json"), out, poses, extra)
+}
+
+fn import_with(images: &Path, camera: &Path, out: &Path, poses: &Path, extra: &[&str]) -> Output {
     let fx = fixture();
     xtask()
         .args(["import", "frames", "--fps", "30", "--images"])
@@ -42,7 +46,7 @@ fn import_from(images: &Path, out: &Path, poses: &Path, extra: &[&str]) -> Outpu
         .arg("--masks")
         .arg(fx.join("masks"))
         .arg("--camera")
-        .arg(fx.join("scene.json"))
+        .arg(camera)
         .arg("--poses")
         .arg(poses)
         .arg("--out")
@@ -165,6 +169,15 @@ fn grey_frames_make_a_grey_scene_that_trains_with_per_frame_exposures() {
     assert_eq!(metrics["test_frames"].as_u64(), Some(3), "{metrics}");
     let psnr = metrics["test_psnr_full"].as_f64().unwrap();
     assert!(psnr.is_finite() && psnr > 5.0, "{metrics}");
+    let html = std::fs::read_to_string(run.join("report.html")).unwrap();
+    for needle in [
+        "<h2>Data</h2>",
+        "xtask import frames",
+        "grey",
+        "1 frames with their own exposure",
+    ] {
+        assert!(html.contains(needle), "report lacks {needle}");
+    }
 }
 
 #[test]
@@ -191,4 +204,40 @@ fn mismatched_counts_and_settings_are_refused() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("exposure_s"), "{err}");
     assert!(!dir.path().join("a").join("scene.json").exists());
+    // A pose file with the wrong shapes names the file and the array.
+    let bad = dir.path().join("bad.npz");
+    let mut w = smpl_deform::npz::NpzWriter::new(std::fs::File::create(&bad).unwrap(), false);
+    w.add_f32("global_orient", &[15, 3], &[0.0; 45]).unwrap();
+    w.add_f32("body_pose", &[15, 68], &vec![0.0; 15 * 68])
+        .unwrap();
+    w.add_f32("transl", &[15, 3], &[0.0; 45]).unwrap();
+    w.finish().unwrap();
+    let o = import(&dir.path().join("d"), &bad, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("bad.npz") && err.contains("body_pose"),
+        "{err}"
+    );
+    // A camera whose size differs from the frames names the frame file and both sizes.
+    let camera = dir.path().join("camera.json");
+    std::fs::write(
+        &camera,
+        r#"{"width": 32, "height": 32, "fx": 40.0, "fy": 40.0, "cx": 16.0, "cy": 16.0,
+            "world_to_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]}"#,
+    )
+    .unwrap();
+    let o = import_with(
+        &fixture().join("sharp"),
+        &camera,
+        &dir.path().join("e"),
+        &poses,
+        &[],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("000000.png")
+            && err.contains("64x64, the camera is 32x32"),
+        "{err}"
+    );
 }

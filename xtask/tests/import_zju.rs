@@ -158,4 +158,16 @@ fn a_distorting_lens_changes_the_frames_and_a_missing_view_is_named() {
     let o = import(&root, &dir.path().join("x"), &["--view", "7"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("7"), "{err}");
+    // Distortion coefficients that are not 5 are refused naming the file and the field.
+    let cams = root.join("cam_params.json");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cams).unwrap()).unwrap();
+    v["1"]["D"] = serde_json::json!([-0.3, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    std::fs::write(&cams, v.to_string()).unwrap();
+    let o = import(&root, &dir.path().join("y"), &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("cam_params.json") && err.contains("`1`.D"),
+        "{err}"
+    );
 }

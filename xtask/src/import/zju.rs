@@ -110,24 +110,14 @@ fn read_camera(root: &Path, view: &str, (w, h): (u32, u32)) -> Result<(scene::Ca
     let k = field("K", 9)?;
     let r = field("R", 9)?;
     let t = field("T", 3)?;
-    let d = match cam.get("D") {
-        Some(v) => {
-            let mut out = Vec::new();
-            for n in [5, 4] {
-                if let Ok(x) = numbers(v, "D", n) {
-                    out = x;
-                    break;
-                }
-            }
-            Distortion::from_opencv(&out).with_context(|| {
-                format!(
-                    "{}: camera `{view}`.D: expected 4 or 5 finite OpenCV coefficients",
-                    path.display()
-                )
-            })?
-        }
-        None => Distortion::default(),
-    };
+    // ZJU-MoCap's lenses are OpenCV's 5-coefficient model; anything else is refused rather than
+    // guessed (8 coefficients would be the rational model this importer does not apply).
+    let d = Distortion::from_opencv(&field("D", 5)?).with_context(|| {
+        format!(
+            "{}: camera `{view}`.D: expected 5 finite OpenCV coefficients",
+            path.display()
+        )
+    })?;
     let camera = scene::Camera {
         width: w,
         height: h,
