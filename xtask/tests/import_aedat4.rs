@@ -1,18 +1,16 @@
-//! `cargo xtask import aedat4` on a DAVIS-like recording made from the tiny fixture: grey frames
-//! with their own exposures and the fixture's events in one AEDAT 4 file, plus one pose per frame.
-//! The scene it writes loads, keeps each frame's exposure and every event after the first frame's
-//! time, and trains; a pose count that differs is refused naming both counts.
+//! `cargo xtask import aedat4` on the committed DAVIS-like recording (`data-fixtures/import/davis`:
+//! grey frames with their own exposures and events in one AEDAT 4 file, plus one pose per frame).
+//! The scene it writes loads, has exactly the file's exposure times and frame pixels, puts every
+//! event after the first frame's time in exactly one frame's file, and trains; a pose count that
+//! differs is refused naming both counts.
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use events::io::aedat4::Compression;
-use events::io::aedat4_frames::{write_aedat4_with_frames, ApsFrame, FrameFormat};
+mod common;
 
-fn fixture() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data-fixtures/tiny")
-}
+use common::fixture;
 
 fn xtask() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_xtask"));
@@ -20,72 +18,16 @@ fn xtask() -> Command {
     c
 }
 
-/// Writes `rec.aedat4` (grey frames of the fixture's observed images, exposures shortened on
-/// frames 3 and 4, the fixture's events) and `poses.json` (the first `poses` poses); returns the
-/// number of events after the first frame's exposure midpoint.
-fn write_recording(dir: &Path, poses: usize) -> usize {
-    let fx = fixture();
-    let tiny: scene::Scene =
-        serde_json::from_str(&std::fs::read_to_string(fx.join("scene.json")).unwrap()).unwrap();
-    let (w, h) = (tiny.camera.width, tiny.camera.height);
-    let n = (w * h) as usize;
-    let us = |t: f64| (t * 1e6).round() as i64;
-    let t_base = 2_000_000; // a device clock that does not start at 0
-    let mut frames = Vec::new();
-    let mut all = events::EventStream::new();
-    for (k, f) in tiny.frames.iter().enumerate() {
-        let rgb = scene::read_rgb(&fx.join(&f.image), tiny.images).unwrap();
-        let y = scene::image_io::luminance(&rgb.data, n);
-        let half = if k == 3 || k == 4 { 8_000 } else { 16_000 };
-        let mid = t_base + us(f.time_s);
-        frames.push(ApsFrame {
-            t_us: mid,
-            exposure_begin_us: mid - half,
-            exposure_end_us: mid + half,
-            format: FrameFormat::Gray,
-            width: w,
-            height: h,
-            offset_x: 0,
-            offset_y: 0,
-            pixels: y
-                .iter()
-                .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-                .collect(),
-        });
-        let mut ev = events::read_events(fx.join(f.events.as_ref().unwrap())).unwrap();
-        ev.t.iter_mut().for_each(|t| *t += t_base);
-        all.extend_from(&ev.as_slice());
-    }
-    let first_mid = frames[0].t_us;
-    let after = all.t.iter().filter(|&&t| t >= first_mid).count();
-    write_aedat4_with_frames(
-        dir.join("rec.aedat4"),
-        &all,
-        &frames,
-        events::SensorSize::new(w, h),
-        Compression::Lz4,
-    )
-    .unwrap();
-    let list: Vec<serde_json::Value> = tiny
-        .frames
-        .iter()
-        .take(poses)
-        .map(|f| serde_json::json!({"pose": f.pose, "transl": f.transl}))
-        .collect();
-    std::fs::write(
-        dir.join("poses.json"),
-        serde_json::to_string(&list).unwrap(),
-    )
-    .unwrap();
-    after
+fn recording() -> PathBuf {
+    common::import_fixtures().join("davis/rec.aedat4")
 }
 
-fn import(dir: &Path, out: &Path) -> std::process::Output {
+fn import(poses: &Path, out: &Path) -> std::process::Output {
     xtask()
         .args(["import", "aedat4", "--file"])
-        .arg(dir.join("rec.aedat4"))
+        .arg(recording())
         .arg("--poses")
-        .arg(dir.join("poses.json"))
+        .arg(poses)
         .arg("--camera")
         .arg(fixture().join("scene.json"))
         .arg("--masks")
@@ -99,9 +41,13 @@ fn import(dir: &Path, out: &Path) -> std::process::Output {
 #[test]
 fn a_davis_recording_becomes_a_grey_scene_with_its_exposures_and_events_that_trains() {
     let dir = tempfile::tempdir().unwrap();
-    let after = write_recording(dir.path(), 15);
+    let (frames, _) = events::io::aedat4_frames::read_aedat4_frames(recording()).unwrap();
+    let all = events::read_events(recording()).unwrap();
+    let first_mid =
+        frames[0].exposure_begin_us + (frames[0].exposure_end_us - frames[0].exposure_begin_us) / 2;
+    let after = all.t.iter().filter(|&&t| t >= first_mid).count();
     let out = dir.path().join("scene");
-    let o = import(dir.path(), &out);
+    let o = import(&common::import_fixtures().join("davis/poses.json"), &out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = scene::load(&out).unwrap();
     assert_eq!(s.frames.len(), 15);
@@ -125,6 +71,23 @@ fn a_davis_recording_becomes_a_grey_scene_with_its_exposures_and_events_that_tra
         total += ev.len();
     }
     assert_eq!(total, after);
+    println!(
+        "{} frames, exposures {:?} µs; {total} of {} events in the frames' files",
+        frames.len(),
+        frames
+            .iter()
+            .map(|f| f.exposure_end_us - f.exposure_begin_us)
+            .collect::<Vec<_>>(),
+        all.len()
+    );
+    // Exactly the file's exposures and pixels.
+    for (k, (f, g)) in s.frames.iter().zip(&frames).enumerate() {
+        let e = (g.exposure_end_us - g.exposure_begin_us) as f64 * 1e-6;
+        assert!((s.exposure_of(k) - e).abs() < 1e-12, "frame {k}");
+        let img = scene::read_rgb(&out.join(&f.image), s.images).unwrap();
+        let stored: Vec<f32> = g.pixels.iter().map(|&p| f32::from(p) / 255.0).collect();
+        assert_eq!(img.data[..stored.len()], stored[..], "frame {k}");
+    }
     // It trains: the exposure model over each frame's own exposure, with the event loss.
     let config = dir.path().join("tiny.toml");
     std::fs::write(
@@ -169,8 +132,9 @@ fn a_davis_recording_becomes_a_grey_scene_with_its_exposures_and_events_that_tra
 #[test]
 fn a_pose_count_that_differs_is_refused_naming_both() {
     let dir = tempfile::tempdir().unwrap();
-    write_recording(dir.path(), 12);
-    let o = import(dir.path(), &dir.path().join("scene"));
+    let poses = dir.path().join("poses.json");
+    common::write_poses(&poses, 12);
+    let o = import(&poses, &dir.path().join("scene"));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
     assert!(

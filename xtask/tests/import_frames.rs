@@ -6,28 +6,14 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn fixture() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data-fixtures/tiny")
-}
+mod common;
+
+use common::{fixture, write_poses};
 
 fn xtask() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_xtask"));
     c.env("RUST_BACKTRACE", "0");
     c
-}
-
-/// The fixture's poses as a JSON list (the first `count`).
-fn write_poses(path: &Path, count: usize) {
-    let text = std::fs::read_to_string(fixture().join("scene.json")).unwrap();
-    let s: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let list: Vec<serde_json::Value> = s["frames"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .take(count)
-        .map(|f| serde_json::json!({"pose": f["pose"], "transl": f["transl"]}))
-        .collect();
-    std::fs::write(path, serde_json::to_string(&list).unwrap()).unwrap();
 }
 
 fn import(out: &Path, poses: &Path, extra: &[&str]) -> Output {
@@ -59,11 +45,18 @@ fn import_with(images: &Path, camera: &Path, out: &Path, poses: &Path, extra: &[
 #[test]
 fn frames_and_poses_become_a_scene_that_trains() {
     let dir = tempfile::tempdir().unwrap();
-    let poses = dir.path().join("poses.json");
-    write_poses(&poses, 15);
+    // The committed fixture: the tiny benchmark's frames with its poses and camera.
+    let committed = common::import_fixtures().join("frames");
+    let poses = committed.join("poses.json");
     // The frames as observations: 15 frames, the 7/3 split, the given exposure.
     let plain = dir.path().join("plain");
-    let o = import(&plain, &poses, &["--exposure-s", "0.02"]);
+    let o = import_with(
+        &fixture().join("sharp"),
+        &committed.join("camera.json"),
+        &plain,
+        &poses,
+        &["--exposure-s", "0.02"],
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = scene::load(&plain).unwrap();
     assert_eq!(s.frames.len(), 15);

@@ -7,63 +7,16 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn fixture() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data-fixtures/tiny")
+mod common;
+
+fn subject() -> PathBuf {
+    common::import_fixtures().join("zju/CoreView_tiny")
 }
 
 fn xtask() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_xtask"));
     c.env("RUST_BACKTRACE", "0");
     c
-}
-
-/// Writes the subject under `root` (view "1"), with lens coefficients `d`; returns the fixture.
-fn write_subject(root: &Path, d: [f64; 5]) -> scene::Scene {
-    let fx = fixture();
-    let tiny: scene::Scene =
-        serde_json::from_str(&std::fs::read_to_string(fx.join("scene.json")).unwrap()).unwrap();
-    let c = &tiny.camera;
-    let m = c.world_to_camera;
-    let cams = serde_json::json!({
-        "all_cam_names": ["1"],
-        "1": {
-            "K": [[c.fx, 0.0, c.cx - 0.5], [0.0, c.fy, c.cy - 0.5], [0.0, 0.0, 1.0]],
-            "D": [[d[0]], [d[1]], [d[2]], [d[3]], [d[4]]],
-            "R": [[m[0][0], m[0][1], m[0][2]], [m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]],
-            "T": [[m[0][3]], [m[1][3]], [m[2][3]]],
-        }
-    });
-    std::fs::create_dir_all(root.join("1")).unwrap();
-    std::fs::create_dir_all(root.join("models")).unwrap();
-    std::fs::write(root.join("cam_params.json"), cams.to_string()).unwrap();
-    for (k, f) in tiny.frames.iter().enumerate() {
-        let rgb = scene::read_rgb(&fx.join(f.sharp.as_ref().unwrap()), tiny.images).unwrap();
-        let n = (c.width * c.height) as usize;
-        let bytes = scene::image_io::srgb8_interleaved(&rgb.data, n);
-        image::save_buffer(
-            root.join(format!("1/{k:06}.jpg")),
-            &bytes,
-            c.width,
-            c.height,
-            image::ExtendedColorType::Rgb8,
-        )
-        .unwrap();
-        std::fs::copy(
-            fx.join(f.mask.as_ref().unwrap()),
-            root.join(format!("1/{k:06}.png")),
-        )
-        .unwrap();
-        let pose: Vec<f32> = f.pose.iter().flatten().copied().collect();
-        let file = std::fs::File::create(root.join(format!("models/{k:06}.npz"))).unwrap();
-        let mut w = smpl_deform::npz::NpzWriter::new(file, false);
-        w.add_f32("root_orient", &[1, 3], &pose[..3]).unwrap();
-        w.add_f32("pose_body", &[1, 63], &pose[3..66]).unwrap();
-        w.add_f32("pose_hand", &[1, 6], &pose[66..]).unwrap();
-        w.add_f32("trans", &[1, 3], &f.transl).unwrap();
-        w.add_f32("betas", &[1, 10], &[0.0; 10]).unwrap();
-        w.finish().unwrap();
-    }
-    tiny
 }
 
 fn import(root: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
@@ -88,10 +41,9 @@ fn import(root: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
 #[test]
 fn a_zju_subject_becomes_a_blurred_scene_with_events_that_trains() {
     let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().join("CoreView_tiny");
-    let tiny = write_subject(&root, [0.0; 5]);
+    let tiny = common::tiny();
     let out = dir.path().join("scene");
-    let o = import(&root, &out, &["--blur", "3", "--events", "simulate"]);
+    let o = import(&subject(), &out, &["--blur", "3", "--events", "simulate"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = scene::load(&out).unwrap();
     assert_eq!(s.frames.len(), 5);
@@ -130,12 +82,10 @@ fn a_zju_subject_becomes_a_blurred_scene_with_events_that_trains() {
 #[test]
 fn a_distorting_lens_changes_the_frames_and_a_missing_view_is_named() {
     let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().join("subject");
-    write_subject(&root, [-0.3, 0.1, 0.0, 0.0, 0.0]);
     let (plain, bent) = (dir.path().join("plain"), dir.path().join("bent"));
-    let o = import(&root, &bent, &["--max-frames", "2"]);
+    let o = import(&subject(), &bent, &["--max-frames", "2"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    write_subject(&dir.path().join("flat"), [0.0; 5]);
+    common::write_subject(&dir.path().join("flat"), [0.0; 5]);
     let o = import(&dir.path().join("flat"), &plain, &["--max-frames", "2"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let read = |d: &Path| {
@@ -155,10 +105,11 @@ fn a_distorting_lens_changes_the_frames_and_a_missing_view_is_named() {
         "{differ} of {} values moved",
         a.len()
     );
-    let o = import(&root, &dir.path().join("x"), &["--view", "7"]);
+    let o = import(&subject(), &dir.path().join("x"), &["--view", "7"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("7"), "{err}");
     // Distortion coefficients that are not 5 are refused naming the file and the field.
+    let root = dir.path().join("flat");
     let cams = root.join("cam_params.json");
     let mut v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&cams).unwrap()).unwrap();
