@@ -142,3 +142,40 @@ fn a_pose_count_that_differs_is_refused_naming_both() {
         "{err}"
     );
 }
+
+#[test]
+fn poses_at_their_own_times_are_interpolated_to_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let (frames, _) = events::io::aedat4_frames::read_aedat4_frames(recording()).unwrap();
+    let tiny = common::tiny();
+    // Poses stamped with the frames' exposure midpoints: the spline passes through them.
+    let stamped = |shift: i64| -> Vec<serde_json::Value> {
+        tiny.frames
+            .iter()
+            .zip(&frames)
+            .map(|(f, g)| {
+                let mid = g.exposure_begin_us + (g.exposure_end_us - g.exposure_begin_us) / 2;
+                serde_json::json!({"pose": f.pose, "transl": f.transl, "t_us": mid + shift})
+            })
+            .collect()
+    };
+    let poses = dir.path().join("timed.json");
+    std::fs::write(&poses, serde_json::to_string(&stamped(0)).unwrap()).unwrap();
+    let out = dir.path().join("scene");
+    let o = import(&poses, &out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = scene::load(&out).unwrap();
+    for (f, t) in s.frames.iter().zip(&tiny.frames) {
+        for (a, b) in f.transl.iter().zip(&t.transl) {
+            assert!((a - b).abs() < 1e-5, "frame {}: {a} vs {b}", f.index);
+        }
+    }
+    // Poses that do not cover the frames are refused, naming the frame.
+    std::fs::write(&poses, serde_json::to_string(&stamped(1_000_000)).unwrap()).unwrap();
+    let o = import(&poses, &dir.path().join("late"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("frame 0's exposure midpoint"),
+        "{err}"
+    );
+}

@@ -9,7 +9,7 @@ use events::io::aedat4_frames::{read_aedat4_frames, ApsFrame, FrameFormat};
 use events::io::EventReader;
 use smpl_deform::BodyRef;
 
-use super::{image_files, read_mask_any, read_poses};
+use super::{image_files, read_mask_any, read_poses, Pose, Poses};
 
 /// Arguments of `import aedat4`.
 #[derive(clap::Args, Debug)]
@@ -29,7 +29,9 @@ pub struct Args {
     /// The AEDAT 4 recording (a `FRME` stream and an `EVTS` stream).
     #[arg(long)]
     pub file: PathBuf,
-    /// SMPL poses, one per frame (the layouts of `import frames --poses`).
+    /// SMPL poses: one per frame (the layouts of `import frames --poses`), or a JSON list whose
+    /// entries also carry `t_us`, the pose's time on the recording's clock (µs): then the pose at
+    /// each frame's exposure midpoint is interpolated (C¹ spline on rotations and translation).
     #[arg(long)]
     pub poses: PathBuf,
     /// With an EasyMocap folder: the `id` of the person to follow.
@@ -110,6 +112,51 @@ fn check_frames(frames: &[ApsFrame], file: &Path) -> Result<(u32, u32, FrameForm
     Ok((first.width, first.height, first.format))
 }
 
+/// The poses at each frame's exposure midpoint, interpolated from poses at their own times (µs,
+/// the recording's clock) by the exposure model's spline ([`train::exposure::PoseTrack`]: C¹ on
+/// rotations and translation). A frame outside the poses' time span is refused by name.
+fn poses_at_frames(
+    list: &[Pose],
+    times_us: &[i64],
+    frames: &[ApsFrame],
+    file: &Path,
+) -> Result<Vec<Pose>> {
+    let params: Vec<smpl_deform::SmplParams> = list
+        .iter()
+        .map(|(pose, transl)| smpl_deform::SmplParams {
+            pose: pose.iter().flatten().copied().collect(),
+            betas: Vec::new(),
+            transl: *transl,
+        })
+        .collect();
+    let keys: Vec<(f64, &smpl_deform::SmplParams)> = times_us
+        .iter()
+        .map(|&t| t as f64 * 1e-6)
+        .zip(&params)
+        .collect();
+    let track = train::exposure::PoseTrack::new(&keys);
+    let (first, last) = (times_us[0], times_us[times_us.len() - 1]);
+    frames
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let mid = f.exposure_begin_us + (f.exposure_end_us - f.exposure_begin_us) / 2;
+            if mid < first || mid > last {
+                bail!(
+                    "{}: frame {k}'s exposure midpoint {mid} µs lies outside the poses' times \
+                     [{first}, {last}] µs",
+                    file.display()
+                );
+            }
+            let p = track.at(mid as f64 * 1e-6);
+            Ok((
+                p.pose.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                p.transl,
+            ))
+        })
+        .collect()
+}
+
 /// Runs `import aedat4`.
 pub fn run(args: Args) -> Result<()> {
     let (frames, _) = read_aedat4_frames(&args.file)
@@ -130,16 +177,23 @@ pub fn run(args: Args) -> Result<()> {
     let body = body_ref
         .load()
         .with_context(|| format!("loading the body model {}", args.body))?;
-    let (poses, betas) = read_poses(&args.poses, &body, args.person)?;
-    if poses.len() != frames.len() {
-        bail!(
-            "{} holds {} poses but {} holds {} frames: one pose per frame is needed",
+    let Poses {
+        list,
+        times_us,
+        betas,
+    } = read_poses(&args.poses, &body, args.person)?;
+    let poses = match times_us {
+        Some(times) => poses_at_frames(&list, &times, &frames, &args.poses)?,
+        None if list.len() != frames.len() => bail!(
+            "{} holds {} poses but {} holds {} frames: one pose per frame is needed (or give \
+             each pose its time as `t_us`)",
             args.poses.display(),
-            poses.len(),
+            list.len(),
             args.file.display(),
             frames.len()
-        );
-    }
+        ),
+        None => list,
+    };
     let masks = match &args.masks {
         Some(dir) => {
             let m = image_files(dir, "masks")?;

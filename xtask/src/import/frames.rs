@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use smpl_deform::BodyRef;
 
-use super::{image_files, read_mask_any, read_poses};
+use super::{image_files, read_mask_any, read_poses, Poses};
 use synth::from_frames::{write_scene_from_frames, FramesToScene, InputFrame};
 
 /// Arguments of `import frames`.
@@ -121,7 +121,18 @@ pub fn run(args: Args) -> Result<()> {
     let body = body_ref
         .load()
         .with_context(|| format!("loading the body model {}", args.body))?;
-    let (poses, betas) = read_poses(&args.poses, &body, args.person)?;
+    let Poses {
+        list: poses,
+        times_us,
+        betas,
+    } = read_poses(&args.poses, &body, args.person)?;
+    if times_us.is_some() {
+        bail!(
+            "{}: poses with `t_us` are for recordings with their own clock (`import aedat4`); \
+             give one pose per frame, in frame order",
+            args.poses.display()
+        );
+    }
     if poses.len() != images.len() {
         bail!(
             "{} holds {} poses but {} holds {} frames: one pose per frame is needed",

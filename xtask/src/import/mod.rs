@@ -54,13 +54,26 @@ pub(super) fn image_files(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// One pose per frame, as 24 triples and a translation, plus the file's betas if it has them.
-#[allow(clippy::type_complexity)]
+/// A pose as 24 axis-angle triples and a translation.
+pub(super) type Pose = (Vec<[f32; 3]>, [f32; 3]);
+
+/// Poses read from a file: one per frame, or — a JSON list whose entries all carry `t_us` — at
+/// their own times (µs, the recording's clock), for the importer to interpolate.
+pub(super) struct Poses {
+    /// The poses, in file order.
+    pub list: Vec<Pose>,
+    /// Each pose's time (µs), when the file gives them.
+    pub times_us: Option<Vec<i64>>,
+    /// The file's shape parameters, when it has them.
+    pub betas: Option<Vec<f32>>,
+}
+
+/// Reads `--poses` (see `import frames --help` for the layouts).
 pub(super) fn read_poses(
     path: &Path,
     body: &smpl_deform::BodyModel,
     person: Option<i64>,
-) -> Result<(Vec<(Vec<[f32; 3]>, [f32; 3])>, Option<Vec<f32>>)> {
+) -> Result<Poses> {
     let triples = |flat: &[f32]| flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     if path.extension().and_then(|e| e.to_str()) == Some("json") {
         let text =
@@ -70,16 +83,47 @@ pub(super) fn read_poses(
         let serde_json::Value::Array(list) = value else {
             bail!("{}: expected a JSON list of poses", path.display());
         };
-        let poses = list
-            .into_iter()
-            .enumerate()
-            .map(|(k, v)| {
-                let (pose, transl, _) = crate::render_pose::read_entry(v)
-                    .with_context(|| format!("{}: pose {k}", path.display()))?;
-                Ok((triples(&pose), transl))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        return Ok((poses, None));
+        let mut times = Vec::new();
+        let mut poses = Vec::with_capacity(list.len());
+        for (k, mut v) in list.into_iter().enumerate() {
+            if let Some(t) = v.as_object_mut().and_then(|o| o.remove("t_us")) {
+                let t = t.as_i64().with_context(|| {
+                    format!(
+                        "{}: pose {k}: `t_us` {t} is not an integer (µs)",
+                        path.display()
+                    )
+                })?;
+                times.push(t);
+            }
+            let (pose, transl, _) = crate::render_pose::read_entry(v)
+                .with_context(|| format!("{}: pose {k}", path.display()))?;
+            poses.push((triples(&pose), transl));
+        }
+        let times_us = match times.len() {
+            0 => None,
+            n if n == poses.len() => {
+                if let Some(k) = (1..n).find(|&k| times[k] <= times[k - 1]) {
+                    bail!(
+                        "{}: pose {k}: `t_us` {} is not after pose {}'s {}",
+                        path.display(),
+                        times[k],
+                        k - 1,
+                        times[k - 1]
+                    );
+                }
+                Some(times)
+            }
+            n => bail!(
+                "{}: {n} of {} poses have `t_us`: all or none must",
+                path.display(),
+                poses.len()
+            ),
+        };
+        return Ok(Poses {
+            list: poses,
+            times_us,
+            betas: None,
+        });
     }
     let motion = if path.is_dir() {
         let shaped = body.shaped_vertices(&[])?;
@@ -102,7 +146,11 @@ pub(super) fn read_poses(
         .zip(&motion.transl)
         .map(|(p, t)| (triples(p), *t))
         .collect();
-    Ok((poses, motion.betas))
+    Ok(Poses {
+        list: poses,
+        times_us: None,
+        betas: motion.betas,
+    })
 }
 
 /// Reads a single-channel (or any) mask image as `non-zero = human`, checked against the camera.
