@@ -10,6 +10,7 @@ pub mod covariance;
 pub mod density;
 pub mod init;
 pub mod ply;
+mod ply_ascii;
 mod ply_compressed;
 pub mod set;
 pub mod sh;

@@ -340,7 +340,7 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, PlyError> {
 
 /// Where a vertex property goes in the set.
 #[derive(Clone, Copy, Debug)]
-enum Target {
+pub(crate) enum Target {
     Mean(usize),
     Dc(usize),
     Rest(usize),
@@ -357,11 +357,11 @@ fn indexed(name: &str, prefix: &str) -> Option<usize> {
 }
 
 /// The vertex layout resolved against the 3DGS properties.
-struct Layout {
-    targets: Vec<Target>,
-    sh_degree: usize,
-    feature_dim: usize,
-    semantic_classes: usize,
+pub(crate) struct Layout {
+    pub(crate) targets: Vec<Target>,
+    pub(crate) sh_degree: usize,
+    pub(crate) feature_dim: usize,
+    pub(crate) semantic_classes: usize,
 }
 
 fn resolve_layout(path: &Path, vertex: &Element) -> Result<Layout, PlyError> {
@@ -462,7 +462,7 @@ fn resolve_layout(path: &Path, vertex: &Element) -> Result<Layout, PlyError> {
 
 /// Stores one decoded value into row `i` of `set`.
 #[inline]
-fn store(set: &mut GaussianSet, layout: &Layout, i: usize, target: Target, v: f32) {
+pub(crate) fn store(set: &mut GaussianSet, layout: &Layout, i: usize, target: Target, v: f32) {
     let k = num_sh_coeffs(layout.sh_degree);
     match target {
         Target::Mean(a) => set.means[i][a] = v,
@@ -510,13 +510,13 @@ pub fn read_ply_bytes(bytes: &[u8], path: impl AsRef<Path>) -> Result<GaussianSe
     let layout = resolve_layout(path, &header.elements[vertex_pos])?;
     let data = &bytes[header.data_offset..];
     if header.format == Format::Ascii {
-        read_ascii(path, data, &header, vertex_pos, &layout)
+        crate::ply_ascii::read_ascii(path, data, &header, vertex_pos, &layout)
     } else {
         read_binary(path, data, &header, vertex_pos, &layout)
     }
 }
 
-fn empty_set(layout: &Layout) -> GaussianSet {
+pub(crate) fn empty_set(layout: &Layout) -> GaussianSet {
     GaussianSet::new(
         layout.sh_degree,
         layout.feature_dim,
@@ -618,111 +618,6 @@ fn read_binary(
                 });
             }
             store(&mut set, layout, i, t, v);
-        }
-    }
-    Ok(set)
-}
-
-fn read_ascii(
-    path: &Path,
-    data: &[u8],
-    header: &Header,
-    vertex_pos: usize,
-    layout: &Layout,
-) -> Result<GaussianSet, PlyError> {
-    let text = std::str::from_utf8(data).map_err(|_| PlyError::Header {
-        path: path.to_path_buf(),
-        line: 0,
-        message: "ASCII body is not valid UTF-8".into(),
-    })?;
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    for element in &header.elements[..vertex_pos] {
-        for _ in 0..element.count {
-            if lines.next().is_none() {
-                return Err(PlyError::Truncated {
-                    path: path.to_path_buf(),
-                    vertex: 0,
-                    property: format!("element {}", element.name),
-                });
-            }
-        }
-    }
-    let vertex = &header.elements[vertex_pos];
-    let sh_stride = num_sh_coeffs(layout.sh_degree) * 3;
-    // Rows are appended as they are parsed: nothing is reserved from the header's claim.
-    let mut set = empty_set(layout);
-    let row_zero = GaussianSet::zeros(
-        1,
-        layout.sh_degree,
-        layout.feature_dim,
-        layout.semantic_classes,
-    );
-    for i in 0..vertex.count {
-        let first_prop = vertex
-            .properties
-            .first()
-            .map_or("vertex", |p| p.name.as_str());
-        let line = lines.next().ok_or_else(|| PlyError::Truncated {
-            path: path.to_path_buf(),
-            vertex: i,
-            property: first_prop.to_string(),
-        })?;
-        set.append(&row_zero)
-            .map_err(|source| PlyError::InvalidSet {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        let idx = set.len() - 1;
-        debug_assert_eq!(set.sh.len(), set.len() * sh_stride);
-        let mut tokens = line.split_whitespace();
-        for (p, &t) in vertex.properties.iter().zip(&layout.targets) {
-            let mut next = || {
-                tokens.next().ok_or_else(|| PlyError::Truncated {
-                    path: path.to_path_buf(),
-                    vertex: i,
-                    property: p.name.clone(),
-                })
-            };
-            let parse = |tok: &str| {
-                tok.parse::<f64>().map_err(|_| PlyError::Parse {
-                    path: path.to_path_buf(),
-                    vertex: i,
-                    property: p.name.clone(),
-                    value: tok.to_string(),
-                })
-            };
-            match p.kind {
-                PropertyKind::Scalar(_) => {
-                    let tok = next()?;
-                    if matches!(t, Target::Ignore) {
-                        continue;
-                    }
-                    let v = parse(tok)?;
-                    if !v.is_finite() {
-                        return Err(PlyError::NonFinite {
-                            path: path.to_path_buf(),
-                            vertex: i,
-                            property: p.name.clone(),
-                            value: v,
-                        });
-                    }
-                    store(&mut set, layout, idx, t, v as f32);
-                }
-                PropertyKind::List => {
-                    let count = parse(next()?)?;
-                    if !(0.0..=1e6).contains(&count) || count.fract() != 0.0 {
-                        return Err(PlyError::Parse {
-                            path: path.to_path_buf(),
-                            vertex: i,
-                            property: p.name.clone(),
-                            value: count.to_string(),
-                        });
-                    }
-                    for _ in 0..count as usize {
-                        next()?;
-                    }
-                }
-            }
         }
     }
     Ok(set)
