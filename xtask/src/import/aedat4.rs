@@ -4,12 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use super::{check_out_is_free, load_body, read_mask_any, read_poses, PersonArgs, Pose, Poses};
 use anyhow::{bail, Context, Result};
 use events::io::aedat4_frames::{read_aedat4_frames, ApsFrame, FrameFormat};
 use events::io::EventReader;
-use smpl_deform::BodyRef;
-
-use super::{image_files, read_mask_any, read_poses, Pose, Poses};
 
 /// Arguments of `import aedat4`.
 #[derive(clap::Args, Debug)]
@@ -29,27 +27,8 @@ pub struct Args {
     /// The AEDAT 4 recording (a `FRME` stream and an `EVTS` stream).
     #[arg(long)]
     pub file: PathBuf,
-    /// SMPL poses: one per frame (the layouts of `import frames --poses`), or a JSON list whose
-    /// entries also carry `t_us`, the pose's time on the recording's clock (µs): then the pose at
-    /// each frame's exposure midpoint is interpolated (C¹ spline on rotations and translation).
-    #[arg(long)]
-    pub poses: PathBuf,
-    /// With an EasyMocap folder: the `id` of the person to follow.
-    #[arg(long)]
-    pub person: Option<i64>,
-    /// The camera (the project's camera JSON, a `scene.json`, or an INRIA `cameras.json` entry);
-    /// its size must be the frames' size.
-    #[arg(long)]
-    pub camera: PathBuf,
-    /// Index into an INRIA `cameras.json` list.
-    #[arg(long, default_value_t = 0)]
-    pub cam_index: usize,
-    /// Optional folder of human masks, one per frame, in file-name order.
-    #[arg(long)]
-    pub masks: Option<PathBuf>,
-    /// Body model: `builtin:makehuman` or the path of your SMPL `.npz` (its licence is yours).
-    #[arg(long, default_value = "builtin:makehuman")]
-    pub body: String,
+    #[command(flatten)]
+    pub person: PersonArgs,
     /// Output scene directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -162,60 +141,37 @@ pub fn run(args: Args) -> Result<()> {
     let (frames, _) = read_aedat4_frames(&args.file)
         .with_context(|| format!("reading the frames of {}", args.file.display()))?;
     let (w, h, format) = check_frames(&frames, &args.file)?;
-    let camera = scene::camera_files::read_any(&args.camera, args.cam_index)
-        .with_context(|| format!("reading the camera {}", args.camera.display()))?;
+    let person = &args.person;
+    let camera = person.camera()?;
     if (camera.width, camera.height) != (w, h) {
         bail!(
             "the camera {} is {}x{}, the frames of {} are {w}x{h}",
-            args.camera.display(),
+            person.camera.display(),
             camera.width,
             camera.height,
             args.file.display()
         );
     }
-    let body_ref = BodyRef::parse(&args.body)?;
-    let body = body_ref
-        .load()
-        .with_context(|| format!("loading the body model {}", args.body))?;
+    let (body, model) = load_body(&person.body)?;
     let Poses {
         list,
         times_us,
         betas,
-    } = read_poses(&args.poses, &body, args.person)?;
+    } = read_poses(&person.poses, &body, person.person)?;
     let poses = match times_us {
-        Some(times) => poses_at_frames(&list, &times, &frames, &args.poses)?,
+        Some(times) => poses_at_frames(&list, &times, &frames, &person.poses)?,
         None if list.len() != frames.len() => bail!(
             "{} holds {} poses but {} holds {} frames: one pose per frame is needed (or give \
              each pose its time as `t_us`)",
-            args.poses.display(),
+            person.poses.display(),
             list.len(),
             args.file.display(),
             frames.len()
         ),
         None => list,
     };
-    let masks = match &args.masks {
-        Some(dir) => {
-            let m = image_files(dir, "masks")?;
-            if m.len() != frames.len() {
-                bail!(
-                    "{} holds {} masks but {} holds {} frames: one mask per frame is needed",
-                    dir.display(),
-                    m.len(),
-                    args.file.display(),
-                    frames.len()
-                );
-            }
-            Some(m)
-        }
-        None => None,
-    };
-    if args.out.join(scene::SCENE_FILE).exists() {
-        bail!(
-            "{} already holds a scene: choose another --out or remove it",
-            args.out.display()
-        );
-    }
+    let masks = person.mask_files(frames.len(), &args.file)?;
+    check_out_is_free(&args.out)?;
     for sub in ["images", "masks", "events"] {
         std::fs::create_dir_all(args.out.join(sub))
             .with_context(|| format!("creating {}", args.out.join(sub).display()))?;
@@ -311,13 +267,6 @@ pub fn run(args: Args) -> Result<()> {
     // Events, streamed into per-frame files.
     let (written, before) = split_events(&args.file, &args.out, t0, &mid_us, (w, h))?;
 
-    let model = match &body_ref {
-        BodyRef::BuiltinMakehuman => args.body.clone(),
-        BodyRef::SmplFile(p) => std::fs::canonicalize(p)
-            .unwrap_or_else(|_| p.clone())
-            .display()
-            .to_string(),
-    };
     let s = scene::Scene {
         format_version: scene::FORMAT_VERSION,
         camera,
@@ -334,8 +283,8 @@ pub fn run(args: Args) -> Result<()> {
             "name": "xtask import aedat4",
             "config": {
                 "file": args.file.display().to_string(),
-                "poses": args.poses.display().to_string(),
-                "camera": args.camera.display().to_string(),
+                "poses": person.poses.display().to_string(),
+                "camera": person.camera.display().to_string(),
                 "time_zero_us": t0,
                 "frame_format": format!("{format:?}"),
             }

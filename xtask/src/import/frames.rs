@@ -3,11 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
+use super::{
+    check_out_is_free, image_files, load_body, read_mask_any, read_poses, PersonArgs, Poses,
+    SynthesisArgs,
+};
 use anyhow::{bail, Context, Result};
-use smpl_deform::BodyRef;
-
-use super::{image_files, read_mask_any, read_poses, Poses};
-use synth::from_frames::{write_scene_from_frames, FramesToScene, InputFrame};
+use synth::from_frames::{write_scene_from_frames, InputFrame};
 
 /// Arguments of `import frames`.
 #[derive(clap::Args, Debug)]
@@ -29,45 +30,13 @@ pub struct Args {
     /// Frame rate of the frames (frames per second).
     #[arg(long)]
     pub fps: f64,
-    /// SMPL poses, one per frame: a JSON list of `{"pose": 72 values or 24 triples, "transl": [3]}`,
-    /// an AMASS-style `.npz` (`poses`, `trans`), a PeopleSnapshot / InstantAvatar `.npz`
-    /// (`global_orient`, `body_pose`, `transl`, `betas`) or an EasyMocap `smpl/` folder.
-    #[arg(long)]
-    pub poses: PathBuf,
-    /// With an EasyMocap folder: the `id` of the person to follow (default the first person).
-    #[arg(long)]
-    pub person: Option<i64>,
-    /// The camera: the project's camera JSON, a scene's `scene.json`, or an INRIA `cameras.json`
-    /// list (see `--cam-index`). Its size must be the frames' size.
-    #[arg(long)]
-    pub camera: PathBuf,
-    /// Index into an INRIA `cameras.json` list.
-    #[arg(long, default_value_t = 0)]
-    pub cam_index: usize,
-    /// Optional folder of human masks (single-channel PNG, non-zero = human), one per frame, in
-    /// file-name order.
-    #[arg(long)]
-    pub masks: Option<PathBuf>,
-    /// Body model: `builtin:makehuman` or the path of your SMPL `.npz` (its licence is yours; the
-    /// scene references it, it is not copied).
-    #[arg(long, default_value = "builtin:makehuman")]
-    pub body: String,
-    /// Average K consecutive frames (odd) into one observed frame, keeping the middle one as the
-    /// sharp reference: output rate fps / K, exposure K / fps. 1 = the frames are the observations.
-    #[arg(long, default_value_t = 1)]
-    pub blur: usize,
+    #[command(flatten)]
+    pub person: PersonArgs,
+    #[command(flatten)]
+    pub synthesis: SynthesisArgs,
     /// The camera's exposure per frame (seconds, ≤ 1/fps) when `--blur 1`; default 1/fps.
     #[arg(long)]
     pub exposure_s: Option<f64>,
-    /// `simulate`: events by ESIM over the frames, split per output frame; `none`: no events.
-    #[arg(long, default_value = "none", value_parser = ["none", "simulate"])]
-    pub events: String,
-    /// ESIM contrast threshold C (both polarities, log-intensity units).
-    #[arg(long, default_value_t = 0.2)]
-    pub threshold: f32,
-    /// Seed of the simulator's per-pixel threshold noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
     /// How the frames' pixel codes relate to intensity: `srgb` (video, photographs) or `linear`.
     #[arg(long, default_value = "srgb", value_parser = ["srgb", "linear"])]
     pub transfer: String,
@@ -110,79 +79,39 @@ fn read_frame(path: &Path, camera: &scene::Camera, linear: bool) -> Result<Vec<f
 
 /// Runs `import frames`.
 pub fn run(args: Args) -> Result<()> {
-    let camera = scene::camera_files::read_any(&args.camera, args.cam_index)
-        .with_context(|| format!("reading the camera {}", args.camera.display()))?;
+    let person = &args.person;
+    let camera = person.camera()?;
     let images = image_files(&args.images, "frames")?;
-    let masks = match &args.masks {
-        Some(dir) => Some(image_files(dir, "masks")?),
-        None => None,
-    };
-    let body_ref = BodyRef::parse(&args.body)?;
-    let body = body_ref
-        .load()
-        .with_context(|| format!("loading the body model {}", args.body))?;
+    let masks = person.mask_files(images.len(), &args.images)?;
+    let (body, model) = load_body(&person.body)?;
     let Poses {
         list: poses,
         times_us,
         betas,
-    } = read_poses(&args.poses, &body, args.person)?;
+    } = read_poses(&person.poses, &body, person.person)?;
     if times_us.is_some() {
         bail!(
             "{}: poses with `t_us` are for recordings with their own clock (`import aedat4`); \
              give one pose per frame, in frame order",
-            args.poses.display()
+            person.poses.display()
         );
     }
     if poses.len() != images.len() {
         bail!(
             "{} holds {} poses but {} holds {} frames: one pose per frame is needed",
-            args.poses.display(),
+            person.poses.display(),
             poses.len(),
             args.images.display(),
             images.len()
         );
     }
-    if let Some(m) = &masks {
-        if m.len() != images.len() {
-            bail!(
-                "{} holds {} masks but {} holds {} frames: one mask per frame is needed",
-                args.masks.as_deref().unwrap_or(Path::new("")).display(),
-                m.len(),
-                args.images.display(),
-                images.len()
-            );
-        }
-    }
-    let mut cfg = FramesToScene {
-        fps: args.fps,
-        blur: args.blur,
-        exposure_s: args.exposure_s,
-        events: (args.events == "simulate").then(|| events::EsimConfig {
-            c_pos: args.threshold,
-            c_neg: args.threshold,
-            seed: args.seed,
-            ..events::EsimConfig::default()
-        }),
-        ..FramesToScene::default()
-    };
+    let mut cfg = args.synthesis.config(args.fps, args.exposure_s);
     if is_grey_file(&images[0])? {
         cfg.encoding.channels = 1;
         eprintln!("grey frames: the scene trains on the renders' luminance (Rec. 601)");
     }
     cfg.check(images.len())?;
-    if args.out.join(scene::SCENE_FILE).exists() {
-        bail!(
-            "{} already holds a scene: choose another --out or remove it",
-            args.out.display()
-        );
-    }
-    let model = match &body_ref {
-        BodyRef::BuiltinMakehuman => args.body.clone(),
-        BodyRef::SmplFile(p) => std::fs::canonicalize(p)
-            .unwrap_or_else(|_| p.clone())
-            .display()
-            .to_string(),
-    };
+    check_out_is_free(&args.out)?;
     let spec = scene::BodySpec {
         model,
         betas: betas.unwrap_or_default(),
@@ -191,14 +120,15 @@ pub fn run(args: Args) -> Result<()> {
         "name": "xtask import frames",
         "config": {
             "images": args.images.display().to_string(),
-            "poses": args.poses.display().to_string(),
-            "camera": args.camera.display().to_string(),
-            "fps": args.fps, "blur": args.blur, "events": args.events,
-            "threshold": args.threshold, "seed": args.seed, "transfer": args.transfer,
+            "poses": person.poses.display().to_string(),
+            "camera": person.camera.display().to_string(),
+            "fps": args.fps, "blur": args.synthesis.blur, "events": args.synthesis.events,
+            "threshold": args.synthesis.threshold, "seed": args.synthesis.seed,
+            "transfer": args.transfer,
         }
     });
     let linear = args.transfer == "linear";
-    let used = images.len() / args.blur * args.blur;
+    let used = images.len() / cfg.blur * cfg.blur;
     let bar = crate::common::progress_bar(used as u64, "frames")?;
     let report = write_scene_from_frames(
         &args.out,
@@ -240,7 +170,7 @@ pub fn run(args: Args) -> Result<()> {
     if report.dropped_frames > 0 {
         eprintln!(
             "note: the last {} frame(s) do not fill a window of {} and were not used",
-            report.dropped_frames, args.blur
+            report.dropped_frames, cfg.blur
         );
     }
     if cfg.events.is_some() {
@@ -252,7 +182,7 @@ pub fn run(args: Args) -> Result<()> {
     eprintln!(
         "{} frames at {:.3} fps, exposure {:.4} s",
         report.frames,
-        args.fps / args.blur as f64,
+        args.fps / cfg.blur as f64,
         cfg.exposure()
     );
     println!("{}", crate::common::shown(&args.out).display());

@@ -27,6 +27,126 @@ pub enum Command {
     Zju(zju::Args),
 }
 
+/// The person and camera arguments `import frames` and `import aedat4` share.
+#[derive(clap::Args, Debug)]
+pub struct PersonArgs {
+    /// SMPL poses, one per frame: a JSON list of `{"pose": 72 values or 24 triples, "transl": [3]}`,
+    /// an AMASS-style `.npz` (`poses`, `trans`), a PeopleSnapshot / InstantAvatar `.npz`
+    /// (`global_orient`, `body_pose`, `transl`, `betas`) or an EasyMocap `smpl/` folder. For
+    /// `import aedat4`, JSON entries may also carry `t_us`, the pose's time on the recording's clock
+    /// (µs): the pose at each frame's exposure midpoint is then interpolated (C¹ spline).
+    #[arg(long)]
+    pub poses: PathBuf,
+    /// With an EasyMocap folder: the `id` of the person to follow (default the first person).
+    #[arg(long)]
+    pub person: Option<i64>,
+    /// The camera: the project's camera JSON, a scene's `scene.json`, or an INRIA `cameras.json`
+    /// list (see `--cam-index`). Its size must be the frames' size.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Index into an INRIA `cameras.json` list.
+    #[arg(long, default_value_t = 0)]
+    pub cam_index: usize,
+    /// Optional folder of human masks (single-channel PNG, non-zero = human), one per frame, in
+    /// file-name order.
+    #[arg(long)]
+    pub masks: Option<PathBuf>,
+    /// Body model: `builtin:makehuman` or the path of your SMPL `.npz` (its licence is yours; the
+    /// scene references it, it is not copied).
+    #[arg(long, default_value = "builtin:makehuman")]
+    pub body: String,
+}
+
+impl PersonArgs {
+    /// The camera of `--camera` / `--cam-index`.
+    pub fn camera(&self) -> Result<scene::Camera> {
+        scene::camera_files::read_any(&self.camera, self.cam_index)
+            .with_context(|| format!("reading the camera {}", self.camera.display()))
+    }
+
+    /// The mask files of `--masks` (none without it), which must be one per frame of the
+    /// `frames` frames of `source`.
+    pub fn mask_files(&self, frames: usize, source: &Path) -> Result<Option<Vec<PathBuf>>> {
+        let Some(dir) = &self.masks else {
+            return Ok(None);
+        };
+        let m = image_files(dir, "masks")?;
+        if m.len() != frames {
+            bail!(
+                "{} holds {} masks but {} holds {frames} frames: one mask per frame is needed",
+                dir.display(),
+                m.len(),
+                source.display()
+            );
+        }
+        Ok(Some(m))
+    }
+}
+
+/// The synthesis arguments `import frames` and `import zju` share (the ZJU-MoCap-Blur recipe).
+#[derive(clap::Args, Debug)]
+pub struct SynthesisArgs {
+    /// Average K consecutive frames (odd) into one observed frame, keeping the middle one as the
+    /// sharp reference: output rate fps / K, exposure K / fps. 1 = the frames are the observations.
+    #[arg(long, default_value_t = 1)]
+    pub blur: usize,
+    /// `simulate`: events by ESIM over the frames, split per output frame; `none`: no events.
+    #[arg(long, default_value = "none", value_parser = ["none", "simulate"])]
+    pub events: String,
+    /// ESIM contrast threshold C (both polarities, log-intensity units).
+    #[arg(long, default_value_t = 0.2)]
+    pub threshold: f32,
+    /// Seed of the simulator's per-pixel threshold noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+impl SynthesisArgs {
+    /// The importer settings for frames at `fps` (exposure: the camera's when not blurring).
+    pub fn config(&self, fps: f64, exposure_s: Option<f64>) -> synth::from_frames::FramesToScene {
+        synth::from_frames::FramesToScene {
+            fps,
+            blur: self.blur,
+            exposure_s,
+            events: (self.events == "simulate").then(|| events::EsimConfig {
+                c_pos: self.threshold,
+                c_neg: self.threshold,
+                seed: self.seed,
+                ..events::EsimConfig::default()
+            }),
+            ..synth::from_frames::FramesToScene::default()
+        }
+    }
+}
+
+/// Loads `--body` and returns it with the name the scene records: `builtin:makehuman`, or the
+/// SMPL file's absolute path.
+pub(super) fn load_body(body: &str) -> Result<(smpl_deform::BodyModel, String)> {
+    let body_ref = smpl_deform::BodyRef::parse(body)?;
+    let model = body_ref
+        .load()
+        .with_context(|| format!("loading the body model {body}"))?;
+    let name = match &body_ref {
+        smpl_deform::BodyRef::BuiltinMakehuman => body.to_string(),
+        smpl_deform::BodyRef::SmplFile(p) => std::fs::canonicalize(p)
+            .unwrap_or_else(|_| p.clone())
+            .display()
+            .to_string(),
+    };
+    Ok((model, name))
+}
+
+/// Refuses an output directory that already holds a scene.
+pub(super) fn check_out_is_free(out: &Path) -> Result<()> {
+    if out.join(scene::SCENE_FILE).exists() {
+        bail!(
+            "{} already holds a scene: choose another --out or remove it",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
 /// Runs `import`.
 pub fn run(command: Command) -> Result<()> {
     match command {

@@ -11,8 +11,9 @@ use anyhow::{bail, Context, Result};
 use scene::image_io::{undistort, Sampling};
 use scene::Distortion;
 use smpl_deform::zju::read_zju_model;
-use smpl_deform::BodyRef;
-use synth::from_frames::{write_scene_from_frames, FramesToScene, InputFrame};
+use synth::from_frames::{write_scene_from_frames, InputFrame};
+
+use super::{check_out_is_free, load_body, SynthesisArgs};
 
 /// Arguments of `import zju`.
 #[derive(clap::Args, Debug)]
@@ -47,18 +48,8 @@ pub struct Args {
     /// Frames to import at most (after `--frames`).
     #[arg(long)]
     pub max_frames: Option<usize>,
-    /// Average K consecutive frames into one observed frame (odd; 1 = none), as `import frames`.
-    #[arg(long, default_value_t = 1)]
-    pub blur: usize,
-    /// `simulate`: ESIM events over the frames; `none`: no events.
-    #[arg(long, default_value = "none", value_parser = ["none", "simulate"])]
-    pub events: String,
-    /// ESIM contrast threshold C.
-    #[arg(long, default_value_t = 0.2)]
-    pub threshold: f32,
-    /// Seed of the simulator's threshold noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub synthesis: SynthesisArgs,
     /// Output scene directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -196,37 +187,12 @@ pub fn run(args: Args) -> Result<()> {
     let (w, h) = image::image_dimensions(&images[chosen[0]])
         .with_context(|| format!("reading {}", images[chosen[0]].display()))?;
     let (camera, lens) = read_camera(&args.root, &args.view, (w, h))?;
-    let body_ref = BodyRef::parse(&args.body)?;
-    body_ref
-        .load()
-        .with_context(|| format!("loading the body model {}", args.body))?;
+    let (_, model) = load_body(&args.body)?;
     let first_model = read_zju_model(&models[chosen[0]])
         .with_context(|| format!("reading {}", models[chosen[0]].display()))?;
-    if args.out.join(scene::SCENE_FILE).exists() {
-        bail!(
-            "{} already holds a scene: choose another --out or remove it",
-            args.out.display()
-        );
-    }
-    let cfg = FramesToScene {
-        fps: args.fps / step as f64,
-        blur: args.blur,
-        events: (args.events == "simulate").then(|| events::EsimConfig {
-            c_pos: args.threshold,
-            c_neg: args.threshold,
-            seed: args.seed,
-            ..events::EsimConfig::default()
-        }),
-        ..FramesToScene::default()
-    };
+    check_out_is_free(&args.out)?;
+    let cfg = args.synthesis.config(args.fps / step as f64, None);
     cfg.check(chosen.len())?;
-    let model = match &body_ref {
-        BodyRef::BuiltinMakehuman => args.body.clone(),
-        BodyRef::SmplFile(p) => std::fs::canonicalize(p)
-            .unwrap_or_else(|_| p.clone())
-            .display()
-            .to_string(),
-    };
     let spec = scene::BodySpec {
         model,
         betas: first_model.betas.clone().unwrap_or_default(),
@@ -235,12 +201,12 @@ pub fn run(args: Args) -> Result<()> {
         "name": "xtask import zju",
         "config": {
             "root": args.root.display().to_string(), "view": args.view, "fps": args.fps,
-            "frames": args.frames, "blur": args.blur, "events": args.events,
-            "threshold": args.threshold, "seed": args.seed,
+            "frames": args.frames, "blur": cfg.blur, "events": args.synthesis.events,
+            "threshold": args.synthesis.threshold, "seed": args.synthesis.seed,
             "distortion": [lens.k1, lens.k2, lens.p1, lens.p2, lens.k3],
         }
     });
-    let used = chosen.len() / args.blur * args.blur;
+    let used = chosen.len() / cfg.blur * cfg.blur;
     let bar = crate::common::progress_bar(used as u64, "frames")?;
     let n = (w * h) as usize;
     let image_err = |path: &Path, e: anyhow::Error| synth::SynthError::Image {
@@ -300,7 +266,7 @@ pub fn run(args: Args) -> Result<()> {
     eprintln!(
         "{} frames at {:.3} fps from view {} ({}x{}), exposure {:.4} s{}",
         report.frames,
-        cfg.fps / args.blur as f64,
+        cfg.fps / cfg.blur as f64,
         args.view,
         w,
         h,
