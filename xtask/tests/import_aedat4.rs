@@ -89,27 +89,8 @@ fn a_davis_recording_becomes_a_grey_scene_with_its_exposures_and_events_that_tra
         assert_eq!(img.data[..stored.len()], stored[..], "frame {k}");
     }
     // It trains: the exposure model over each frame's own exposure, with the event loss.
-    let config = dir.path().join("tiny.toml");
-    std::fs::write(
-        &config,
-        "steps = 4\nhuman_gaussians = 200\nscene_gaussians = 400\nmax_gaussians = 2000\n\
-         deform_hidden = 16\nskinning_until = 4\nskinning_samples = 32\nnonrigid_from = 2\n\
-         densify_from = 8\ndensify_until = 8\n",
-    )
-    .unwrap();
     let run = dir.path().join("run");
-    let o = xtask()
-        .arg("reconstruct")
-        .arg("--data")
-        .arg(&out)
-        .arg("--out")
-        .arg(&run)
-        .arg("--config")
-        .arg(&config)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stdout = common::reconstruct(&out, &run, &common::tiny_config(dir.path()));
     assert!(stdout.contains("16.0–32.0 ms exposure"), "{stdout}");
     assert!(stdout.contains("event loss: "), "{stdout}");
     let metrics: serde_json::Value =

@@ -3,12 +3,12 @@
 //! both counts.
 #![allow(clippy::unwrap_used)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 mod common;
 
-use common::{fixture, write_poses};
+use common::{fixture, reconstruct, tiny_config, write_poses};
 
 fn xtask() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_xtask"));
@@ -89,35 +89,6 @@ fn frames_and_poses_become_a_scene_that_trains() {
     let out = reconstruct(&blurred, &run, &config);
     assert!(out.contains("event loss: "), "{out}");
     assert!(run.join("model").is_dir());
-}
-
-fn tiny_config(dir: &Path) -> PathBuf {
-    let config = dir.join("tiny.toml");
-    std::fs::write(
-        &config,
-        "steps = 4\nhuman_gaussians = 200\nscene_gaussians = 400\nmax_gaussians = 2000\n\
-         deform_hidden = 16\nskinning_until = 4\nskinning_samples = 32\nnonrigid_from = 2\n\
-         densify_from = 8\ndensify_until = 8\n",
-    )
-    .unwrap();
-    config
-}
-
-/// Runs `reconstruct` and returns its standard output.
-fn reconstruct(data: &Path, run: &Path, config: &Path) -> String {
-    let o = xtask()
-        .arg("reconstruct")
-        .arg("--data")
-        .arg(data)
-        .arg("--out")
-        .arg(run)
-        .arg("--config")
-        .arg(config)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{err}");
-    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 #[test]

@@ -58,25 +58,11 @@ fn a_zju_subject_becomes_a_blurred_scene_with_events_that_trains() {
         assert!(f.sharp.is_some() && f.events.is_some() && f.mask.is_some());
     }
     // It trains for a few steps.
-    let config = dir.path().join("tiny.toml");
-    std::fs::write(
-        &config,
-        "steps = 3\nhuman_gaussians = 200\nscene_gaussians = 400\nmax_gaussians = 2000\n\
-         deform_hidden = 16\nskinning_until = 3\nskinning_samples = 32\nnonrigid_from = 2\n\
-         densify_from = 8\ndensify_until = 8\n",
-    )
-    .unwrap();
-    let o = xtask()
-        .arg("reconstruct")
-        .arg("--data")
-        .arg(&out)
-        .arg("--out")
-        .arg(dir.path().join("run"))
-        .arg("--config")
-        .arg(&config)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::reconstruct(
+        &out,
+        &dir.path().join("run"),
+        &common::tiny_config(dir.path()),
+    );
 }
 
 #[test]

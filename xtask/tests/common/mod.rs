@@ -142,3 +142,33 @@ pub fn write_subject(root: &Path, d: [f64; 5]) -> scene::Scene {
     }
     tiny
 }
+
+/// A few-step training configuration for the tiny scenes, written into `dir`.
+pub fn tiny_config(dir: &Path) -> PathBuf {
+    let config = dir.join("tiny.toml");
+    std::fs::write(
+        &config,
+        "steps = 4\nhuman_gaussians = 200\nscene_gaussians = 400\nmax_gaussians = 2000\n\
+         deform_hidden = 16\nskinning_until = 4\nskinning_samples = 32\nnonrigid_from = 2\n\
+         densify_from = 8\ndensify_until = 8\n",
+    )
+    .unwrap();
+    config
+}
+
+/// Runs `reconstruct` and returns its standard output.
+pub fn reconstruct(data: &Path, run: &Path, config: &Path) -> String {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .arg("reconstruct")
+        .arg("--data")
+        .arg(data)
+        .arg("--out")
+        .arg(run)
+        .arg("--config")
+        .arg(config)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
