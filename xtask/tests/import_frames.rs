@@ -83,6 +83,28 @@ fn frames_and_poses_become_a_scene_that_trains() {
         .frames
         .iter()
         .all(|f| f.sharp.is_some() && f.events.is_some()));
+    // With frames interpolated by the flow network in every gap (the paper's construction), the
+    // windows average 3 + 2 frames and differ from the recorded frames' mean.
+    let smooth = dir.path().join("smooth");
+    let o = import(
+        &smooth,
+        &poses,
+        &["--blur", "3", "--in-between", "1", "--events", "simulate"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = scene::load(&smooth).unwrap();
+    let first = |d: &Path, s: &scene::Scene| {
+        scene::read_rgb(&d.join(&s.frames[0].image), s.images)
+            .unwrap()
+            .data
+    };
+    let (plain_mean, smooth_mean) = (first(&blurred, &s), first(&smooth, &t));
+    let moved = plain_mean
+        .iter()
+        .zip(&smooth_mean)
+        .filter(|(a, b)| (*a - *b).abs() > 1e-3)
+        .count();
+    assert!(moved > 100, "{moved} values changed");
     // It trains (exposure model + event loss, the default) for a few steps.
     let config = tiny_config(dir.path());
     let run = dir.path().join("run");

@@ -31,6 +31,7 @@
 //!
 //! This crate knows nothing about events, Gaussians or the training losses of the method.
 
+pub mod interpolate;
 mod net;
 pub mod synthetic;
 pub mod t7;

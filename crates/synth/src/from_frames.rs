@@ -15,9 +15,11 @@
 //! assumption its use in the benchmark makes — and written per output frame for `t ∈ [time_s,
 //! next time_s)` (the last frame: every later event), microseconds from `t_0 = 0`. Events before
 //! the first output frame's time belong to no frame (the trainer then has no event supervision for
-//! the first half of frame 0's exposure) and are dropped and counted. In-between frames
-//! interpolated by a flow network (which the paper used to make its averages smoother) are not
-//! made: each window averages the recorded frames only.
+//! the first half of frame 0's exposure) and are dropped and counted. With `in_between = M`, M
+//! frames interpolated between each pair of consecutive input frames (by a function the caller
+//! gives, e.g. the project's flow network through `flow::interpolate`: what the paper did to make
+//! its averages smoother) join the event simulation at their times and, inside a window, its mean
+//! (then of `K + (K − 1) M` frames).
 //!
 //! The split is the benchmark's: output frames `j mod 10 < 7` train, the rest test.
 //!
@@ -41,18 +43,24 @@ pub struct FramesToScene {
     pub exposure_s: Option<f64>,
     /// Simulate events with this configuration; `None` = no events.
     pub events: Option<events::EsimConfig>,
+    /// `M`: frames interpolated between each pair of consecutive input frames (0 = none), by the
+    /// `between` function given to [`write_scene_from_frames`]; they join the blur windows' means
+    /// and the event simulation, as the paper's ZJU-MoCap-Blur construction did.
+    pub in_between: usize,
     /// Encoding of the written images (the benchmark's: 16-bit sRGB).
     pub encoding: ImageEncoding,
 }
 
 impl Default for FramesToScene {
-    /// 30 fps, no blur added, exposure `1 / fps`, no events, 16-bit sRGB images.
+    /// 30 fps, no blur added, exposure `1 / fps`, no events, no in-between frames, 16-bit sRGB
+    /// images.
     fn default() -> Self {
         Self {
             fps: 30.0,
             blur: 1,
             exposure_s: None,
             events: None,
+            in_between: 0,
             encoding: ImageEncoding::rgb(16, Transfer::Srgb),
         }
     }
@@ -71,6 +79,10 @@ pub struct InputFrame {
     /// SMPL translation (metres, camera's world frame).
     pub transl: [f32; 3],
 }
+
+/// Makes the frames at times `ts` (each in `(0, 1)`) between consecutive frames `a` and `b`
+/// (planar linear RGB, camera size), in order; e.g. from optical flow (`flow::interpolate`).
+pub type Between<'a> = dyn FnMut(&[f32], &[f32], &[f32]) -> Result<Vec<Vec<f32>>> + 'a;
 
 /// What [`write_scene_from_frames`] wrote.
 #[derive(Clone, Debug, PartialEq)]
@@ -144,7 +156,9 @@ fn input_time_us(i: usize, fps: f64) -> i64 {
 }
 
 /// Writes a scene to `out` from `count` input frames, loading frame `i` with `load(i)` in order
-/// (each exactly once) and calling `progress(i)` after each. `camera` and `body` go into
+/// (each exactly once) and calling `progress(i)` after each. With `cfg.in_between = M > 0`,
+/// `between` makes the M frames at `t = m / (M + 1)` between consecutive frames ([`Between`]);
+/// they join the events and, inside a window, its mean. `camera` and `body` go into
 /// `scene.json` as given; `generator` is recorded there. Returns what was written; the scene is
 /// validated by [`scene::load`] before returning.
 pub fn write_scene_from_frames(
@@ -155,9 +169,17 @@ pub fn write_scene_from_frames(
     cfg: &FramesToScene,
     generator: serde_json::Value,
     mut load: impl FnMut(usize) -> Result<InputFrame>,
+    mut between: Option<&mut Between<'_>>,
     mut progress: impl FnMut(usize),
 ) -> Result<FramesReport> {
     cfg.check(count)?;
+    if cfg.in_between > 0 && between.is_none() {
+        return Err(bad(
+            "in_between",
+            cfg.in_between,
+            "in-between frames need an interpolation function",
+        ));
+    }
     let (w, h) = (camera.width as usize, camera.height as usize);
     let n = w * h;
     let k = cfg.blur;
@@ -172,8 +194,6 @@ pub fn write_scene_from_frames(
         None => None,
     };
     let sensor = events::SensorSize::new(camera.width, camera.height);
-    let mut bucket = events::EventStream::new();
-    bucket.sensor = Some(sensor);
     let mut report = FramesReport {
         frames: outputs,
         dropped_frames: count - outputs * k,
@@ -183,16 +203,14 @@ pub fn write_scene_from_frames(
     let time_of = |j: usize| input_time_us(j * k + half, cfg.fps);
     let mut frames: Vec<Frame> = Vec::with_capacity(outputs);
     let mut sum = vec![0.0f64; 3 * n];
-    // The output frame whose events are being gathered (`None` before the first frame's time).
-    let mut bucket_frame: Option<usize> = None;
-    let flush = |j: usize, s: &mut events::EventStream, report: &mut FramesReport| -> Result<()> {
-        let p = out.join(format!("events/{j:06}.npz"));
-        events::write_events(&p, s)?;
-        report.events += s.len();
-        *s = events::EventStream::new();
-        s.sensor = Some(sensor);
-        Ok(())
+    let mut splitter = EventSplitter {
+        out,
+        sensor,
+        starts_us: (0..outputs).map(time_of).collect(),
+        frame: None,
+        bucket: events::EventStream::new(),
     };
+    let (mut samples, mut prev): (usize, Option<Vec<f32>>) = (0, None);
     for i in 0..outputs * k {
         let frame = load(i)?;
         if frame.rgb.len() != 3 * n {
@@ -202,40 +220,44 @@ pub fn write_scene_from_frames(
                 format!("{} values, expected a {w}x{h} RGB image", frame.rgb.len()),
             ));
         }
-        if let Some(sim) = sim.as_mut() {
-            let t = input_time_us(i, cfg.fps);
-            let grey = events::simulate::grey_from_rgb(&frame.rgb, w, h)?;
-            let evs = sim.add_frame(t, &grey)?;
-            for e in 0..evs.len() {
-                let te = evs.t[e];
-                // Move the bucket forward to the frame whose interval holds `te`.
-                while let Some(next) =
-                    bucket_frame.map_or(Some(0), |b| (b + 1 < outputs).then_some(b + 1))
-                {
-                    if te < time_of(next) {
-                        break;
+        let (j, slot) = (i / k, i % k);
+        // The in-between frames from the previous frame to this one: events, and the window's
+        // mean when both frames are in it.
+        if let (Some(prev_rgb), Some(between)) = (&prev, between.as_mut()) {
+            let ts: Vec<f32> = (1..=cfg.in_between)
+                .map(|m| m as f32 / (cfg.in_between + 1) as f32)
+                .collect();
+            let mids = between(prev_rgb, &frame.rgb, &ts)?;
+            if mids.len() != ts.len() || mids.iter().any(|m| m.len() != 3 * n) {
+                return Err(bad(
+                    "in_between",
+                    cfg.in_between,
+                    "the interpolation returned frames of the wrong number or size",
+                ));
+            }
+            for (&t, mid) in ts.iter().zip(&mids) {
+                let t_us = ((i as f64 - 1.0 + f64::from(t)) * 1e6 / cfg.fps).round() as i64;
+                splitter.add(&mut sim, t_us, mid, w, h, &mut report)?;
+                if slot > 0 {
+                    for (s, &v) in sum.iter_mut().zip(mid) {
+                        *s += f64::from(v);
                     }
-                    if let Some(b) = bucket_frame {
-                        flush(b, &mut bucket, &mut report)?;
-                    }
-                    bucket_frame = Some(next);
+                    samples += 1;
                 }
-                if bucket_frame.is_none() {
-                    report.events_before_first_frame += 1;
-                    continue;
-                }
-                bucket.push(events::Event {
-                    t: te,
-                    x: evs.x[e],
-                    y: evs.y[e],
-                    p: evs.p[e],
-                });
             }
         }
-        let (j, slot) = (i / k, i % k);
+        splitter.add(
+            &mut sim,
+            input_time_us(i, cfg.fps),
+            &frame.rgb,
+            w,
+            h,
+            &mut report,
+        )?;
         for (s, &v) in sum.iter_mut().zip(&frame.rgb) {
             *s += f64::from(v);
         }
+        samples += 1;
         if slot == half {
             let mut f = Frame {
                 index: j as u32,
@@ -268,7 +290,7 @@ pub fn write_scene_from_frames(
             frames.push(f);
         }
         if slot + 1 == k {
-            let mean: Vec<f32> = sum.iter().map(|&s| (s / k as f64) as f32).collect();
+            let mean: Vec<f32> = sum.iter().map(|&s| (s / samples as f64) as f32).collect();
             write_rgb(
                 out,
                 &format!("images/{j:06}.png"),
@@ -277,21 +299,13 @@ pub fn write_scene_from_frames(
                 cfg.encoding,
             )?;
             sum.iter_mut().for_each(|s| *s = 0.0);
+            samples = 0;
         }
+        prev = (cfg.in_between > 0).then_some(frame.rgb);
         progress(i);
     }
     if cfg.events.is_some() {
-        // Every frame gets its file, empty if no event fell into its interval.
-        let first_unwritten = match bucket_frame {
-            Some(b) => {
-                flush(b, &mut bucket, &mut report)?;
-                b + 1
-            }
-            None => 0,
-        };
-        for j in first_unwritten..outputs {
-            flush(j, &mut bucket, &mut report)?;
-        }
+        splitter.finish(&mut report)?;
     }
     let scene = Scene {
         format_version: scene::FORMAT_VERSION,
@@ -322,4 +336,87 @@ fn write_rgb(
         data: rgb.to_vec(),
     };
     Ok(scene::write_rgb(&out.join(rel), &img, enc)?)
+}
+
+/// Splits simulated events into the output frames' files: frame `j` holds `[starts_us[j],
+/// starts_us[j + 1])`, the last frame every later event; events before the first start are counted,
+/// not written.
+struct EventSplitter<'a> {
+    out: &'a Path,
+    sensor: events::SensorSize,
+    starts_us: Vec<i64>,
+    /// The frame whose events are being gathered (`None` before the first frame's time).
+    frame: Option<usize>,
+    bucket: events::EventStream,
+}
+
+impl EventSplitter<'_> {
+    /// Simulates the events up to the frame `rgb` at `t_us` (nothing without a simulator) and
+    /// files them.
+    fn add(
+        &mut self,
+        sim: &mut Option<events::EventSimulator>,
+        t_us: i64,
+        rgb: &[f32],
+        w: usize,
+        h: usize,
+        report: &mut FramesReport,
+    ) -> Result<()> {
+        let Some(sim) = sim.as_mut() else {
+            return Ok(());
+        };
+        let grey = events::simulate::grey_from_rgb(rgb, w, h)?;
+        let evs = sim.add_frame(t_us, &grey)?;
+        for e in 0..evs.len() {
+            let te = evs.t[e];
+            // Move to the frame whose interval holds `te`.
+            while let Some(next) = self
+                .frame
+                .map_or(Some(0), |b| (b + 1 < self.starts_us.len()).then_some(b + 1))
+            {
+                if te < self.starts_us[next] {
+                    break;
+                }
+                if let Some(b) = self.frame {
+                    self.flush(b, report)?;
+                }
+                self.frame = Some(next);
+            }
+            if self.frame.is_none() {
+                report.events_before_first_frame += 1;
+                continue;
+            }
+            self.bucket.push(events::Event {
+                t: te,
+                x: evs.x[e],
+                y: evs.y[e],
+                p: evs.p[e],
+            });
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self, j: usize, report: &mut FramesReport) -> Result<()> {
+        let p = self.out.join(format!("events/{j:06}.npz"));
+        self.bucket.sensor = Some(self.sensor);
+        events::write_events(&p, &self.bucket)?;
+        report.events += self.bucket.len();
+        self.bucket = events::EventStream::new();
+        Ok(())
+    }
+
+    /// Writes the frame being gathered and an empty file for every later frame.
+    fn finish(&mut self, report: &mut FramesReport) -> Result<()> {
+        let first_unwritten = match self.frame {
+            Some(b) => {
+                self.flush(b, report)?;
+                b + 1
+            }
+            None => 0,
+        };
+        for j in first_unwritten..self.starts_us.len() {
+            self.flush(j, report)?;
+        }
+        Ok(())
+    }
 }

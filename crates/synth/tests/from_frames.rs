@@ -77,6 +77,7 @@ fn windows_average_to_the_observation_around_their_sharp_middle_frame() {
             loaded.push(i);
             Ok(input(i))
         },
+        None,
         |_| {},
     )
     .expect("import");
@@ -149,6 +150,7 @@ fn without_blur_the_frames_are_the_observations() {
         &cfg,
         serde_json::json!({}),
         |i| Ok(input(i)),
+        None,
         |_| {},
     )
     .expect("import");
@@ -233,8 +235,81 @@ fn bad_settings_are_refused_by_name() {
             }
             Ok(f)
         },
+        None,
         |_| {},
     )
     .expect_err("refused");
     assert!(err.to_string().contains("frame = 2"), "{err}");
+}
+
+#[test]
+fn in_between_frames_join_the_windows_and_the_events() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cfg = FramesToScene {
+        fps: 60.0,
+        blur: 3,
+        in_between: 2,
+        events: Some(events::EsimConfig::default()),
+        ..FramesToScene::default()
+    };
+    // A stand-in interpolator: the linear blend, recording the times it was asked for.
+    let mut asked = Vec::new();
+    let mut blend = |a: &[f32], b: &[f32], ts: &[f32]| -> synth::Result<Vec<Vec<f32>>> {
+        asked.push(ts.to_vec());
+        Ok(ts
+            .iter()
+            .map(|&t| {
+                a.iter()
+                    .zip(b)
+                    .map(|(&x, &y)| (1.0 - t) * x + t * y)
+                    .collect()
+            })
+            .collect())
+    };
+    write_scene_from_frames(
+        dir.path(),
+        camera(),
+        body(),
+        6,
+        &cfg,
+        serde_json::json!({}),
+        |i| Ok(input(i)),
+        Some(&mut blend),
+        |_| {},
+    )
+    .expect("import");
+    // Five pairs of consecutive frames, two in-betweens each at 1/3 and 2/3.
+    assert_eq!(asked.len(), 5);
+    assert!(asked.iter().all(|ts| ts == &[1.0 / 3.0, 2.0 / 3.0]));
+    let s = scene::load(dir.path()).expect("valid scene");
+    let n = (W * H) as usize;
+    // Window 0: frames 0, 1, 2 and the four in-betweens of its two gaps: 7 samples.
+    let image = scene::read_rgb(&dir.path().join(&s.frames[0].image), s.images).expect("image");
+    let lerp = |p: usize, a: usize, t: f32| (1.0 - t) * input(a).rgb[p] + t * input(a + 1).rgb[p];
+    for p in 0..3 * n {
+        let want = (input(0).rgb[p]
+            + lerp(p, 0, 1.0 / 3.0)
+            + lerp(p, 0, 2.0 / 3.0)
+            + input(1).rgb[p]
+            + lerp(p, 1, 1.0 / 3.0)
+            + lerp(p, 1, 2.0 / 3.0)
+            + input(2).rgb[p])
+            / 7.0;
+        assert!((image.data[p] - want).abs() < 1e-4, "pixel {p}");
+    }
+    // Without an interpolation function, in-between frames are refused by name.
+    let msg = write_scene_from_frames(
+        dir.path(),
+        camera(),
+        body(),
+        6,
+        &cfg,
+        serde_json::json!({}),
+        |i| Ok(input(i)),
+        None,
+        |_| {},
+    )
+    .expect_err("refused")
+    .to_string();
+    assert!(msg.contains("in_between"), "{msg}");
 }

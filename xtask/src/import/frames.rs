@@ -130,6 +130,9 @@ pub fn run(args: Args) -> Result<()> {
     let linear = args.transfer == "linear";
     let used = images.len() / cfg.blur * cfg.blur;
     let bar = crate::common::progress_bar(used as u64, "frames")?;
+    let mut between = args
+        .synthesis
+        .between(camera.height as usize, camera.width as usize)?;
     let report = write_scene_from_frames(
         &args.out,
         camera.clone(),
@@ -163,6 +166,7 @@ pub fn run(args: Args) -> Result<()> {
                 transl,
             })
         },
+        between.as_deref_mut(),
         |_| bar.inc(1),
     )
     .with_context(|| format!("writing the scene {}", args.out.display()))?;

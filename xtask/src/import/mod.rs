@@ -99,14 +99,54 @@ pub struct SynthesisArgs {
     /// Seed of the simulator's per-pixel threshold noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Frames interpolated between each pair of consecutive frames by the project's flow network
+    /// (`--flow-weights`), joining the blur windows and the event simulation (the paper's
+    /// construction); 0 = none. Costs two flow estimates per pair at the frames' size.
+    #[arg(long, default_value_t = 0)]
+    pub in_between: usize,
+    /// Flow weights for `--in-between` (default: the project's own).
+    #[arg(long)]
+    pub flow_weights: Option<PathBuf>,
 }
 
 impl SynthesisArgs {
+    /// The interpolation of `--in-between` (`None` without it): flows both ways between the two
+    /// frames by the flow network, then `flow::interpolate::frame_between` at each time.
+    pub fn between(
+        &self,
+        h: usize,
+        w: usize,
+    ) -> Result<Option<Box<synth::from_frames::Between<'static>>>> {
+        if self.in_between == 0 {
+            return Ok(None);
+        }
+        let path = self
+            .flow_weights
+            .clone()
+            .unwrap_or_else(crate::common::shipped_flow_network);
+        let net = flow::load_safetensors(&path)
+            .with_context(|| format!("loading the flow weights {}", path.display()))?;
+        Ok(Some(Box::new(move |a: &[f32], b: &[f32], ts: &[f32]| {
+            let err = |e: flow::FlowError| synth::SynthError::Knob {
+                knob: "in_between",
+                value: "flow".into(),
+                reason: e.to_string(),
+            };
+            let (ab, ba) = flow::interpolate::flows_between(&net, a, b, h, w).map_err(err)?;
+            ts.iter()
+                .map(|&t| {
+                    flow::interpolate::frame_between(a, b, (&ab, &ba), 3, h, w, t).map_err(err)
+                })
+                .collect()
+        })))
+    }
+
     /// The importer settings for frames at `fps` (exposure: the camera's when not blurring).
     pub fn config(&self, fps: f64, exposure_s: Option<f64>) -> synth::from_frames::FramesToScene {
         synth::from_frames::FramesToScene {
             fps,
             blur: self.blur,
+            in_between: self.in_between,
             exposure_s,
             events: (self.events == "simulate").then(|| events::EsimConfig {
                 c_pos: self.threshold,

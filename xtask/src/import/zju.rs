@@ -213,6 +213,7 @@ pub fn run(args: Args) -> Result<()> {
         path: path.to_path_buf(),
         message: format!("{e:#}"),
     };
+    let mut between = args.synthesis.between(h as usize, w as usize)?;
     let report = write_scene_from_frames(
         &args.out,
         camera.clone(),
@@ -259,6 +260,7 @@ pub fn run(args: Args) -> Result<()> {
                 transl: fit.transl,
             })
         },
+        between.as_deref_mut(),
         |_| bar.inc(1),
     )
     .with_context(|| format!("writing the scene {}", args.out.display()))?;
