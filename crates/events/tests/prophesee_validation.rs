@@ -415,3 +415,62 @@ fn lenient_reading_skips_and_counts_exactly_the_bad_words() {
         }
     }
 }
+
+/// A `.dat` file: the text header, event type 0x0C and size 8, then `(t, x, y, p)` records as
+/// given (`p` the raw polarity nibble).
+fn dat(events: &[(u32, u32, u32, u32)]) -> Vec<u8> {
+    let mut out = b"% Date 2026-11-26\n% Height 480\n% Width 640\n".to_vec();
+    out.extend_from_slice(&[0x0C, 8]);
+    for &(t, x, y, p) in events {
+        out.extend_from_slice(&t.to_le_bytes());
+        out.extend_from_slice(&(x | (y << 14) | (p << 28)).to_le_bytes());
+    }
+    out
+}
+
+/// [`decode`] for a `.dat` stream.
+fn decode_dat(
+    bytes: &[u8],
+    name: &str,
+    options: &ReadOptions,
+) -> Result<(EventStream, u64), EventsError> {
+    let mut r = PropheseeReader::with_options(bytes, name, true, options)?;
+    let mut s = EventStream::new();
+    while r.read_chunk(&mut s, 3)? > 0 {}
+    Ok((s, r.skipped_words()))
+}
+
+#[test]
+fn dat_events_with_a_bad_polarity_or_time_going_back_are_named_and_wraps_are_kept() {
+    let header = dat(&[]).len() as u64;
+    // A polarity nibble of 5 at the third event: named by its byte offset; lenient skips it.
+    let bytes = dat(&[(10, 1, 2, 1), (20, 3, 4, 0), (30, 5, 6, 5), (40, 7, 8, 1)]);
+    let (offset, msg) = bad_word(decode_dat(&bytes, "p.dat", &strict()));
+    assert_eq!(offset, header + 16);
+    assert!(msg.contains("p.dat") && msg.contains("polarity 5"), "{msg}");
+    let (s, skipped) = decode_dat(
+        &bytes,
+        "p.dat",
+        &ReadOptions {
+            lenient: true,
+            ..strict()
+        },
+    )
+    .unwrap();
+    assert_eq!((s.len(), skipped), (3, 1));
+    assert_eq!(s.t, vec![10, 20, 40]);
+    // Time going back by 15 µs: named.
+    let bytes = dat(&[(10, 1, 2, 1), (25, 3, 4, 0), (10, 5, 6, 1)]);
+    let (offset, msg) = bad_word(decode_dat(&bytes, "b.dat", &strict()));
+    assert_eq!(offset, header + 16);
+    assert!(msg.contains("goes back 15 us"), "{msg}");
+    // The 32-bit counter's wrap from its top to its bottom is not a step back: times keep rising.
+    let top = u32::MAX - 5;
+    let bytes = dat(&[(top, 1, 2, 1), (3, 3, 4, 0), (9, 5, 6, 1)]);
+    let (s, _) = decode_dat(&bytes, "w.dat", &strict()).unwrap();
+    let base = 1i64 << 32;
+    assert_eq!(s.t, vec![i64::from(top), base + 3, base + 9]);
+    // Events that repeat a time are in order.
+    let (s, _) = decode_dat(&dat(&[(7, 1, 1, 1), (7, 2, 2, 0)]), "e.dat", &strict()).unwrap();
+    assert_eq!(s.len(), 2);
+}

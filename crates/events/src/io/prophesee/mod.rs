@@ -205,6 +205,11 @@ pub struct PropheseeReader<R: BufRead> {
     time_high: i64,
     time_high_seen: bool,
     wraps: i64,
+    /// `.dat` decoding state: the last event's time (µs, unwrapped), whether one was seen, and the
+    /// wraps of the 32-bit counter.
+    dat_last: i64,
+    dat_seen: bool,
+    dat_wraps: i64,
     eof: bool,
 }
 
@@ -303,6 +308,9 @@ impl<R: BufRead> PropheseeReader<R> {
             time_high: 0,
             time_high_seen: false,
             wraps: 0,
+            dat_last: 0,
+            dat_seen: false,
+            dat_wraps: 0,
             eof: false,
         })
     }
@@ -337,21 +345,7 @@ impl<R: BufRead> PropheseeReader<R> {
         let bad = match self.format {
             PropheseeFormat::Evt2 => self.decode_evt2(&mut block, out),
             PropheseeFormat::Evt3 => self.decode_evt3(&mut block, out),
-            PropheseeFormat::Dat => {
-                for c in self.buf.chunks_exact(8) {
-                    block.make_room(out);
-                    let t = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-                    let d = u32::from_le_bytes([c[4], c[5], c[6], c[7]]);
-                    block.put(
-                        t as i64,
-                        (d & 0x3FFF) as u16,
-                        ((d >> 14) & 0x3FFF) as u16,
-                        if (d >> 28) & 0xF != 0 { 1 } else { -1 },
-                        true,
-                    );
-                }
-                None
-            }
+            PropheseeFormat::Dat => self.decode_dat(&mut block, out),
         };
         block.flush(out);
         match bad {
@@ -370,6 +364,66 @@ impl<R: BufRead> PropheseeReader<R> {
             Some(_) => format!("the header's {}x{} sensor", self.width, self.height),
             None => format!("the {EVT_RANGE}x{EVT_RANGE} address range"),
         }
+    }
+
+    /// Decodes `.dat` CD events (u32 µs, then x in bits 0–13, y in 14–27, polarity in 28–31);
+    /// returns the first bad one (strict) or `None`. A polarity other than 0 or 1 is bad, and so
+    /// is time going back, except the wrap of the 32-bit counter (a drop of at least 2³² − 2 s
+    /// worth of microseconds' slack, from its top to its bottom).
+    fn decode_dat(&mut self, block: &mut Block, out: &mut EventStream) -> Option<BadWord> {
+        const LOOP: i64 = 1 << 32;
+        const WRAP_SLACK_US: i64 = 2_000_000;
+        let (mut last, mut seen, mut wraps) = (self.dat_last, self.dat_seen, self.dat_wraps);
+        let mut bad = None;
+        for (i, c) in self.buf.chunks_exact(8).enumerate() {
+            block.make_room(out);
+            let raw_t = i64::from(u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+            let d = u32::from_le_bytes([c[4], c[5], c[6], c[7]]);
+            let pol = (d >> 28) & 0xF;
+            let current = last - wraps * LOOP;
+            let problem = if pol > 1 {
+                Some(Problem::Polarity(pol))
+            } else if seen && raw_t < current {
+                if current - raw_t >= LOOP - WRAP_SLACK_US {
+                    wraps += 1;
+                    None
+                } else {
+                    Some(Problem::TimeBack {
+                        from: current,
+                        to: raw_t,
+                    })
+                }
+            } else {
+                None
+            };
+            match problem {
+                None => {
+                    let t = raw_t + wraps * LOOP;
+                    (last, seen) = (t, true);
+                    block.put(
+                        t,
+                        (d & 0x3FFF) as u16,
+                        ((d >> 14) & 0x3FFF) as u16,
+                        if pol != 0 { 1 } else { -1 },
+                        true,
+                    );
+                }
+                Some(_) if self.lenient => self.skipped += 1,
+                Some(p) => {
+                    bad = Some(BadWord {
+                        index: i,
+                        message: p.describe(
+                            &format!("{d:#010x} at t = {raw_t} us"),
+                            ".dat",
+                            &self.bounds(),
+                        ),
+                    });
+                    break;
+                }
+            }
+        }
+        (self.dat_last, self.dat_seen, self.dat_wraps) = (last, seen, wraps);
+        bad
     }
 
     /// Decodes EVT 2.0 words; returns the first bad word (strict) or `None`.
@@ -563,6 +617,10 @@ enum Problem {
     NoBase,
     /// A TIME_HIGH below the current one that is not a wrap; `step_us` is one TIME_HIGH unit.
     Backwards { from: i64, to: i64, step_us: i64 },
+    /// A `.dat` polarity nibble other than 0 or 1.
+    Polarity(u32),
+    /// A `.dat` event earlier than the one before it (µs), not a wrap of the counter.
+    TimeBack { from: i64, to: i64 },
 }
 
 impl Problem {
@@ -580,6 +638,14 @@ impl Problem {
             Self::NoBase => {
                 format!("{format} word {word}: vector before any VECT_BASE_X word (no base)")
             }
+            Self::Polarity(p) => format!(
+                "{format} event {word}: polarity {p} is not 0 or 1 (not a .dat CD stream, or a \
+                 corrupt one; --lenient skips bad events)"
+            ),
+            Self::TimeBack { from, to } => format!(
+                "{format} event {word} goes back {} us in time (events must be in time order)",
+                from - to
+            ),
             Self::Backwards { from, to, step_us } => format!(
                 "{format} word {word}: TIME_HIGH {to:#x} after {from:#x} sends time back by {} us \
                  (a drop is a wrap of the counter only from its top to its bottom)",
