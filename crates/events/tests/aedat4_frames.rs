@@ -120,3 +120,28 @@ fn broken_frame_packets_and_files_without_frames_are_refused() {
     let msg = read_aedat4_frames(&p2).expect_err("cut").to_string();
     assert!(msg.contains("cut.aedat4") && msg.contains("byte"), "{msg}");
 }
+
+#[test]
+fn aedat4_events_outside_the_sensor_or_back_in_time_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut s = some_events();
+    // The description states 31×23; an event at x = 40 lies outside.
+    s.x[5000] = 40;
+    let p = dir.path().join("outside.aedat4");
+    events::io::aedat4::write_aedat4(&p, &s, Compression::None).expect("write");
+    let msg = events::read_events(&p).expect_err("outside").to_string();
+    assert!(
+        msg.contains("outside.aedat4") && msg.contains("(40, 9)") && msg.contains("31x23"),
+        "{msg}"
+    );
+    // An event earlier than the one before it (in a later packet).
+    let mut s = some_events();
+    s.t[10_000] = 5;
+    let p = dir.path().join("back.aedat4");
+    events::io::aedat4::write_aedat4(&p, &s, Compression::Lz4).expect("write");
+    let msg = events::read_events(&p).expect_err("back").to_string();
+    assert!(
+        msg.contains("back.aedat4") && msg.contains("goes back") && msg.contains("to 5 us"),
+        "{msg}"
+    );
+}

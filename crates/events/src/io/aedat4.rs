@@ -297,6 +297,8 @@ pub struct Aedat4Reader<R: Read> {
     cursor: usize,
     count: usize,
     done: bool,
+    /// The last event's time handed out (µs; `i64::MIN` before the first).
+    last_t: i64,
 }
 
 impl Aedat4Reader<BufReader<File>> {
@@ -340,6 +342,7 @@ impl<R: Read> Aedat4Reader<R> {
             cursor: 0,
             count: 0,
             done: false,
+            last_t: i64::MIN,
         })
     }
 
@@ -685,6 +688,43 @@ impl<R: Read> EventReader for Aedat4Reader<R> {
                     format!("event at t={t} us has negative coordinate ({x}, {y})"),
                 ));
             }
+            // Events inside the stated sensor, in time order (across packets too).
+            if let Some(s) = self.sensor {
+                let (mx, my) = out.x[base..]
+                    .iter()
+                    .zip(&out.y[base..])
+                    .fold((0u16, 0u16), |(a, b), (&x, &y)| (a.max(x), b.max(y)));
+                if u32::from(mx) >= s.width || u32::from(my) >= s.height {
+                    let k = (base..base + take)
+                        .find(|&i| {
+                            u32::from(out.x[i]) >= s.width || u32::from(out.y[i]) >= s.height
+                        })
+                        .unwrap_or(base);
+                    let (t, x, y) = (out.t[k], out.x[k], out.y[k]);
+                    out.truncate(base);
+                    return Err(EventsError::format(
+                        &self.path,
+                        format!(
+                            "event at t={t} us lies at ({x}, {y}), outside the {}x{} sensor the description states",
+                            s.width, s.height
+                        ),
+                    ));
+                }
+            }
+            let mut last = self.last_t;
+            if let Some(k) = (base..base + take).find(|&i| {
+                let back = out.t[i] < last;
+                last = out.t[i];
+                back
+            }) {
+                let (before, t) = (if k > base { out.t[k - 1] } else { self.last_t }, out.t[k]);
+                out.truncate(base);
+                return Err(EventsError::format(
+                    &self.path,
+                    format!("event time goes back from {before} us to {t} us (events must be in time order)"),
+                ));
+            }
+            self.last_t = last;
             self.cursor += 16 * take;
             self.count -= take;
             n += take;
