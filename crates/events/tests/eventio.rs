@@ -229,3 +229,25 @@ proptest::proptest! {
         let _ = read_events(&p);
     }
 }
+
+#[test]
+fn text_events_outside_the_sensor_line_or_back_in_time_are_refused_by_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let write = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).expect("write");
+        p
+    };
+    let p = write("outside.txt", "10 10\n0.001 3 4 1\n0.002 12 4 0\n");
+    let msg = events::read_events(&p).expect_err("outside").to_string();
+    assert!(
+        msg.contains("outside.txt") && msg.contains("line 3") && msg.contains("(12, 4)"),
+        "{msg}"
+    );
+    let p = write("back.txt", "0.003 3 4 1\n0.002 2 4 0\n");
+    let msg = events::read_events(&p).expect_err("back").to_string();
+    assert!(msg.contains("line 2") && msg.contains("goes back"), "{msg}");
+    // Equal times are in order; without a sensor line any coordinate is accepted.
+    let p = write("ok.txt", "0.002 3 4 1\n0.002 2000 4 0\n");
+    assert_eq!(events::read_events(&p).expect("ok").len(), 2);
+}

@@ -25,6 +25,10 @@ pub struct TextReader<R: BufRead> {
     bytes: u64,
     total: Option<u64>,
     pending: Option<(i64, u16, u16, i8)>,
+    /// Line of the pending event.
+    pending_line: u64,
+    /// The last event's time (µs; `i64::MIN` before the first).
+    last_t: i64,
 }
 
 impl TextReader<BufReader<File>> {
@@ -52,6 +56,8 @@ impl<R: BufRead> TextReader<R> {
             bytes: 0,
             total: None,
             pending: None,
+            pending_line: 0,
+            last_t: i64::MIN,
         };
         r.read_header()?;
         Ok(r)
@@ -101,7 +107,10 @@ impl<R: BufRead> TextReader<R> {
             }
         }
         match parse_event(&self.line) {
-            Some(e) => self.pending = Some(e),
+            Some(e) => {
+                self.pending = Some(e);
+                self.pending_line = self.line_no;
+            }
             // A column header such as "t x y p" has letters: skipped.
             None if self.line.iter().any(u8::is_ascii_alphabetic) => {}
             None => {
@@ -117,6 +126,35 @@ impl<R: BufRead> TextReader<R> {
                 ));
             }
         }
+        Ok(())
+    }
+}
+
+impl<R: BufRead> TextReader<R> {
+    /// Refuses an event outside the first line's sensor size or earlier than the one before it,
+    /// naming the line.
+    fn check(&mut self, t: i64, x: u16, y: u16, line: u64) -> Result<()> {
+        if let Some(s) = self.sensor {
+            if u32::from(x) >= s.width || u32::from(y) >= s.height {
+                return Err(EventsError::format(
+                    &self.path,
+                    format!(
+                        "line {line}: event at ({x}, {y}) lies outside the {}x{} sensor of the first line",
+                        s.width, s.height
+                    ),
+                ));
+            }
+        }
+        if t < self.last_t {
+            return Err(EventsError::format(
+                &self.path,
+                format!(
+                    "line {line}: time {t} us goes back from {} us (events must be in time order)",
+                    self.last_t
+                ),
+            ));
+        }
+        self.last_t = t;
         Ok(())
     }
 }
@@ -223,6 +261,7 @@ impl<R: BufRead> EventReader for TextReader<R> {
             return Ok(0);
         }
         if let Some((t, x, y, p)) = self.pending.take() {
+            self.check(t, x, y, self.pending_line)?;
             out.t.push(t);
             out.x.push(x);
             out.y.push(y);
@@ -243,6 +282,7 @@ impl<R: BufRead> EventReader for TextReader<R> {
                     ),
                 ));
             };
+            self.check(t, x, y, self.line_no)?;
             out.t.push(t);
             out.x.push(x);
             out.y.push(y);
