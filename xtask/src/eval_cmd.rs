@@ -79,6 +79,8 @@ pub fn write_evaluation(
         "mask_iou": m.mask_iou,
         "blurred_psnr_full": m.blurred_psnr_full,
         "blurred_psnr_human_box": m.blurred_psnr_human_box,
+        "blurred_ssim_full": m.blurred_ssim_full,
+        "blurred_ssim_human_box": m.blurred_ssim_human_box,
         "test_lpips_full": m.lpips_full,
         "test_lpips_human_box": m.lpips_human_box,
         "blurred_lpips_full": m.blurred_lpips_full,
@@ -135,6 +137,10 @@ pub fn write_evaluation(
         m.ssim_full, m.ssim_human_box
     );
     println!(
+        "| SSIM blurred vs sharp        | {:>10.4} | {:>9.4} |",
+        m.blurred_ssim_full, m.blurred_ssim_human_box
+    );
+    println!(
         "| LPIPS render vs sharp        | {:>10.4} | {:>9.4} |",
         m.lpips_full, m.lpips_human_box
     );
@@ -146,10 +152,17 @@ pub fn write_evaluation(
         "| human mask IoU (p > 0.5)     | {:>10.3} |           |",
         m.mask_iou
     );
-    println!(
-        "| training                     | {:>8.0} s | {} steps |",
-        summary.train_seconds, summary.steps
-    );
+    if summary.train_seconds.is_finite() {
+        println!(
+            "| training                     | {:>8.0} s | {} steps |",
+            summary.train_seconds, summary.steps
+        );
+    } else {
+        println!(
+            "| training                     |          — | {} steps |",
+            summary.steps
+        );
+    }
     println!(
         "| Gaussians (human + scene)    | {:>10} | {:>9} |",
         summary.gaussians_human, summary.gaussians_scene

@@ -48,15 +48,35 @@ fn cell(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "—".to_string(), |x| format!("{x:.digits$}"))
 }
 
+/// A generator setting as a reader wants it: a number stored from an `f32` (2.5999999046325684)
+/// is written as the `f32` it was (2.6); strings without quotes.
+fn setting_text(v: &serde_json::Value) -> String {
+    match v {
+        serde_json::Value::Number(n) if n.is_f64() => {
+            let x = n.as_f64().unwrap_or(f64::NAN);
+            let narrow = x as f32;
+            // A few f64 ulps of slack: some writers print the f32's value to 17 digits, which
+            // parses back one ulp away from it.
+            if (f64::from(narrow) - x).abs() <= 4.0 * f64::EPSILON * x.abs() {
+                format!("{narrow}")
+            } else {
+                format!("{x}")
+            }
+        }
+        serde_json::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
 /// The summary table of a run's `metrics.json`.
 fn summary_table(m: &serde_json::Value) -> String {
-    let row = |name: &str, prefix: &str, ssim: bool| {
+    let row = |name: &str, prefix: &str| {
         format!(
             "<tr><td>{name}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
             cell(number(m, &format!("{prefix}_psnr_full")), 2),
             cell(number(m, &format!("{prefix}_psnr_human_box")), 2),
-            cell(ssim.then(|| number(m, &format!("{prefix}_ssim_full"))).flatten(), 4),
-            cell(ssim.then(|| number(m, &format!("{prefix}_ssim_human_box"))).flatten(), 4),
+            cell(number(m, &format!("{prefix}_ssim_full")), 4),
+            cell(number(m, &format!("{prefix}_ssim_human_box")), 4),
             cell(number(m, &format!("{prefix}_lpips_full")), 4),
             cell(number(m, &format!("{prefix}_lpips_human_box")), 4),
         )
@@ -66,8 +86,8 @@ fn summary_table(m: &serde_json::Value) -> String {
          <th>PSNR box (dB)</th><th>SSIM full</th><th>SSIM box</th><th>LPIPS full</th>\
          <th>LPIPS box</th></tr>\n",
     );
-    s += &row("render", "test", true);
-    s += &row("blurred input", "blurred", false);
+    s += &row("render", "test");
+    s += &row("blurred input", "blurred");
     let gap = |k: &str| number(m, k).map(|g| format!("{g:+.2}"));
     let _ = writeln!(
         s,
@@ -186,6 +206,7 @@ fn line_chart<DB: DrawingBackend>(
             chart
                 .configure_mesh()
                 .x_desc(x_desc)
+                .x_label_formatter(&|x| format!("{x:.0}"))
                 .light_line_style(RGBColor(235, 235, 235))
                 .draw()
                 .map_err(plot_err)?;
@@ -372,7 +393,7 @@ fn data_section(m: &serde_json::Value) -> String {
             let settings: Vec<String> = cfg
                 .iter()
                 .filter(|(_, v)| !v.is_object() && !v.is_array())
-                .map(|(k, v)| format!("{k} = {v}"))
+                .map(|(k, v)| format!("{k} = {}", setting_text(v)))
                 .collect();
             rows.push(("settings".into(), settings.join(", ")));
         }
@@ -624,6 +645,20 @@ mod tests {
             svg.contains("total") && svg.contains("L1") && !svg.contains(">event<"),
             "zero terms are left out"
         );
+    }
+
+    #[test]
+    fn settings_stored_from_f32_read_as_written() {
+        assert_eq!(setting_text(&serde_json::json!(2.6f32)), "2.6");
+        assert_eq!(setting_text(&serde_json::json!(0.03f32)), "0.03");
+        assert_eq!(
+            setting_text(&serde_json::json!(0.029999999329447743)),
+            "0.03"
+        );
+        assert_eq!(setting_text(&serde_json::json!(0.1f64)), "0.1");
+        assert_eq!(setting_text(&serde_json::json!(1000)), "1000");
+        assert_eq!(setting_text(&serde_json::json!("fast")), "fast");
+        assert_eq!(setting_text(&serde_json::json!(true)), "true");
     }
 
     #[test]

@@ -51,6 +51,10 @@ pub struct FrameMetrics {
     pub blurred_psnr_full: f64,
     /// PSNR (dB) of the blurred input against the reference, human box.
     pub blurred_psnr_human_box: f64,
+    /// SSIM of the blurred input against the reference, full frame.
+    pub blurred_ssim_full: f64,
+    /// SSIM of the blurred input against the reference, human box.
+    pub blurred_ssim_human_box: f64,
     /// LPIPS (AlexNet, v0.1; lower is closer), full frame (NaN without the network or for frames
     /// below its minimum size).
     pub lpips_full: f64,
@@ -150,6 +154,8 @@ pub fn evaluate_frame(
         },
         blurred_psnr_full: psnr(f.blurred, f.reference),
         blurred_psnr_human_box: f64::NAN,
+        blurred_ssim_full: f64::from(ssim(f.blurred, f.reference, shape, None)),
+        blurred_ssim_human_box: f64::NAN,
         lpips_full: f64::NAN,
         lpips_human_box: f64::NAN,
         blurred_lpips_full: f64::NAN,
@@ -173,6 +179,7 @@ pub fn evaluate_frame(
     out.psnr_human_box = psnr(&r, &g);
     out.ssim_human_box = f64::from(ssim(&r, &g, box_shape, None));
     out.blurred_psnr_human_box = psnr(&b, &g);
+    out.blurred_ssim_human_box = f64::from(ssim(&b, &g, box_shape, None));
     if let (Some(net), Some((x0, y0, x1, y1))) =
         (lpips, grown_box(bbox, f.width, f.height, lpips::MIN_SIZE))
     {
@@ -207,6 +214,8 @@ pub fn mean_metrics(frames: &[FrameMetrics]) -> FrameMetrics {
         mask_iou: mean(|m| m.mask_iou),
         blurred_psnr_full: mean(|m| m.blurred_psnr_full),
         blurred_psnr_human_box: mean(|m| m.blurred_psnr_human_box),
+        blurred_ssim_full: mean(|m| m.blurred_ssim_full),
+        blurred_ssim_human_box: mean(|m| m.blurred_ssim_human_box),
         lpips_full: mean(|m| m.lpips_full),
         lpips_human_box: mean(|m| m.lpips_human_box),
         blurred_lpips_full: mean(|m| m.blurred_lpips_full),
@@ -329,6 +338,10 @@ mod tests {
         );
         assert!((m.psnr_full - 10.0 * (576.0f64 / 15.0 / 0.01).log10()).abs() < 1e-3);
         assert!(m.blurred_psnr_full.is_infinite());
+        // The blurred input is the reference here: SSIM 1 over the frame and the box.
+        assert!((m.blurred_ssim_full - 1.0).abs() < 1e-6, "{m:?}");
+        assert!((m.blurred_ssim_human_box - 1.0).abs() < 1e-6, "{m:?}");
+        assert!(m.ssim_human_box < 1.0);
         assert!(m.lpips_full.is_nan() && m.blurred_lpips_human_box.is_nan());
         let (sw, sh, strip) = comparison_strip(&f);
         assert_eq!((sw, sh, strip.len()), (4 * 16 + 6, 12, 3 * 12 * 70));
@@ -344,6 +357,8 @@ mod tests {
             mask_iou: 1.0,
             blurred_psnr_full: 18.0,
             blurred_psnr_human_box: f64::NAN,
+            blurred_ssim_full: 0.4,
+            blurred_ssim_human_box: f64::NAN,
             lpips_full: 0.1,
             lpips_human_box: f64::NAN,
             blurred_lpips_full: 0.2,
