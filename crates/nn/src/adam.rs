@@ -132,3 +132,142 @@ pub fn adam_update<T: Real>(
     }
     Ok(())
 }
+
+/// Lazy Adam over the rows of a matrix of per-item parameters (per-frame pose corrections, per-frame
+/// codes), as PyTorch's `SparseAdam`: a step updates only the rows it is given, and each row has its
+/// own step count for the bias corrections. Rows that are not trained in a step keep their value
+/// and moments, where a dense [`Adam`] with zero gradients would keep moving them by their decaying
+/// first moment and would decay their second moment between visits.
+#[derive(Clone, Debug)]
+pub struct RowAdam<T: Real> {
+    /// Hyper-parameters.
+    pub config: AdamConfig,
+    row_len: usize,
+    m: Vec<T>,
+    v: Vec<T>,
+    steps: Vec<u64>,
+}
+
+impl<T: Real> RowAdam<T> {
+    /// Zero-initialised moments for `rows` rows of `row_len` parameters.
+    pub fn new(rows: usize, row_len: usize, config: AdamConfig) -> Self {
+        Self {
+            config,
+            row_len,
+            m: vec![T::zero(); rows * row_len],
+            v: vec![T::zero(); rows * row_len],
+            steps: vec![0; rows],
+        }
+    }
+
+    /// Rebuilds the state from saved moments and per-row step counts (for checkpoints).
+    pub fn from_parts(
+        config: AdamConfig,
+        row_len: usize,
+        m: Vec<T>,
+        v: Vec<T>,
+        steps: Vec<u64>,
+    ) -> Result<Self, NnError> {
+        check_len("row adam first moment", steps.len() * row_len, m.len())?;
+        check_len("row adam second moment", m.len(), v.len())?;
+        Ok(Self {
+            config,
+            row_len,
+            m,
+            v,
+            steps,
+        })
+    }
+
+    /// First and second moments (for checkpoints).
+    pub fn moments(&self) -> (&[T], &[T]) {
+        (&self.m, &self.v)
+    }
+
+    /// Steps taken by each row so far.
+    pub fn row_steps(&self) -> &[u64] {
+        &self.steps
+    }
+
+    /// One update of the rows `rows` of `params` with their rows of `grads` (both the full matrix);
+    /// a row named twice is updated once.
+    pub fn step_rows(
+        &mut self,
+        params: &mut [T],
+        grads: &[T],
+        rows: &[usize],
+    ) -> Result<(), NnError> {
+        check_len("row adam params", self.m.len(), params.len())?;
+        check_len("row adam grads", self.m.len(), grads.len())?;
+        let mut done: Vec<usize> = Vec::with_capacity(rows.len());
+        for &row in rows {
+            if done.contains(&row) {
+                continue;
+            }
+            if row >= self.steps.len() {
+                return Err(NnError::Shape(format!(
+                    "row adam: row {row} of {} rows",
+                    self.steps.len()
+                )));
+            }
+            done.push(row);
+            self.steps[row] += 1;
+            let span = row * self.row_len..(row + 1) * self.row_len;
+            let c = self.config;
+            let lr = T::of(c.lr);
+            adam_update(
+                &mut params[span.clone()],
+                &grads[span.clone()],
+                &mut self.m[span.clone()],
+                &mut self.v[span],
+                self.steps[row],
+                c.beta1,
+                c.beta2,
+                c.eps,
+                1,
+                |_| lr,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn row_adam_moves_only_the_rows_it_is_given_and_matches_a_dense_adam_per_row() {
+        let config = AdamConfig {
+            lr: 0.1,
+            ..AdamConfig::default()
+        };
+        let mut rows = RowAdam::<f64>::new(3, 2, config);
+        let mut params = vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        let grads = vec![0.5, -1.0, 9.0, 9.0, -0.25, 2.0];
+        // Row 0 twice, row 2 once; row 1 never (its non-zero gradient is ignored).
+        rows.step_rows(&mut params, &grads, &[0, 0]).unwrap();
+        rows.step_rows(&mut params, &grads, &[2]).unwrap();
+        rows.step_rows(&mut params, &grads, &[0]).unwrap();
+        assert_eq!(rows.row_steps(), &[2, 0, 1]);
+        assert_eq!(&params[2..4], &[3.0, 4.0]);
+        // Row 0 took two dense steps of its own, row 2 one.
+        let mut dense0 = Adam::<f64>::new(2, config);
+        let mut p0 = vec![1.0, 2.0];
+        dense0.step(&mut p0, &grads[0..2]).unwrap();
+        dense0.step(&mut p0, &grads[0..2]).unwrap();
+        assert_eq!(&params[0..2], p0.as_slice());
+        let mut dense2 = Adam::<f64>::new(2, config);
+        let mut p2 = vec![5.0, 6.0];
+        dense2.step(&mut p2, &grads[4..6]).unwrap();
+        assert_eq!(&params[4..6], p2.as_slice());
+        assert!(rows.step_rows(&mut params, &grads, &[3]).is_err());
+        let (m, v) = rows.moments();
+        let back =
+            RowAdam::from_parts(config, 2, m.to_vec(), v.to_vec(), rows.row_steps().to_vec());
+        assert!(back.is_ok());
+        assert!(
+            RowAdam::<f64>::from_parts(config, 2, vec![0.0; 5], vec![0.0; 5], vec![0; 3]).is_err()
+        );
+    }
+}

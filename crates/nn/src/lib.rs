@@ -34,7 +34,7 @@ pub use activation::{
     leaky_relu_backward, leaky_relu_forward, relu_backward, relu_forward, sigmoid_backward,
     sigmoid_forward, softplus_backward, softplus_forward,
 };
-pub use adam::{adam_update, Adam, AdamConfig};
+pub use adam::{adam_update, Adam, AdamConfig, RowAdam};
 pub use conv::{
     conv2d_backward_input, conv2d_backward_weight, conv2d_forward, conv2d_reference, Conv2dShape,
 };

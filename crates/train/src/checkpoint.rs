@@ -153,6 +153,11 @@ impl CheckpointReader {
         }
     }
 
+    /// Whether the file holds a tensor `name`.
+    pub fn has(&self, name: &str) -> bool {
+        self.tensors.contains_key(name)
+    }
+
     /// The tensor `name`.
     pub fn get(&self, name: &str) -> Result<Vec<f32>, TrainError> {
         self.tensors

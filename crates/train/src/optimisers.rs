@@ -1,10 +1,12 @@
 //! The optimisers of a [`Model`]: Adam on every Gaussian attribute group (with per-group rates, the
-//! moments following density control's splits and prunes) and one Adam per network parameter group
-//! ([`NETWORK_GROUPS`]), keyed by group name, with their checkpoint form.
+//! moments following density control's splits and prunes), one Adam per shared network parameter
+//! group ([`NETWORK_GROUPS`]), keyed by group name, and a lazy per-frame Adam ([`nn::RowAdam`]) for
+//! the pose corrections, which only the step's frames may move; with their checkpoint form.
 
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::model::{Model, NETWORK_GROUPS};
+use crate::pose_correction::CORRECTION_VALUES;
 use crate::TrainError;
 use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
 use gaussians::GaussianSet;
@@ -14,9 +16,16 @@ use gaussians::GaussianSet;
 pub struct Optimisers {
     /// Adam over the Gaussian set's attribute groups.
     pub gaussians: GaussianAdam,
-    /// One Adam per network group, in [`NETWORK_GROUPS`] order.
+    /// One Adam per network group, in [`NETWORK_GROUPS`] order (the pose-correction group's is
+    /// unused: see `corrections`).
     networks: Vec<nn::Adam<f32>>,
+    /// The pose corrections' Adam, one row per training frame with its own step count: a frame's
+    /// correction moves only on the steps that train that frame.
+    corrections: nn::RowAdam<f32>,
 }
+
+/// The name of the pose-correction group in [`NETWORK_GROUPS`].
+const CORRECTION_GROUP: &str = "pose_correction";
 
 /// Step counts of a checkpoint's optimisers (stored in its JSON metadata).
 #[derive(Clone, Debug, PartialEq)]
@@ -61,12 +70,22 @@ impl Optimisers {
             .iter()
             .zip(model.network_groups())
             .map(|((name, _), params)| {
-                nn::Adam::new(params.len(), adam_config(network_rate(&model.config, name)))
+                let len = if *name == CORRECTION_GROUP {
+                    0
+                } else {
+                    params.len()
+                };
+                nn::Adam::new(len, adam_config(network_rate(&model.config, name)))
             })
             .collect();
         Self {
             gaussians: GaussianAdam::new(&model.set, AdamConfig::default()),
             networks,
+            corrections: nn::RowAdam::new(
+                model.pose_corrections.len() / CORRECTION_VALUES,
+                CORRECTION_VALUES,
+                adam_config(model.config.lr_pose_correction),
+            ),
         }
     }
 
@@ -89,8 +108,24 @@ impl Optimisers {
         params: &mut [f32],
         grads: &[f32],
     ) -> Result<(), TrainError> {
+        if group == CORRECTION_GROUP {
+            return Err(TrainError::Config(
+                "the pose corrections step by frame: `step_pose_corrections`".into(),
+            ));
+        }
         let k = group_index(group)?;
         Ok(self.networks[k].step(params, grads)?)
+    }
+
+    /// One lazy Adam step of the pose corrections of the training slots `slots` (the step's
+    /// frames); every other slot keeps its correction and moments.
+    pub fn step_pose_corrections(
+        &mut self,
+        corrections: &mut [f32],
+        grads: &[f32],
+        slots: &[usize],
+    ) -> Result<(), TrainError> {
+        Ok(self.corrections.step_rows(corrections, grads, slots)?)
     }
 
     /// Adds every moment to `w` (`adam.<group>.{m,v}` and `<group>_adam.{m,v}`; an empty group's
@@ -101,7 +136,17 @@ impl Optimisers {
             .iter()
             .zip(&self.networks)
             .map(|((name, _), adam)| {
-                if adam.moments().0.is_empty() {
+                if *name == CORRECTION_GROUP {
+                    let rows = &self.corrections;
+                    let (m, v) = rows.moments();
+                    if !m.is_empty() {
+                        w.push(format!("{name}_adam.m"), m.to_vec());
+                        w.push(format!("{name}_adam.v"), v.to_vec());
+                        let steps = rows.row_steps().iter().map(|&t| t as f32).collect();
+                        w.push(format!("{name}_adam.row_steps"), steps);
+                    }
+                    rows.row_steps().iter().sum()
+                } else if adam.moments().0.is_empty() {
                     adam.steps()
                 } else {
                     w.push_adam(&format!("{name}_adam"), adam)
@@ -140,15 +185,57 @@ impl Optimisers {
             .zip(&counts)
             .map(|(((name, _), params), &count)| {
                 let config = adam_config(network_rate(&model.config, name));
-                if params.is_empty() {
+                if params.is_empty() || *name == CORRECTION_GROUP {
                     return Ok(nn::Adam::new(0, config));
                 }
                 r.adam(&format!("{name}_adam"), config, params.len(), count)
             })
             .collect::<Result<_, _>>()?;
+        let corrections = Self::load_corrections(r, model, counts[group_index(CORRECTION_GROUP)?])?;
         Ok(Self {
             gaussians,
             networks,
+            corrections,
         })
+    }
+
+    /// The pose corrections' per-frame Adam; a checkpoint from before it (one dense Adam over
+    /// every frame, no `row_steps`) gives every frame that Adam's moments and step count.
+    fn load_corrections(
+        r: &CheckpointReader,
+        model: &Model,
+        count: u64,
+    ) -> Result<nn::RowAdam<f32>, TrainError> {
+        let config = adam_config(model.config.lr_pose_correction);
+        let len = model.pose_corrections.len();
+        let rows = len / CORRECTION_VALUES;
+        if len == 0 {
+            return Ok(nn::RowAdam::new(0, CORRECTION_VALUES, config));
+        }
+        let prefix = format!("{CORRECTION_GROUP}_adam");
+        let m = r.get_len(&format!("{prefix}.m"), len)?;
+        let v = r.get_len(&format!("{prefix}.v"), len)?;
+        let name = format!("{prefix}.row_steps");
+        let steps = if r.has(&name) {
+            r.get_len(&name, rows)?
+                .iter()
+                .map(|&t| {
+                    if t >= 0.0 && t.fract() == 0.0 && t < 16_777_216.0 {
+                        Ok(t as u64)
+                    } else {
+                        Err(r.error(format!("tensor `{name}`: {t} is not a step count")))
+                    }
+                })
+                .collect::<Result<Vec<u64>, _>>()?
+        } else {
+            vec![count; rows]
+        };
+        Ok(nn::RowAdam::from_parts(
+            config,
+            CORRECTION_VALUES,
+            m,
+            v,
+            steps,
+        )?)
     }
 }

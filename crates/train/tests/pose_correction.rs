@@ -143,3 +143,34 @@ fn without_the_root_only_the_body_joints_are_corrected() {
     }
     assert!(c.iter().any(|&v| v != 0.0));
 }
+
+#[test]
+fn a_step_moves_only_the_corrections_of_the_frames_it_trains() {
+    let ctx = context();
+    let mut t = Trainer::new(&ctx, correction_config(10)).unwrap();
+    t.run(&ctx, 2, |_, _| Ok(())).unwrap();
+    let mut moved_slots = 0usize;
+    for _ in 2..10 {
+        let before = t.model.pose_corrections.clone();
+        let r = t.step(&ctx).unwrap();
+        let slot = t
+            .model
+            .frame_indices
+            .iter()
+            .position(|&i| i == r.frame)
+            .unwrap();
+        for (k, (a, b)) in before
+            .chunks(CORRECTION_VALUES)
+            .zip(t.model.pose_corrections.chunks(CORRECTION_VALUES))
+            .enumerate()
+        {
+            // Frame k + 1 is trained too when the step renders it (flow or frame-pair events).
+            if k == slot || k == slot + 1 {
+                moved_slots += usize::from(a != b);
+            } else {
+                assert_eq!(a, b, "slot {k} moved on a step that trained slot {slot}");
+            }
+        }
+    }
+    assert!(moved_slots >= 8, "the trained frames' corrections move");
+}

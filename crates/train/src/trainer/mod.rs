@@ -539,10 +539,18 @@ impl Trainer {
                 correction_grads.as_ref().unwrap_or(&no_correction),
             ),
         ];
+        // The pose corrections of the step's frames (frame k, and k + 1 when it was rendered).
+        let mut trained_slots = vec![slot];
+        trained_slots.extend(second_latent.as_ref().map(|(next, _)| *next));
         for (name, params, g) in groups {
-            if name == "nonrigid" && nonrigid_frozen
-                || name == "pose_correction" && correction_grads.is_none()
-            {
+            if name == "nonrigid" && nonrigid_frozen {
+                continue;
+            }
+            if name == "pose_correction" {
+                if correction_grads.is_some() {
+                    self.optimisers
+                        .step_pose_corrections(params, g, &trained_slots)?;
+                }
                 continue;
             }
             self.optimisers.step_network(name, params, g)?;
