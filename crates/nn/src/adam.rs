@@ -140,9 +140,10 @@ pub fn adam_update<T: Real>(
 /// first moment and would decay their second moment between visits.
 #[derive(Clone, Debug)]
 pub struct RowAdam<T: Real> {
-    /// Hyper-parameters.
+    /// Hyper-parameters (`lr` for every column unless [`RowAdam::with_column_rates`] set them).
     pub config: AdamConfig,
     row_len: usize,
+    column_rates: Option<Vec<f64>>,
     m: Vec<T>,
     v: Vec<T>,
     steps: Vec<u64>,
@@ -154,6 +155,7 @@ impl<T: Real> RowAdam<T> {
         Self {
             config,
             row_len,
+            column_rates: None,
             m: vec![T::zero(); rows * row_len],
             v: vec![T::zero(); rows * row_len],
             steps: vec![0; rows],
@@ -173,10 +175,19 @@ impl<T: Real> RowAdam<T> {
         Ok(Self {
             config,
             row_len,
+            column_rates: None,
             m,
             v,
             steps,
         })
+    }
+
+    /// The same optimiser with a learning rate per column (one per value of a row, e.g. a slower
+    /// rate for a pose's root than for its joints), in place of `config.lr`.
+    pub fn with_column_rates(mut self, rates: Vec<f64>) -> Result<Self, NnError> {
+        check_len("row adam column rates", self.row_len, rates.len())?;
+        self.column_rates = Some(rates);
+        Ok(self)
     }
 
     /// First and second moments (for checkpoints).
@@ -214,7 +225,7 @@ impl<T: Real> RowAdam<T> {
             self.steps[row] += 1;
             let span = row * self.row_len..(row + 1) * self.row_len;
             let c = self.config;
-            let lr = T::of(c.lr);
+            let rates = &self.column_rates;
             adam_update(
                 &mut params[span.clone()],
                 &grads[span.clone()],
@@ -224,8 +235,8 @@ impl<T: Real> RowAdam<T> {
                 c.beta1,
                 c.beta2,
                 c.eps,
-                1,
-                |_| lr,
+                self.row_len,
+                |j| T::of(rates.as_ref().map_or(c.lr, |r| r[j])),
             )?;
         }
         Ok(())

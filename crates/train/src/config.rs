@@ -261,10 +261,13 @@ training_options! {
     /// error costs (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction: bool = false,
-    /// Adam learning rate of the pose corrections (radians or metres). 3e-3 is the best of 3e-3 /
-    /// 3e-2 / 1e-1 on the `realistic` benchmark's `quick` preset; the faster rates push the body out
-    /// of the frame (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
-    lr_pose_correction: f32 = 3e-3,
+    /// Adam learning rate of the body joints' corrections (radians), per visit of a frame (the
+    /// corrections step lazily, frame by frame). Chosen on the `realistic` benchmark's `quick`
+    /// preset (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
+    lr_pose_correction: f32 = 1e-2,
+    /// Adam learning rate of the root's corrections (global orientation, radians; translation,
+    /// metres). Faster root rates push the body out of the frame (`docs/BENCHMARKS.md`).
+    lr_pose_correction_root: f32 = 1e-2,
     /// λ₀ of the pose-correction prior: weight of ‖δ_k‖² (radians², m²) pulling each training
     /// frame's correction towards zero.
     pose_correction_zero_weight: f32 = 1e-3,
@@ -566,6 +569,7 @@ impl TrainConfig {
             ("lr_colour", self.lr_colour),
             ("lr_latent", self.lr_latent),
             ("lr_pose_correction", self.lr_pose_correction),
+            ("lr_pose_correction_root", self.lr_pose_correction_root),
             (
                 "pose_correction_zero_weight",
                 self.pose_correction_zero_weight,

@@ -6,7 +6,7 @@
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::model::{Model, NETWORK_GROUPS};
-use crate::pose_correction::CORRECTION_VALUES;
+use crate::pose_correction::{root_indices, CORRECTION_VALUES};
 use crate::TrainError;
 use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
 use gaussians::GaussianSet;
@@ -47,6 +47,18 @@ fn network_rate(config: &TrainConfig, group: &str) -> f32 {
     }
 }
 
+/// `adam` with the pose corrections' rates: `lr_pose_correction` for the body joints,
+/// `lr_pose_correction_root` for the root's orientation and translation.
+fn correction_adam(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<f32> {
+    let mut rates = vec![f64::from(config.lr_pose_correction); CORRECTION_VALUES];
+    for k in root_indices() {
+        rates[k] = f64::from(config.lr_pose_correction_root);
+    }
+    // One rate per column of the rows (`CORRECTION_VALUES`): this cannot fail.
+    adam.with_column_rates(rates)
+        .unwrap_or_else(|e| unreachable!("{e}"))
+}
+
 /// Adam's defaults with the learning rate `lr`.
 pub fn adam_config(lr: f32) -> nn::AdamConfig {
     nn::AdamConfig {
@@ -81,10 +93,13 @@ impl Optimisers {
         Self {
             gaussians: GaussianAdam::new(&model.set, AdamConfig::default()),
             networks,
-            corrections: nn::RowAdam::new(
-                model.pose_corrections.len() / CORRECTION_VALUES,
-                CORRECTION_VALUES,
-                adam_config(model.config.lr_pose_correction),
+            corrections: correction_adam(
+                nn::RowAdam::new(
+                    model.pose_corrections.len() / CORRECTION_VALUES,
+                    CORRECTION_VALUES,
+                    adam_config(model.config.lr_pose_correction),
+                ),
+                &model.config,
             ),
         }
     }
@@ -210,7 +225,10 @@ impl Optimisers {
         let len = model.pose_corrections.len();
         let rows = len / CORRECTION_VALUES;
         if len == 0 {
-            return Ok(nn::RowAdam::new(0, CORRECTION_VALUES, config));
+            return Ok(correction_adam(
+                nn::RowAdam::new(0, CORRECTION_VALUES, config),
+                &model.config,
+            ));
         }
         let prefix = format!("{CORRECTION_GROUP}_adam");
         let m = r.get_len(&format!("{prefix}.m"), len)?;

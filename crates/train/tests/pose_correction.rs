@@ -50,6 +50,7 @@ fn a_correction_that_cannot_move_changes_no_bit() {
     assert!(none.is_empty());
     let (frozen, corrections) = run(TrainConfig {
         lr_pose_correction: 0.0,
+        lr_pose_correction_root: 0.0,
         ..correction_config(8)
     });
     assert!(corrections.iter().all(|&v| v == 0.0));
