@@ -257,14 +257,16 @@ training_options! {
     /// translation (m) at mid exposure and, with `blur_model = exposure`, of their change over the
     /// exposure, regularised towards zero and towards the neighbouring frames' corrections.
     /// Held-out frames take corrections interpolated from their neighbouring training frames. Off
-    /// by default: on the `realistic` benchmark it has not yet recovered the PSNR a fitter's pose
-    /// error costs (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
+    /// by default (the default benchmark's poses are exact): on the `realistic` benchmark it
+    /// recovers about a sixth of the PSNR a fitter's pose error costs (`docs/BENCHMARKS.md`,
+    /// "Estimated poses and learned pose correction"); turn it on for poses from a fitter.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction: bool = false,
     /// Adam learning rate of the body joints' corrections (radians), per visit of a frame (the
-    /// corrections step lazily, frame by frame). Chosen on the `realistic` benchmark's `quick`
-    /// preset (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
-    lr_pose_correction: f32 = 1e-2,
+    /// corrections step lazily, frame by frame). The best of 3e-3 / 1e-2 / 3e-2 / 1e-1 on the
+    /// `realistic` benchmark's `quick` preset (`docs/BENCHMARKS.md`, "Estimated poses and learned
+    /// pose correction").
+    lr_pose_correction: f32 = 3e-2,
     /// Adam learning rate of the root's corrections (global orientation, radians; translation,
     /// metres). Faster root rates push the body out of the frame (`docs/BENCHMARKS.md`).
     lr_pose_correction_root: f32 = 1e-2,
