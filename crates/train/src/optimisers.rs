@@ -6,7 +6,7 @@
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::model::{Model, NETWORK_GROUPS};
-use crate::pose_correction::{root_indices, CORRECTION_VALUES};
+use crate::pose_correction::{root_indices, CORRECTION_VALUES, POSE_VALUES};
 use crate::TrainError;
 use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
 use gaussians::GaussianSet;
@@ -48,11 +48,15 @@ fn network_rate(config: &TrainConfig, group: &str) -> f32 {
 }
 
 /// `adam` with the pose corrections' rates: `lr_pose_correction` for the body joints,
-/// `lr_pose_correction_root` for the root's orientation and translation.
+/// `lr_pose_correction_root` for the root's orientation and translation, 0 for the change over the
+/// exposure when `pose_correction_change` is off.
 fn correction_adam(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<f32> {
     let mut rates = vec![f64::from(config.lr_pose_correction); CORRECTION_VALUES];
     for k in root_indices() {
         rates[k] = f64::from(config.lr_pose_correction_root);
+    }
+    if !config.pose_correction_change {
+        rates[POSE_VALUES..].fill(0.0);
     }
     // One rate per column of the rows (`CORRECTION_VALUES`): this cannot fail.
     adam.with_column_rates(rates)
@@ -248,12 +252,9 @@ impl Optimisers {
         } else {
             vec![count; rows]
         };
-        Ok(nn::RowAdam::from_parts(
-            config,
-            CORRECTION_VALUES,
-            m,
-            v,
-            steps,
-        )?)
+        Ok(correction_adam(
+            nn::RowAdam::from_parts(config, CORRECTION_VALUES, m, v, steps)?,
+            &model.config,
+        ))
     }
 }

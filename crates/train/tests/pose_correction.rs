@@ -175,3 +175,21 @@ fn a_step_moves_only_the_corrections_of_the_frames_it_trains() {
     }
     assert!(moved_slots >= 8, "the trained frames' corrections move");
 }
+
+#[test]
+fn without_the_change_over_the_exposure_only_the_mid_exposure_correction_moves() {
+    let config = TrainConfig {
+        blur_model: BlurModel::Exposure,
+        subframes: 3,
+        pose_correction_change: false,
+        ..correction_config(8)
+    };
+    let ctx = exposure_context(&config);
+    let mut t = Trainer::new(&ctx, config).unwrap();
+    t.run(&ctx, 8, |_, _| Ok(())).unwrap();
+    let slots = t.model.pose_corrections.chunks(CORRECTION_VALUES);
+    assert!(slots
+        .clone()
+        .all(|s| s[POSE_VALUES..].iter().all(|&v| v == 0.0)));
+    assert!(slots.flat_map(|s| &s[..POSE_VALUES]).any(|&v| v != 0.0));
+}
