@@ -59,9 +59,11 @@ fn a_correction_that_cannot_move_changes_no_bit() {
 
 #[test]
 fn pose_correction_learns_ignores_the_thread_count_and_resumes_bit_for_bit() {
+    // With the change over the exposure learned too: every column keeps its rate across a resume.
     let config = TrainConfig {
         blur_model: BlurModel::Exposure,
         subframes: 3,
+        pose_correction_change: true,
         ..correction_config(8)
     };
     let ctx = exposure_context(&config);
@@ -177,19 +179,25 @@ fn a_step_moves_only_the_corrections_of_the_frames_it_trains() {
 }
 
 #[test]
-fn without_the_change_over_the_exposure_only_the_mid_exposure_correction_moves() {
-    let config = TrainConfig {
-        blur_model: BlurModel::Exposure,
-        subframes: 3,
-        pose_correction_change: false,
-        ..correction_config(8)
-    };
-    let ctx = exposure_context(&config);
-    let mut t = Trainer::new(&ctx, config).unwrap();
-    t.run(&ctx, 8, |_, _| Ok(())).unwrap();
-    let slots = t.model.pose_corrections.chunks(CORRECTION_VALUES);
-    assert!(slots
-        .clone()
-        .all(|s| s[POSE_VALUES..].iter().all(|&v| v == 0.0)));
-    assert!(slots.flat_map(|s| &s[..POSE_VALUES]).any(|&v| v != 0.0));
+fn the_change_over_the_exposure_is_learned_only_when_asked() {
+    for change in [false, true] {
+        let config = TrainConfig {
+            blur_model: BlurModel::Exposure,
+            subframes: 3,
+            pose_correction_change: change,
+            ..correction_config(8)
+        };
+        let ctx = exposure_context(&config);
+        let mut t = Trainer::new(&ctx, config).unwrap();
+        t.run(&ctx, 8, |_, _| Ok(())).unwrap();
+        let slots = t.model.pose_corrections.chunks(CORRECTION_VALUES);
+        let change_moved = slots
+            .clone()
+            .any(|s| s[POSE_VALUES..].iter().any(|&v| v != 0.0));
+        assert_eq!(
+            change_moved, change,
+            "change over the exposure learned: {change}"
+        );
+        assert!(slots.flat_map(|s| &s[..POSE_VALUES]).any(|&v| v != 0.0));
+    }
 }
