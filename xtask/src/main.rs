@@ -5,6 +5,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod ablate;
+mod allocator;
 mod animate;
 mod bench_deform;
 mod bench_events;
@@ -32,13 +33,6 @@ mod run_pictures;
 mod steal;
 mod synth;
 mod train_flow;
-
-/// mimalloc instead of glibc malloc: the training step, the deformation networks and the flow
-/// network allocate and free many multi-megabyte buffers per call; with glibc, page faults and
-/// kernel page clearing were ≈ 16% of the `bench deform` profile, and mimalloc's reuse of freed
-/// pages makes that benchmark ≈ 15% faster (docs/notes/benchmarks-history.md, deformation, "Third pass").
-#[global_allocator]
-static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// E-Sem3DGS driver: reconstruct people and scenes from blurred video + events, on the CPU.
 #[derive(Parser, Debug)]
@@ -118,6 +112,7 @@ enum BenchCommand {
 }
 
 fn main() -> Result<()> {
+    allocator::keep_freed_pages();
     let cli = Cli::parse();
     match cli.command {
         Command::Reconstruct(args) => reconstruct::run(args),
