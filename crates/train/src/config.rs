@@ -290,6 +290,11 @@ training_options! {
     /// Gaussians, its gradients do not say where the limbs are; 100 against 300: +0.13 dB in the
     /// box on `realistic`, `quick`).
     pose_correction_from: usize = 100,
+    /// Pose corrections are learned on knots every this many training frames (and on the last),
+    /// and each frame's is interpolated linearly in frame number between the knots around it
+    /// (`train::pose_correction::KnotSpan`): 1, a correction per training frame; larger, each
+    /// learned value hears several frames' gradients and the correction is smooth in time.
+    pose_correction_knot_every: usize = 1,
 }
 
 /// Which images are trained on (see [`TrainConfig::train_on`]).
@@ -608,6 +613,12 @@ impl TrainConfig {
         }
         if self.subframes == 0 || self.subframes > 64 {
             return bad("subframes", "must be in 1..=64");
+        }
+        if self.pose_correction_knot_every == 0 {
+            return bad(
+                "pose_correction_knot_every",
+                "must be at least 1 (training frames)",
+            );
         }
         if !(self.near_plane > 0.0 && self.near_plane.is_finite()) {
             return bad("near_plane", "must be a finite number > 0 (metres)");

@@ -14,7 +14,9 @@ use crate::body::PreparedPose;
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::config::TrainConfig;
-use crate::pose_correction::{corrected_params, interpolated_correction, CORRECTION_VALUES};
+use crate::pose_correction::{
+    corrected_params, interpolated_correction, knot_slots, KnotSpan, CORRECTION_VALUES,
+};
 use crate::posing::{
     pose_frame_backward_with, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
     GaussianParams, ModelGradients, ModelNets, PosedFrame,
@@ -163,7 +165,8 @@ impl Model {
             });
         }
         let pose_corrections = if config.pose_correction {
-            vec![0.0; frame_indices.len() * CORRECTION_VALUES]
+            let knots = knot_slots(frame_indices.len(), config.pose_correction_knot_every);
+            vec![0.0; knots.len() * CORRECTION_VALUES]
         } else {
             Vec::new()
         };
@@ -273,11 +276,35 @@ impl Model {
         self.latent(slot)
     }
 
-    /// The pose correction of frame `index` ([`CORRECTION_VALUES`] values, empty when pose
-    /// correction is off): a training frame's own mid-exposure correction, a held-out frame's
-    /// interpolated from its neighbours (`train::pose_correction::interpolated_correction`).
+    /// The frame numbers of the pose corrections' knots (`pose_correction_knot_every`; one row of
+    /// [`Model::pose_corrections`] each).
+    pub fn correction_knot_frames(&self) -> Vec<u32> {
+        knot_slots(
+            self.frame_indices.len(),
+            self.config.pose_correction_knot_every,
+        )
+        .into_iter()
+        .map(|slot| self.frame_indices[slot])
+        .collect()
+    }
+
+    /// The pose correction of frame `index` at mid exposure ([`CORRECTION_VALUES`] values, the
+    /// change over the exposure zero; empty when pose correction is off), interpolated between the
+    /// knots around it (`train::pose_correction::interpolated_correction`).
     pub fn pose_correction_for(&self, index: u32) -> Vec<f32> {
-        interpolated_correction(&self.frame_indices, &self.pose_corrections, index)
+        interpolated_correction(
+            &self.correction_knot_frames(),
+            &self.pose_corrections,
+            index,
+        )
+    }
+
+    /// Training slot `slot`'s whole correction (mid exposure and change; [`CORRECTION_VALUES`]
+    /// values) and where it sits among the knots (for the backward). Pose correction must be on.
+    pub fn training_correction(&self, slot: usize) -> (Vec<f32>, KnotSpan) {
+        let span = KnotSpan::of(&self.correction_knot_frames(), self.frame_indices[slot]);
+        let values = span.blend(&self.pose_corrections, CORRECTION_VALUES, CORRECTION_VALUES);
+        (values, span)
     }
 
     /// SMPL parameters of frame `index` with its pose correction applied at mid exposure (`params`

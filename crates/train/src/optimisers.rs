@@ -136,8 +136,8 @@ impl Optimisers {
         Ok(self.networks[k].step(params, grads)?)
     }
 
-    /// One lazy Adam step of the pose corrections of the training slots `slots` (the step's
-    /// frames); every other slot keeps its correction and moments.
+    /// One lazy Adam step of the pose corrections' knots `slots` (those of the step's frames; one
+    /// per training slot by default); every other knot keeps its correction and moments.
     pub fn step_pose_corrections(
         &mut self,
         corrections: &mut [f32],

@@ -13,9 +13,14 @@
 //! **Regulariser**: `R = Σ_k λ₀ ‖δ_k‖² + λ_s Σ_k ‖δ_{k+1} − δ_k‖²` over the training slots in time
 //! order; a step on frame k applies `∂R/∂δ_k` (a block-coordinate gradient of `R`).
 //!
-//! **Held-out frames** take the mid-exposure correction interpolated linearly in frame number
-//! between the neighbouring training frames (clamped to the nearest one outside their range): never
-//! fitted to held-out images.
+//! **Knots**: the corrections live on knots — every training slot by default, or every
+//! `pose_correction_knot_every`-th one (and the last), so that each learned value hears the
+//! gradients of several frames. A frame's correction is the linear interpolation, in frame number,
+//! of the two knots around it ([`KnotSpan`]); its gradient reaches both, weighted.
+//!
+//! **Held-out frames** take the mid-exposure correction interpolated the same way between the
+//! neighbouring knots (clamped to the nearest one outside their range): never fitted to held-out
+//! images.
 //!
 //! The functions are generic over the float type so the f64 versions are finite-difference checked.
 
@@ -122,29 +127,96 @@ pub fn prior_terms<T: Float>(
     value
 }
 
-/// The mid-exposure correction ([`POSE_VALUES`] values, then a zero change) of frame `index`: a
-/// training frame's own, else interpolated linearly in frame number between the neighbouring
-/// training frames (`frame_indices` ascending, one per slot of `corrections`), the nearest one's
-/// outside their range. Empty when `corrections` is.
-pub fn interpolated_correction(frame_indices: &[u32], corrections: &[f32], index: u32) -> Vec<f32> {
-    if corrections.is_empty() || frame_indices.is_empty() {
-        return Vec::new();
+/// The training slots that carry a knot when every `every`-th one does: 0, `every`, 2·`every`, …
+/// and the last slot (every slot when `every` ≤ 1).
+pub fn knot_slots(slots: usize, every: usize) -> Vec<usize> {
+    let every = every.max(1);
+    let mut knots: Vec<usize> = (0..slots).step_by(every).collect();
+    if slots > 0 && knots.last() != Some(&(slots - 1)) {
+        knots.push(slots - 1);
     }
-    let mid = |k: usize| &corrections[k * CORRECTION_VALUES..k * CORRECTION_VALUES + POSE_VALUES];
-    let after = frame_indices.partition_point(|&f| f < index);
-    let mut out = vec![0.0f32; CORRECTION_VALUES];
-    if after < frame_indices.len() && frame_indices[after] == index || after == 0 {
-        out[..POSE_VALUES].copy_from_slice(mid(after.min(frame_indices.len() - 1)));
-    } else if after == frame_indices.len() {
-        out[..POSE_VALUES].copy_from_slice(mid(after - 1));
-    } else {
-        let (f0, f1) = (frame_indices[after - 1], frame_indices[after]);
-        let u = (index - f0) as f32 / (f1 - f0) as f32;
-        for (o, (&a, &b)) in out.iter_mut().zip(mid(after - 1).iter().zip(mid(after))) {
-            *o = a + u * (b - a);
+    knots
+}
+
+/// Where a frame sits among the knots: at knot `first` (`next` = `None`: at a knot, or outside the
+/// knots' range, clamped to the nearest), or a fraction `u` ∈ (0, 1) of the way from `first` to
+/// `first + 1` in frame number.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KnotSpan {
+    /// The knot at or before the frame.
+    pub first: usize,
+    /// The knot after it and the fraction of the way to it.
+    pub next: Option<(usize, f32)>,
+}
+
+impl KnotSpan {
+    /// The span of frame `index` among knots at frame numbers `knot_frames` (ascending, at least
+    /// one).
+    pub fn of(knot_frames: &[u32], index: u32) -> Self {
+        let after = knot_frames.partition_point(|&f| f < index);
+        let at = |k: usize| Self {
+            first: k,
+            next: None,
+        };
+        if after < knot_frames.len() && knot_frames[after] == index || after == 0 {
+            at(after.min(knot_frames.len().saturating_sub(1)))
+        } else if after == knot_frames.len() {
+            at(after - 1)
+        } else {
+            let (f0, f1) = (knot_frames[after - 1], knot_frames[after]);
+            Self {
+                first: after - 1,
+                next: Some((after, (index - f0) as f32 / (f1 - f0) as f32)),
+            }
         }
     }
-    out
+
+    /// The knots and their weights in the interpolation (1, or 1 − u and u).
+    pub fn weights(&self) -> Vec<(usize, f32)> {
+        match self.next {
+            None => vec![(self.first, 1.0)],
+            Some((next, u)) => vec![(self.first, 1.0 - u), (next, u)],
+        }
+    }
+
+    /// The interpolated values `a + u (b − a)` of `values_per_knot` values from `knots` (one row
+    /// per knot), the first `count` of each row (the rest zero).
+    pub fn blend<T: Float>(&self, knots: &[T], values_per_knot: usize, count: usize) -> Vec<T> {
+        let row = |k: usize| &knots[k * values_per_knot..k * values_per_knot + count];
+        let mut out = vec![T::zero(); values_per_knot];
+        match self.next {
+            None => out[..count].copy_from_slice(row(self.first)),
+            Some((next, u)) => {
+                let u = T::from(u).unwrap_or_else(T::zero);
+                for (o, (&a, &b)) in out.iter_mut().zip(row(self.first).iter().zip(row(next))) {
+                    *o = a + u * (b - a);
+                }
+            }
+        }
+        out
+    }
+
+    /// Backward of [`KnotSpan::blend`] (all values): adds `weight · d_values` to each knot's row
+    /// of `grad`.
+    pub fn blend_backward<T: Float>(&self, d_values: &[T], grad: &mut [T]) {
+        let n = d_values.len();
+        for (knot, w) in self.weights() {
+            let w = T::from(w).unwrap_or_else(T::zero);
+            for (g, &d) in grad[knot * n..(knot + 1) * n].iter_mut().zip(d_values) {
+                *g = *g + w * d;
+            }
+        }
+    }
+}
+
+/// The mid-exposure correction ([`POSE_VALUES`] values, then a zero change) of frame `index`:
+/// interpolated linearly in frame number between the knots around it (`knot_frames` ascending, one
+/// per row of `knots`), the nearest one's outside their range. Empty when `knots` is.
+pub fn interpolated_correction(knot_frames: &[u32], knots: &[f32], index: u32) -> Vec<f32> {
+    if knots.is_empty() || knot_frames.is_empty() {
+        return Vec::new();
+    }
+    KnotSpan::of(knot_frames, index).blend(knots, CORRECTION_VALUES, POSE_VALUES)
 }
 
 #[cfg(test)]
@@ -177,6 +249,50 @@ mod tests {
         // Never the change over the exposure: a held-out frame is rendered once.
         assert!(at(3)[POSE_VALUES..].iter().all(|&v| v == 0.0));
         assert!(interpolated_correction(&frames, &[], 3).is_empty());
+    }
+
+    #[test]
+    fn knots_sit_every_few_slots_and_at_the_last() {
+        assert_eq!(knot_slots(4, 1), vec![0, 1, 2, 3]);
+        assert_eq!(knot_slots(7, 3), vec![0, 3, 6]);
+        assert_eq!(knot_slots(8, 3), vec![0, 3, 6, 7]);
+        assert_eq!(knot_slots(1, 3), vec![0]);
+        assert!(knot_slots(0, 3).is_empty());
+    }
+
+    #[test]
+    fn a_frame_between_knots_blends_them_and_its_gradient_reaches_both() {
+        let knots = [2u32, 6, 10];
+        let span = KnotSpan::of(&knots, 7);
+        assert_eq!(span.first, 1);
+        assert_eq!(span.next, Some((2, 0.25)));
+        assert_eq!(span.weights(), vec![(1, 0.75), (2, 0.25)]);
+        assert_eq!(KnotSpan::of(&knots, 6).next, None);
+        assert_eq!(KnotSpan::of(&knots, 0).first, 0);
+        assert_eq!(KnotSpan::of(&knots, 12).first, 2);
+        // f64 central differences of L = Σ c ⊙ blend(knots) against blend_backward.
+        let values: Vec<f64> = (0..6).map(|k| (k as f64 * 0.7).sin()).collect();
+        let c = [0.3, -1.1];
+        let loss = |v: &[f64]| -> f64 {
+            let b = span.blend(v, 2, 2);
+            b.iter().zip(&c).map(|(x, y)| x * y).sum()
+        };
+        let mut grad = vec![0.0f64; 6];
+        span.blend_backward(&c, &mut grad);
+        let h = 1e-6;
+        for k in 0..6 {
+            let (mut up, mut down) = (values.clone(), values.clone());
+            up[k] += h;
+            down[k] -= h;
+            let fd = (loss(&up) - loss(&down)) / (2.0 * h);
+            // Linear in the knots: only rounding (≈ 1e-16 / 1e-6) separates the two.
+            assert!(
+                (fd - grad[k]).abs() < 1e-8,
+                "knot value {k}: {fd} vs {}",
+                grad[k]
+            );
+        }
+        assert!(grad[..2].iter().all(|&g| g == 0.0) && grad[2] != 0.0 && grad[4] != 0.0);
     }
 
     #[test]

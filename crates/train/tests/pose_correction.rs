@@ -1,12 +1,13 @@
 //! Learned pose correction on the tiny fixture: the differentiable pose preparation gives the same
 //! bits as the plain one, a correction that cannot move leaves the run's bits alone, a learning one
-//! moves the poses and ignores the thread count, resumes bit for bit, and held-out frames are
-//! rendered with interpolated corrections.
+//! moves the poses and ignores the thread count, resumes bit for bit, held-out frames are
+//! rendered with interpolated corrections, and corrections on knots every few frames step only the
+//! knots of the trained frames.
 #![allow(clippy::unwrap_used)]
 
 use train::config::{BlurModel, TrainConfig};
 use train::data::load_dataset;
-use train::pose_correction::{CORRECTION_VALUES, POSE_VALUES};
+use train::pose_correction::{KnotSpan, CORRECTION_VALUES, POSE_VALUES};
 use train::trainer::Trainer;
 
 mod common;
@@ -200,4 +201,66 @@ fn the_change_over_the_exposure_is_learned_only_when_asked() {
         );
         assert!(slots.flat_map(|s| &s[..POSE_VALUES]).any(|&v| v != 0.0));
     }
+}
+
+#[test]
+fn corrections_on_knots_step_only_the_knots_of_the_trained_frames() {
+    let ctx = context();
+    let config = TrainConfig {
+        pose_correction_knot_every: 3,
+        ..correction_config(10)
+    };
+    let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+    let frames = t.model.frame_indices.len();
+    let knot_frames = t.model.correction_knot_frames();
+    assert_eq!(
+        knot_frames.len(),
+        frames.div_ceil(3) + usize::from((frames - 1) % 3 != 0)
+    );
+    assert_eq!(
+        t.model.pose_corrections.len(),
+        knot_frames.len() * CORRECTION_VALUES
+    );
+    t.run(&ctx, 2, |_, _| Ok(())).unwrap();
+    let mut moved = 0usize;
+    for _ in 2..10 {
+        let before = t.model.pose_corrections.clone();
+        let r = t.step(&ctx).unwrap();
+        let slot = t
+            .model
+            .frame_indices
+            .iter()
+            .position(|&i| i == r.frame)
+            .unwrap();
+        // Frame k + 1 is trained too when the step renders it (flow or frame-pair events).
+        let mut allowed = Vec::new();
+        for s in [slot, (slot + 1).min(frames - 1)] {
+            let span = KnotSpan::of(&knot_frames, t.model.frame_indices[s]);
+            allowed.extend(span.weights().into_iter().map(|(k, _)| k));
+        }
+        for (k, (a, b)) in before
+            .chunks(CORRECTION_VALUES)
+            .zip(t.model.pose_corrections.chunks(CORRECTION_VALUES))
+            .enumerate()
+        {
+            if allowed.contains(&k) {
+                moved += usize::from(a != b);
+            } else {
+                assert_eq!(a, b, "knot {k} moved on a step that trained slot {slot}");
+            }
+        }
+    }
+    assert!(moved >= 8, "the trained frames' knots move");
+    // A training frame between two knots is corrected by their interpolation.
+    let (values, span) = t.model.training_correction(1);
+    let (k0, (k1, u)) = (
+        span.first,
+        span.next.expect("slot 1 lies between knots 0 and 1"),
+    );
+    let row =
+        |k: usize| &t.model.pose_corrections[k * CORRECTION_VALUES..(k + 1) * CORRECTION_VALUES];
+    for ((v, a), b) in values.iter().zip(row(k0)).zip(row(k1)) {
+        assert_eq!(*v, a + u * (b - a));
+    }
+    resume_is_bit_identical(&ctx, config);
 }

@@ -7,15 +7,15 @@ use crate::data::TrainingData;
 use crate::model::Model;
 use crate::pose_correction::{
     correct_pose_backward, corrected_params, exposure_offset, prior_terms, root_indices,
-    CorrectionPrior, CORRECTION_VALUES,
+    CorrectionPrior, KnotSpan, CORRECTION_VALUES,
 };
 use crate::TrainError;
 use smpl_deform::math::Affine;
 
 /// One frame's corrected poses (one per pass) and what their backward needs.
 pub(super) struct CorrectedPoses {
-    /// The slot whose correction they carry.
-    pub slot: usize,
+    /// Where the frame's correction comes from among the knots.
+    span: KnotSpan,
     /// The prepared poses, one per pass.
     pub prepared: Vec<PreparedPose>,
     tapes: Vec<PoseTape>,
@@ -31,8 +31,7 @@ impl CorrectedPoses {
         slot: usize,
         exposure: bool,
     ) -> Result<Self, TrainError> {
-        let correction =
-            &model.pose_corrections[slot * CORRECTION_VALUES..(slot + 1) * CORRECTION_VALUES];
+        let (correction, span) = model.training_correction(slot);
         let params = match data.exposure_params.get(slot) {
             Some(sub) if exposure && !sub.is_empty() => sub.iter().collect(),
             _ => vec![&data.frames[slot].params],
@@ -42,24 +41,29 @@ impl CorrectedPoses {
         let mut prepared = Vec::with_capacity(count);
         let mut tapes = Vec::with_capacity(count);
         for (p, &offset) in params.iter().zip(&offsets) {
-            let (pose, tape) = data
-                .body
-                .prepare_differentiable(&corrected_params(p, correction, offset))?;
+            let (pose, tape) =
+                data.body
+                    .prepare_differentiable(&corrected_params(p, &correction, offset))?;
             prepared.push(pose);
             tapes.push(tape);
         }
         Ok(Self {
-            slot,
+            span,
             prepared,
             tapes,
             offsets,
         })
     }
 
-    /// Adds ∂L/∂correction of these poses' slot to `grad` (every slot's, [`CORRECTION_VALUES`] per
-    /// slot) from each pass's ∂L/∂bones and ∂L/∂pose code (same order as the poses; an empty code
-    /// gradient for a pass that re-posed another's networks); the root's values get none unless
-    /// `correct_root`.
+    /// The knots this frame's correction is interpolated from (one or two).
+    pub fn knots(&self) -> Vec<usize> {
+        self.span.weights().into_iter().map(|(k, _)| k).collect()
+    }
+
+    /// Adds ∂L/∂knots of these poses' correction to `grad` (every knot's, [`CORRECTION_VALUES`]
+    /// per knot) from each pass's ∂L/∂bones and ∂L/∂pose code (same order as the poses; an empty
+    /// code gradient for a pass that re-posed another's networks); the root's values get none
+    /// unless `correct_root`.
     pub fn add_gradient(
         &self,
         body: &Body,
@@ -84,20 +88,28 @@ impl CorrectedPoses {
                 slot_grad[k] = 0.0;
             }
         }
-        let out = &mut grad[self.slot * CORRECTION_VALUES..(self.slot + 1) * CORRECTION_VALUES];
-        for (o, g) in out.iter_mut().zip(slot_grad) {
-            *o += g as f32;
-        }
+        let slot_grad: Vec<f32> = slot_grad.into_iter().map(|g| g as f32).collect();
+        self.span.blend_backward(&slot_grad, grad);
     }
 }
 
-/// The prior's terms for slot `slot` ([`prior_terms`] with the configured weights), its gradient
-/// added to `grad`.
-pub(super) fn add_prior(model: &Model, slot: usize, grad: &mut [f32]) -> f32 {
+/// The prior's terms for the knots `knots` ([`prior_terms`] with the configured weights), their
+/// gradient added to `grad`.
+pub(super) fn add_prior(model: &Model, knots: &[usize], grad: &mut [f32]) -> f32 {
     let prior = CorrectionPrior {
         zero: model.config.pose_correction_zero_weight,
         smooth: model.config.pose_correction_smooth_weight,
     };
-    let out = &mut grad[slot * CORRECTION_VALUES..(slot + 1) * CORRECTION_VALUES];
-    prior_terms(&model.pose_corrections, slot, prior, out)
+    let n = CORRECTION_VALUES;
+    knots
+        .iter()
+        .map(|&k| {
+            prior_terms(
+                &model.pose_corrections,
+                k,
+                prior,
+                &mut grad[k * n..(k + 1) * n],
+            )
+        })
+        .sum()
 }

@@ -420,9 +420,21 @@ impl Trainer {
         times.model_backward =
             t0.elapsed().as_secs_f64() - second_backward_seconds - sub_render_backward_seconds;
 
-        let pose_prior = match correction_grads.as_mut() {
-            Some(g) => correction::add_prior(model, slot, g),
-            None => 0.0,
+        // The knots the step's frames are interpolated from: frame k's, and k + 1's when rendered.
+        let mut trained_knots = corrected
+            .as_ref()
+            .map(CorrectedPoses::knots)
+            .unwrap_or_default();
+        if let (Some(_), Some(next)) = (&second, &next_corrected) {
+            for k in next.knots() {
+                if !trained_knots.contains(&k) {
+                    trained_knots.push(k);
+                }
+            }
+        }
+        let pose_prior = match (correction_grads.as_mut(), &corrected) {
+            (Some(g), Some(c)) => correction::add_prior(model, &c.knots(), g),
+            _ => 0.0,
         };
         let event_value = event_value + exposure_events;
         let loss = photo.photometric
@@ -454,7 +466,8 @@ impl Trainer {
         drop(passes);
 
         let t0 = Instant::now();
-        self.apply_gradients(slot, grads, opacity_grads, second_latent, correction_grads)?;
+        let correction_update = correction_grads.map(|g| (g, trained_knots));
+        self.apply_gradients(slot, grads, opacity_grads, second_latent, correction_update)?;
         times.adam = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         self.refine(data, &refine_inputs);
@@ -482,14 +495,14 @@ impl Trainer {
 
     /// One optimiser step of every parameter group: the Gaussians (position rate decayed over the
     /// run), the networks (the non-rigid one only from `nonrigid_from` on), the latents of the
-    /// step's frames and, when given, the pose corrections.
+    /// step's frames and, when given, the pose corrections (their gradient and the knots to step).
     fn apply_gradients(
         &mut self,
         slot: usize,
         grads: ModelGradients<f32>,
         opacity_grads: Vec<f32>,
         second_latent: Option<(usize, Vec<f32>)>,
-        correction_grads: Option<Vec<f32>>,
+        correction_update: Option<(Vec<f32>, Vec<usize>)>,
     ) -> Result<(), TrainError> {
         let config = &self.model.config;
         let step = self.step;
@@ -536,20 +549,18 @@ impl Trainer {
             (
                 "pose_correction",
                 corrections,
-                correction_grads.as_ref().unwrap_or(&no_correction),
+                correction_update
+                    .as_ref()
+                    .map_or(&no_correction, |(g, _)| g),
             ),
         ];
-        // The pose corrections of the step's frames (frame k, and k + 1 when it was rendered).
-        let mut trained_slots = vec![slot];
-        trained_slots.extend(second_latent.as_ref().map(|(next, _)| *next));
         for (name, params, g) in groups {
             if name == "nonrigid" && nonrigid_frozen {
                 continue;
             }
             if name == "pose_correction" {
-                if correction_grads.is_some() {
-                    self.optimisers
-                        .step_pose_corrections(params, g, &trained_slots)?;
+                if let Some((_, knots)) = &correction_update {
+                    self.optimisers.step_pose_corrections(params, g, knots)?;
                 }
                 continue;
             }
