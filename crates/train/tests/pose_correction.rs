@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used)]
 
 use train::config::{BlurModel, TrainConfig};
-use train::data::load_dataset;
+use train::data::{load_dataset, TrainingData};
 use train::pose_correction::{KnotSpan, CORRECTION_VALUES, POSE_VALUES};
 use train::trainer::Trainer;
 
@@ -148,35 +148,46 @@ fn without_the_root_only_the_body_joints_are_corrected() {
     assert!(c.iter().any(|&v| v != 0.0));
 }
 
-#[test]
-fn a_step_moves_only_the_corrections_of_the_frames_it_trains() {
-    let ctx = context();
-    let mut t = Trainer::new(&ctx, correction_config(10)).unwrap();
-    t.run(&ctx, 2, |_, _| Ok(())).unwrap();
-    let mut moved_slots = 0usize;
+/// Runs steps 2..10 of `t` and asserts that each changes only the correction rows (frames or knots)
+/// that `rows_of(slot)` names for the slots it trains: its frame's and the next one's (trained too
+/// when the step renders it: flow or frame-pair events). Returns how many of those rows moved.
+fn steps_move_only_their_rows(
+    t: &mut Trainer,
+    ctx: &TrainingData,
+    rows_of: impl Fn(usize) -> Vec<usize>,
+) -> usize {
+    t.run(ctx, 2, |_, _| Ok(())).unwrap();
+    let mut moved = 0usize;
     for _ in 2..10 {
         let before = t.model.pose_corrections.clone();
-        let r = t.step(&ctx).unwrap();
-        let slot = t
-            .model
-            .frame_indices
-            .iter()
-            .position(|&i| i == r.frame)
-            .unwrap();
+        let r = t.step(ctx).unwrap();
+        let frames = &t.model.frame_indices;
+        let slot = frames.iter().position(|&i| i == r.frame).unwrap();
+        let allowed: Vec<usize> = [slot, (slot + 1).min(frames.len() - 1)]
+            .into_iter()
+            .flat_map(&rows_of)
+            .collect();
         for (k, (a, b)) in before
             .chunks(CORRECTION_VALUES)
             .zip(t.model.pose_corrections.chunks(CORRECTION_VALUES))
             .enumerate()
         {
-            // Frame k + 1 is trained too when the step renders it (flow or frame-pair events).
-            if k == slot || k == slot + 1 {
-                moved_slots += usize::from(a != b);
+            if allowed.contains(&k) {
+                moved += usize::from(a != b);
             } else {
-                assert_eq!(a, b, "slot {k} moved on a step that trained slot {slot}");
+                assert_eq!(a, b, "row {k} moved on a step that trained slot {slot}");
             }
         }
     }
-    assert!(moved_slots >= 8, "the trained frames' corrections move");
+    moved
+}
+
+#[test]
+fn a_step_moves_only_the_corrections_of_the_frames_it_trains() {
+    let ctx = context();
+    let mut t = Trainer::new(&ctx, correction_config(10)).unwrap();
+    let moved = steps_move_only_their_rows(&mut t, &ctx, |slot| vec![slot]);
+    assert!(moved >= 8, "the trained frames' corrections move");
 }
 
 #[test]
@@ -221,35 +232,11 @@ fn corrections_on_knots_step_only_the_knots_of_the_trained_frames() {
         t.model.pose_corrections.len(),
         knot_frames.len() * CORRECTION_VALUES
     );
-    t.run(&ctx, 2, |_, _| Ok(())).unwrap();
-    let mut moved = 0usize;
-    for _ in 2..10 {
-        let before = t.model.pose_corrections.clone();
-        let r = t.step(&ctx).unwrap();
-        let slot = t
-            .model
-            .frame_indices
-            .iter()
-            .position(|&i| i == r.frame)
-            .unwrap();
-        // Frame k + 1 is trained too when the step renders it (flow or frame-pair events).
-        let mut allowed = Vec::new();
-        for s in [slot, (slot + 1).min(frames - 1)] {
-            let span = KnotSpan::of(&knot_frames, t.model.frame_indices[s]);
-            allowed.extend(span.weights().into_iter().map(|(k, _)| k));
-        }
-        for (k, (a, b)) in before
-            .chunks(CORRECTION_VALUES)
-            .zip(t.model.pose_corrections.chunks(CORRECTION_VALUES))
-            .enumerate()
-        {
-            if allowed.contains(&k) {
-                moved += usize::from(a != b);
-            } else {
-                assert_eq!(a, b, "knot {k} moved on a step that trained slot {slot}");
-            }
-        }
-    }
+    let frame_indices = t.model.frame_indices.clone();
+    let moved = steps_move_only_their_rows(&mut t, &ctx, |slot| {
+        let span = KnotSpan::of(&knot_frames, frame_indices[slot]);
+        span.weights().into_iter().map(|(k, _)| k).collect()
+    });
     assert!(moved >= 8, "the trained frames' knots move");
     // A training frame between two knots is corrected by their interpolation.
     let (values, span) = t.model.training_correction(1);
