@@ -226,7 +226,7 @@ fn corrections_on_knots_step_only_the_knots_of_the_trained_frames() {
     let knot_frames = t.model.correction_knot_frames();
     assert_eq!(
         knot_frames.len(),
-        frames.div_ceil(3) + usize::from((frames - 1) % 3 != 0)
+        frames.div_ceil(3) + usize::from(!(frames - 1).is_multiple_of(3))
     );
     assert_eq!(
         t.model.pose_corrections.len(),
