@@ -7,7 +7,9 @@
 //! returns freed pages to the OS a second after they are freed, so a training step on a large model
 //! faults them back in, zeroed by the kernel: ≈ 9 000 page faults and 8.5 % of the time of a `full`
 //! step at 114k Gaussians. [`keep_freed_pages`] turns that purging off, so the process keeps its
-//! peak (≈ 1.5 GB for a `full` run) and steps ≈ 7 % faster (docs/BENCHMARKS.md, "Results").
+//! peak (1.7 GB for a `full` run, which then takes 16 143 page faults in all) and the `full` run
+//! trains in 5337 s instead of 5469 (docs/BENCHMARKS.md, "Deblurring: the exposure model with
+//! events").
 //!
 //! `unsafe` here: two calls into mimalloc's C API, whose Rust bindings lack this option.
 #![allow(unsafe_code)]
