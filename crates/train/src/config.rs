@@ -293,7 +293,9 @@ training_options! {
     /// Pose corrections are learned on knots every this many training frames (and on the last),
     /// and each frame's is interpolated linearly in frame number between the knots around it
     /// (`train::pose_correction::KnotSpan`): 1, a correction per training frame; larger, each
-    /// learned value hears several frames' gradients and the correction is smooth in time.
+    /// learned value hears several frames' gradients and the correction is smooth in time. 3 halves
+    /// the root's error on `realistic` (`quick`) but loses 0.20 dB in the box, so 1 is the default
+    /// (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
     pose_correction_knot_every: usize = 1,
 }
 
