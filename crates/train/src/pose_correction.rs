@@ -2,7 +2,7 @@
 //! given — a fitter's estimate, never exact on real video — learned with the reconstruction, as HUGS
 //! and GauHuman optimise theirs.
 //!
-//! **Layout**: each training slot holds [`CORRECTION_VALUES`] numbers: the mid-exposure correction of
+//! **Layout**: each knot (see below) holds [`CORRECTION_VALUES`] numbers: the mid-exposure correction of
 //! the 72 axis-angle values (radians) and the translation (metres), then the change of that
 //! correction over the exposure (end minus start; same units). A pose at exposure offset
 //! `o = (s + ½)/S − ½ ∈ (−½, ½)` is corrected by `mid + o · change`; a frame rendered once (no
@@ -10,8 +10,9 @@
 //! The correction is added to the axis-angle vector (not composed as rotations): exact for the
 //! gradient, and for the few degrees a fitter errs by, indistinguishable from composition.
 //!
-//! **Regulariser**: `R = Σ_k λ₀ ‖δ_k‖² + λ_s Σ_k ‖δ_{k+1} − δ_k‖²` over the training slots in time
-//! order; a step on frame k applies `∂R/∂δ_k` (a block-coordinate gradient of `R`).
+//! **Regulariser**: `R = Σ_k λ₀ ‖δ_k‖² + λ_s Σ_k ‖δ_{k+1} − δ_k‖²` over the knots in time order;
+//! a step on frame k applies `∂R/∂δ_j` for the knots j it is interpolated from (a block-coordinate
+//! gradient of `R`).
 //!
 //! **Knots**: the corrections live on knots — every training slot by default, or every
 //! `pose_correction_knot_every`-th one (and the last), so that each learned value hears the
@@ -30,7 +31,7 @@ use smpl_deform::{SmplParams, NUM_JOINTS};
 /// Corrected values per pose: 72 axis-angle values and 3 translation values.
 pub const POSE_VALUES: usize = 3 * NUM_JOINTS + 3;
 
-/// Correction values per training slot: the mid-exposure correction and its change over the exposure.
+/// Correction values per knot: the mid-exposure correction and its change over the exposure.
 pub const CORRECTION_VALUES: usize = 2 * POSE_VALUES;
 
 /// The pose `pose` (72 axis-angle values, radians) and translation `transl` (m) corrected by a slot's
@@ -95,7 +96,7 @@ pub fn exposure_offset(s: usize, count: usize) -> f32 {
 pub struct CorrectionPrior<T> {
     /// λ₀, towards zero.
     pub zero: T,
-    /// λ_s, towards the neighbouring training frames' corrections.
+    /// λ_s, towards the neighbouring knots' corrections.
     pub smooth: T,
 }
 

@@ -420,11 +420,16 @@ impl Trainer {
         times.model_backward =
             t0.elapsed().as_secs_f64() - second_backward_seconds - sub_render_backward_seconds;
 
-        // The knots the step's frames are interpolated from: frame k's, and k + 1's when rendered.
+        // The knots the step's frames are interpolated from: frame k's (which the prior's step
+        // covers), and k + 1's when rendered.
         let mut trained_knots = corrected
             .as_ref()
             .map(CorrectedPoses::knots)
             .unwrap_or_default();
+        let pose_prior = match correction_grads.as_mut() {
+            Some(g) => correction::add_prior(model, &trained_knots, g),
+            None => 0.0,
+        };
         if let (Some(_), Some(next)) = (&second, &next_corrected) {
             for k in next.knots() {
                 if !trained_knots.contains(&k) {
@@ -432,10 +437,6 @@ impl Trainer {
                 }
             }
         }
-        let pose_prior = match (correction_grads.as_mut(), &corrected) {
-            (Some(g), Some(c)) => correction::add_prior(model, &c.knots(), g),
-            _ => 0.0,
-        };
         let event_value = event_value + exposure_events;
         let loss = photo.photometric
             + lpips_value
