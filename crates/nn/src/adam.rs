@@ -208,6 +208,18 @@ impl<T: Real> RowAdam<T> {
         grads: &[T],
         rows: &[usize],
     ) -> Result<(), NnError> {
+        self.step_rows_scaled(params, grads, rows, 1.0)
+    }
+
+    /// [`RowAdam::step_rows`] with every column's rate multiplied by `rate_scale` (a schedule's
+    /// factor; 1 gives `step_rows`' bits).
+    pub fn step_rows_scaled(
+        &mut self,
+        params: &mut [T],
+        grads: &[T],
+        rows: &[usize],
+        rate_scale: f64,
+    ) -> Result<(), NnError> {
         check_len("row adam params", self.m.len(), params.len())?;
         check_len("row adam grads", self.m.len(), grads.len())?;
         let mut done: Vec<usize> = Vec::with_capacity(rows.len());
@@ -236,7 +248,7 @@ impl<T: Real> RowAdam<T> {
                 c.beta2,
                 c.eps,
                 self.row_len,
-                |j| T::of(rates.as_ref().map_or(c.lr, |r| r[j])),
+                |j| T::of(rates.as_ref().map_or(c.lr, |r| r[j]) * rate_scale),
             )?;
         }
         Ok(())

@@ -297,6 +297,11 @@ training_options! {
     /// the root's error on `realistic` (`quick`) but loses 0.20 dB in the box, so 1 is the default
     /// (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
     pose_correction_knot_every: usize = 1,
+    /// The pose corrections' rates decay log-linearly from `pose_correction_from` to the last step,
+    /// to this fraction of `lr_pose_correction` / `lr_pose_correction_root` (1: constant rates).
+    /// A frame's Adam step is about its rate whatever its gradient's size, so the rate is the
+    /// corrections' noise floor; the decay lets them settle.
+    lr_pose_correction_final_fraction: f32 = 1.0,
 }
 
 /// Which images are trained on (see [`TrainConfig::train_on`]).
@@ -616,6 +621,20 @@ impl TrainConfig {
         if self.subframes == 0 || self.subframes > 64 {
             return bad("subframes", "must be in 1..=64");
         }
+        for (name, v) in [
+            ("lr_means_final_fraction", self.lr_means_final_fraction),
+            (
+                "lr_pose_correction_final_fraction",
+                self.lr_pose_correction_final_fraction,
+            ),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(
+                    name,
+                    "must be a finite number > 0 (a fraction of the first rate)",
+                );
+            }
+        }
         if self.pose_correction_knot_every == 0 {
             return bad(
                 "pose_correction_knot_every",
@@ -737,6 +756,24 @@ mod tests {
         assert!(Cli::command()
             .try_get_matches_from(["x", "--event-loss", "yes"])
             .is_err());
+    }
+
+    #[test]
+    fn a_rate_fraction_must_be_positive() {
+        for (field, v) in [
+            ("lr_means_final_fraction", 0.0),
+            ("lr_pose_correction_final_fraction", -0.1),
+            ("lr_pose_correction_final_fraction", f32::NAN),
+        ] {
+            let mut c = TrainConfig::default();
+            if field == "lr_means_final_fraction" {
+                c.lr_means_final_fraction = v;
+            } else {
+                c.lr_pose_correction_final_fraction = v;
+            }
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains(field), "{e}");
+        }
     }
 
     #[test]

@@ -137,14 +137,18 @@ impl Optimisers {
     }
 
     /// One lazy Adam step of the pose corrections' knots `slots` (those of the step's frames; one
-    /// per training slot by default); every other knot keeps its correction and moments.
+    /// per training slot by default) at `rate_scale` times their rates; every other knot keeps its
+    /// correction and moments.
     pub fn step_pose_corrections(
         &mut self,
         corrections: &mut [f32],
         grads: &[f32],
         slots: &[usize],
+        rate_scale: f32,
     ) -> Result<(), TrainError> {
-        Ok(self.corrections.step_rows(corrections, grads, slots)?)
+        Ok(self
+            .corrections
+            .step_rows_scaled(corrections, grads, slots, f64::from(rate_scale))?)
     }
 
     /// Adds every moment to `w` (`adam.<group>.{m,v}` and `<group>_adam.{m,v}`; an empty group's

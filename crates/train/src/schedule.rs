@@ -10,6 +10,17 @@ pub fn exponential_rate(lr0: f32, final_fraction: f32, step: usize, steps: usize
     (lr0.ln() * (1.0 - t) + (lr0 * final_fraction).ln() * t).exp()
 }
 
+/// The factor of the pose corrections' rates at `step`: 1 until the corrections start at `from`,
+/// then log-linear to `final_fraction` at the run's last step `steps`.
+pub fn correction_rate_scale(final_fraction: f32, from: usize, step: usize, steps: usize) -> f32 {
+    exponential_rate(
+        1.0,
+        final_fraction,
+        step.saturating_sub(from),
+        steps.saturating_sub(from),
+    )
+}
+
 /// True when the 1-based step count `done` falls on a density-control pass of the schedule
 /// `from..=until` every `every` steps (`every = 0` disables it).
 pub fn on_schedule(done: usize, from: usize, until: usize, every: usize) -> bool {
@@ -47,6 +58,19 @@ mod tests {
             exponential_rate(lr0, f, 200, 100),
             exponential_rate(lr0, f, 100, 100)
         );
+    }
+
+    #[test]
+    fn the_correction_rates_decay_from_their_first_step_and_stay_constant_at_one() {
+        assert_eq!(correction_rate_scale(0.1, 100, 0, 1100), 1.0);
+        assert_eq!(correction_rate_scale(0.1, 100, 100, 1100), 1.0);
+        let mid = correction_rate_scale(0.1, 100, 600, 1100);
+        assert!((mid - 0.1f32.sqrt()).abs() < 1e-6, "{mid}");
+        assert!((correction_rate_scale(0.1, 100, 1100, 1100) - 0.1).abs() < 1e-7);
+        // A fraction of 1 is exactly 1 at every step (the constant rates' bits).
+        for step in [0, 100, 333, 1100, 5000] {
+            assert_eq!(correction_rate_scale(1.0, 100, step, 1100), 1.0);
+        }
     }
 
     #[test]

@@ -29,7 +29,9 @@ use crate::model::{FramePass, Model, PosedGradients, RENDER_CHANNELS};
 use crate::optimisers::Optimisers;
 use crate::perceptual::perceptual_term;
 use crate::posing::ModelGradients;
-use crate::schedule::{accumulate_screen_stats, exponential_rate, on_schedule};
+use crate::schedule::{
+    accumulate_screen_stats, correction_rate_scale, exponential_rate, on_schedule,
+};
 use crate::TrainError;
 use gaussians::adam::GaussianLearningRates;
 use gaussians::density::{densify_and_prune, reset_opacity, DensifyConfig, DensityStats};
@@ -536,6 +538,12 @@ impl Trainer {
             latent_grads[next_slot * d..(next_slot + 1) * d].copy_from_slice(g);
         }
         let nonrigid_frozen = step < config.nonrigid_from;
+        let rate_scale = correction_rate_scale(
+            config.lr_pose_correction_final_fraction,
+            config.pose_correction_from,
+            step,
+            config.steps,
+        );
         self.optimisers
             .step_gaussians(&mut self.model.set, &set_grads, &rates)?;
         let [nonrigid, skinning, human_colour, scene_colour, latents, corrections] =
@@ -561,7 +569,8 @@ impl Trainer {
             }
             if name == "pose_correction" {
                 if let Some((_, knots)) = &correction_update {
-                    self.optimisers.step_pose_corrections(params, g, knots)?;
+                    self.optimisers
+                        .step_pose_corrections(params, g, knots, rate_scale)?;
                 }
                 continue;
             }
