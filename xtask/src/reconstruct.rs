@@ -416,6 +416,10 @@ pub fn run(args: Args) -> Result<()> {
     let model = &trainer.model;
     train::export::save_model(&model_dir, model, trainer.step, &data)
         .with_context(|| format!("writing the model to {}", model_dir.display()))?;
+    if config.pose_correction {
+        train::export::write_corrected_poses(&model_dir, model, &data)
+            .with_context(|| format!("writing the corrected poses to {}", model_dir.display()))?;
+    }
     if let Some(first) = ctx.frames.first() {
         let pose = ctx
             .body

@@ -7,7 +7,9 @@
 //! - `networks.safetensors` — float32 tensors `nonrigid`, `skinning`, `human_colour`, `scene_colour`
 //!   (flat parameter vectors in `nn::Mlp` order) and `latents` (frames × latent_dim);
 //! - `model.json` — [`ModelManifest`]: the configuration (network sizes, semantics), body model and
-//!   betas, camera, the frame number of each latent and the scene extent.
+//!   betas, camera, the frame number of each latent and the scene extent;
+//! - `poses_corrected.json` (with pose correction) — [`CorrectedPoses`]: every frame's corrected
+//!   SMPL parameters in `scene.json`'s layout.
 
 use crate::body::{resolve_reference, Body};
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
@@ -103,6 +105,75 @@ pub fn save_model(
     let json = dir.join("model.json");
     let text = serde_json::to_string_pretty(&manifest).map_err(|e| io_err(&json, e))?;
     gaussians::ply::write_atomically(&json, text.as_bytes()).map_err(|e| io_err(&json, e))
+}
+
+/// Name of the corrected poses' file in a model directory ([`write_corrected_poses`]).
+pub const CORRECTED_POSES_FILE: &str = "poses_corrected.json";
+
+/// One frame of [`CorrectedPoses`]: its SMPL parameters at mid exposure, in `scene.json`'s layout.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CorrectedFramePose {
+    /// The frame's `index` in `scene.json`.
+    pub index: u32,
+    /// Mid-exposure time (seconds).
+    pub time_s: f64,
+    /// `train`: the correction was learned on this frame; `test`: interpolated from the training
+    /// frames around it, never fitted to its image.
+    pub split: scene::Split,
+    /// 24 axis-angle rotations (radians), joint 0 the global orientation (world frame), each
+    /// joint's rotation in its parent's frame.
+    pub pose: Vec<[f32; 3]>,
+    /// SMPL translation (metres, world frame).
+    pub transl: [f32; 3],
+}
+
+/// Contents of `poses_corrected.json`: every frame's SMPL parameters as the model poses it, the
+/// scene's estimate plus the learned pose correction (`TrainConfig::pose_correction`). The
+/// per-frame `pose` and `transl` have `scene.json`'s layout, so they can replace a scene's poses.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CorrectedPoses {
+    /// Always 1.
+    pub format_version: u32,
+    /// One entry per frame of the scene, in time order.
+    pub frames: Vec<CorrectedFramePose>,
+}
+
+/// The corrected mid-exposure poses of every frame of `data` (training frames' learned, held-out
+/// frames' interpolated; the scene's own when `model` has no pose correction).
+pub fn corrected_poses(model: &Model, data: &crate::data::Dataset) -> CorrectedPoses {
+    let frames = data
+        .frames
+        .iter()
+        .map(|f| {
+            let p = model.corrected_params(f.index, &f.smpl);
+            CorrectedFramePose {
+                index: f.index,
+                time_s: f.time_s,
+                split: f.split,
+                pose: p.pose.chunks_exact(3).map(|r| [r[0], r[1], r[2]]).collect(),
+                transl: p.transl,
+            }
+        })
+        .collect();
+    CorrectedPoses {
+        format_version: 1,
+        frames,
+    }
+}
+
+/// Writes [`corrected_poses`] to `dir/poses_corrected.json` (atomically, pretty JSON).
+pub fn write_corrected_poses(
+    dir: &Path,
+    model: &Model,
+    data: &crate::data::Dataset,
+) -> Result<(), TrainError> {
+    let path = dir.join(CORRECTED_POSES_FILE);
+    let text = serde_json::to_string_pretty(&corrected_poses(model, data))
+        .map_err(|e| io_err(&path, e))?;
+    gaussians::ply::write_atomically(&path, format!("{text}\n").as_bytes())
+        .map_err(|e| io_err(&path, e))
 }
 
 /// Loads a model directory written by [`save_model`].

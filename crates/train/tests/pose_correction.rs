@@ -1,7 +1,7 @@
 //! Learned pose correction on the tiny fixture: the differentiable pose preparation gives the same
 //! bits as the plain one, a correction that cannot move leaves the run's bits alone, a learning one
 //! moves the poses and ignores the thread count, resumes bit for bit, held-out frames are
-//! rendered with interpolated corrections, and corrections on knots every few frames step only the
+//! rendered with interpolated corrections (and exported with them), and corrections on knots every few frames step only the
 //! knots of the trained frames.
 #![allow(clippy::unwrap_used)]
 
@@ -119,6 +119,24 @@ fn held_out_frames_are_rendered_with_interpolated_corrections() {
     let corrected = model.corrected_params(held_out.index, &held_out.smpl);
     assert!((corrected.transl[0] - held_out.smpl.transl[0] - 0.05).abs() < 1e-6);
     assert_eq!(corrected.pose, held_out.smpl.pose);
+    // The exported poses: every frame, the held-out one with its interpolated correction, and
+    // the file reads back to the same values.
+    let dir = tempfile::tempdir().unwrap();
+    train::export::write_corrected_poses(dir.path(), model, &data).unwrap();
+    let text =
+        std::fs::read_to_string(dir.path().join(train::export::CORRECTED_POSES_FILE)).unwrap();
+    let file: train::export::CorrectedPoses = serde_json::from_str(&text).unwrap();
+    assert_eq!(file, train::export::corrected_poses(model, &data));
+    assert_eq!(file.frames.len(), data.frames.len());
+    let entry = file
+        .frames
+        .iter()
+        .find(|f| f.index == held_out.index)
+        .unwrap();
+    assert_eq!(entry.split, scene::Split::Test);
+    assert_eq!(entry.transl, corrected.transl);
+    let flat: Vec<f32> = entry.pose.iter().flatten().copied().collect();
+    assert_eq!(flat, corrected.pose);
     // Off: the parameters as given.
     let plain = Trainer::new(&ctx, tiny_config(4)).unwrap();
     assert_eq!(
