@@ -4,19 +4,36 @@
 
 use anyhow::{Context, Result};
 use scene::Split;
-use synth::pose_metrics::measure;
-use synth::{FramePose, PoseErrorStats, TruePoses};
+use synth::pose_metrics::{measure, view_error};
+use synth::{FramePose, PoseErrorStats, TruePoses, ViewErrorStats};
 use train::body::Body;
 use train::data::Dataset;
 use train::model::Model;
 
-/// Pose errors of the training frames: as given, and as corrected (when the model corrects poses).
+/// Pose errors of the training frames: as given, and as corrected (when the model corrects poses);
+/// and how the joints' error looks from the scene's camera, on the training and the held-out frames.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct PoseReport {
     /// The scene's poses against the truth.
     pub given: PoseErrorStats,
     /// The corrected poses against the truth (`None` without pose correction).
     pub corrected: Option<PoseErrorStats>,
+    /// The joints' error seen from the camera, per split and pose source.
+    pub view: ViewReport,
+}
+
+/// [`ViewErrorStats`] of the training frames and of the held-out frames (whose corrections are
+/// interpolated, never fitted): as given and, with pose correction, as corrected.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ViewReport {
+    /// Training frames, the scene's poses.
+    pub train_given: ViewErrorStats,
+    /// Training frames, corrected.
+    pub train_corrected: Option<ViewErrorStats>,
+    /// Held-out frames, the scene's poses.
+    pub test_given: ViewErrorStats,
+    /// Held-out frames, corrected (interpolated corrections).
+    pub test_corrected: Option<ViewErrorStats>,
 }
 
 /// The report for `data`, or `None` when the scene has no `poses_true.json`.
@@ -32,29 +49,40 @@ pub fn pose_report(data: &Dataset, model: &Model, body: &Body) -> Result<Option<
         pose: p.pose.chunks_exact(3).map(|r| [r[0], r[1], r[2]]).collect(),
         transl: p.transl,
     };
-    let (mut true_frames, mut given, mut corrected) = (Vec::new(), Vec::new(), Vec::new());
-    for f in data.frames.iter().filter(|f| f.split == Split::Train) {
-        let t = truth
-            .frames
-            .iter()
-            .find(|t| t.index == f.index)
-            .with_context(|| format!("poses_true.json has no frame {}", f.index))?;
-        true_frames.push(t.clone());
-        given.push(as_frame(f.index, f.time_s, &f.smpl));
-        corrected.push(as_frame(
-            f.index,
-            f.time_s,
-            &model.corrected_params(f.index, &f.smpl),
-        ));
-    }
+    // (truth, given, corrected) of the frames of one split.
+    let frames_of = |split: Split| -> Result<[Vec<FramePose>; 3]> {
+        let (mut true_frames, mut given, mut corrected) = (Vec::new(), Vec::new(), Vec::new());
+        for f in data.frames.iter().filter(|f| f.split == split) {
+            let t = truth
+                .frames
+                .iter()
+                .find(|t| t.index == f.index)
+                .with_context(|| format!("poses_true.json has no frame {}", f.index))?;
+            true_frames.push(t.clone());
+            given.push(as_frame(f.index, f.time_s, &f.smpl));
+            corrected.push(as_frame(
+                f.index,
+                f.time_s,
+                &model.corrected_params(f.index, &f.smpl),
+            ));
+        }
+        Ok([true_frames, given, corrected])
+    };
+    let [train_true, train_given, train_corrected] = frames_of(Split::Train)?;
+    let [test_true, test_given, test_corrected] = frames_of(Split::Test)?;
     let joints = &body.canonical.posed.joints_rest;
     let parents = &body.model.parents;
+    let correcting = model.config.pose_correction;
+    let view = |t: &[FramePose], e: &[FramePose]| view_error(t, e, joints, parents, &data.camera);
     Ok(Some(PoseReport {
-        given: measure(&true_frames, &given, joints, parents),
-        corrected: model
-            .config
-            .pose_correction
-            .then(|| measure(&true_frames, &corrected, joints, parents)),
+        given: measure(&train_true, &train_given, joints, parents),
+        corrected: correcting.then(|| measure(&train_true, &train_corrected, joints, parents)),
+        view: ViewReport {
+            train_given: view(&train_true, &train_given),
+            train_corrected: correcting.then(|| view(&train_true, &train_corrected)),
+            test_given: view(&test_true, &test_given),
+            test_corrected: correcting.then(|| view(&test_true, &test_corrected)),
+        },
     }))
 }
 
@@ -71,9 +99,15 @@ pub fn summary_line(r: &PoseReport) -> String {
     match &r.corrected {
         Some(c) => {
             let (cj, co, ct) = figures(c);
+            let px = |v: &Option<ViewErrorStats>| v.map_or(f64::NAN, |v| v.image_px);
             format!(
                 "pose error of the training frames (mean, against poses_true.json): joints {j:.2}° → \
-                 {cj:.2}°, root orientation {o:.2}° → {co:.2}°, translation {t:.2} → {ct:.2} cm"
+                 {cj:.2}°, root orientation {o:.2}° → {co:.2}°, translation {t:.2} → {ct:.2} cm; \
+                 joints on the image {:.2} → {:.2} px (held-out frames {:.2} → {:.2} px)",
+                r.view.train_given.image_px,
+                px(&r.view.train_corrected),
+                r.view.test_given.image_px,
+                px(&r.view.test_corrected),
             )
         }
         None => format!(

@@ -36,5 +36,5 @@ pub use error::{Result, SynthError};
 pub use generate::{generate, generate_with_body, Stats};
 pub use motion::Speed;
 pub use pose_error::PoseError;
-pub use pose_metrics::PoseErrorStats;
+pub use pose_metrics::{PoseErrorStats, ViewErrorStats};
 pub use true_poses::{FramePose, TruePoses, TRUE_POSES_FILE};

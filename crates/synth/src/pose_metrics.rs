@@ -257,6 +257,78 @@ pub fn measure(
     }
 }
 
+/// How the posed joints' error looks from a camera: what a monocular method can see of it (across
+/// the view ray, on the image) and what it can hardly see (along the ray).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ViewErrorStats {
+    /// Mean over frames and the 24 joints of the distance between the written and the true joint
+    /// projected into the image (pixels).
+    pub image_px: f64,
+    /// Mean of the joint position error's component across the view ray, the camera's x and y
+    /// (mm; root translation included).
+    pub across_mm: f64,
+    /// Mean of the absolute component along the camera's z axis (mm).
+    pub depth_mm: f64,
+}
+
+/// The [`ViewErrorStats`] of `est` against `truth` (24 world joints per frame, from
+/// `forward_kinematics` with the translation) seen by the pinhole `camera`; joints behind the camera
+/// are not projected (their image error is left out, their position error is kept). Sequential sums.
+///
+/// # Panics
+/// If the two sequences differ in length or a frame does not hold one rotation per rest joint.
+pub fn view_error(
+    truth: &[FramePose],
+    est: &[FramePose],
+    joints_rest: &[[f32; 3]],
+    parents: &[Option<usize>],
+    camera: &scene::Camera,
+) -> ViewErrorStats {
+    assert_eq!(truth.len(), est.len(), "one estimate per frame");
+    let rest64: Vec<[f64; 3]> = joints_rest.iter().map(|j| j.map(f64::from)).collect();
+    let m = &camera.world_to_camera;
+    let to_camera = |p: [f64; 3]| -> DVec3 {
+        let row = |r: usize| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3];
+        DVec3::new(row(0), row(1), row(2))
+    };
+    let joints = |f: &FramePose| -> Vec<DVec3> {
+        let pose: Vec<f64> = f.pose.iter().flatten().map(|&v| f64::from(v)).collect();
+        let transl = f.transl.map(f64::from);
+        forward_kinematics(&pose, transl, &rest64, parents)
+            .joints_posed
+            .into_iter()
+            .map(to_camera)
+            .collect()
+    };
+    let pixel = |c: DVec3| {
+        (
+            camera.fx * c.x / c.z + camera.cx,
+            camera.fy * c.y / c.z + camera.cy,
+        )
+    };
+    let (mut image, mut projected, mut across, mut depth, mut count) =
+        (0.0, 0usize, 0.0, 0.0, 0usize);
+    for (t, e) in truth.iter().zip(est) {
+        for (a, b) in joints(t).into_iter().zip(joints(e)) {
+            let d = b - a;
+            across += d.truncate().length();
+            depth += d.z.abs();
+            count += 1;
+            if a.z > 0.0 && b.z > 0.0 {
+                let ((ax, ay), (bx, by)) = (pixel(a), pixel(b));
+                image += (bx - ax).hypot(by - ay);
+                projected += 1;
+            }
+        }
+    }
+    let div = |a: f64, b: usize| if b > 0 { a / b as f64 } else { 0.0 };
+    ViewErrorStats {
+        image_px: div(image, projected),
+        across_mm: 1000.0 * div(across, count),
+        depth_mm: 1000.0 * div(depth, count),
+    }
+}
+
 /// Mean distance (metres) between `reference` and `points` after the similarity transform
 /// (rotation, translation, scale) that best maps `points` onto `reference` in the least-squares
 /// sense (Horn's closed form: the rotation is the top eigenvector of a 4×4 symmetric matrix built
@@ -426,6 +498,83 @@ mod tests {
                 assert!(rms(q, s) >= opt_rms - 1e-12, "case {case}");
             }
         }
+    }
+
+    #[test]
+    fn the_view_error_splits_a_shift_across_and_along_the_view_ray() {
+        let body = smpl_deform::BodyModel::builtin_makehuman().unwrap();
+        let rest = body.rest_joints(&body.shaped_vertices(&[]).unwrap());
+        // A camera 3 m in front of the body, looking along world −z (camera z = −world z).
+        let camera = scene::Camera::new(
+            256,
+            256,
+            300.0,
+            300.0,
+            128.0,
+            128.0,
+            [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, -1.0, 0.0, 0.0],
+                [0.0, 0.0, -1.0, 3.0],
+                [0.0, 0.0, 0.0, 1.0],
+            ],
+        )
+        .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let truth: Vec<FramePose> = (0..4)
+            .map(|k| FramePose {
+                index: k,
+                time_s: f64::from(k) / 30.0,
+                pose: (0..24)
+                    .map(|_| [0; 3].map(|_| rng.gen_range(-0.3f32..0.3)))
+                    .collect(),
+                transl: [0.0, 0.0, 0.0],
+            })
+            .collect();
+        let same = view_error(&truth, &truth, &rest, &body.parents, &camera);
+        assert_eq!(same, ViewErrorStats::default());
+        // 2 cm along world x: across the ray, 300·0.02/z pixels per joint; no depth error.
+        let shifted: Vec<FramePose> = truth
+            .iter()
+            .map(|f| FramePose {
+                transl: [0.02, 0.0, 0.0],
+                ..f.clone()
+            })
+            .collect();
+        let v = view_error(&truth, &shifted, &rest, &body.parents, &camera);
+        assert!(
+            (v.across_mm - 20.0).abs() < 1e-4 && v.depth_mm < 1e-6,
+            "{v:?}"
+        );
+        let mut expected = 0.0;
+        for f in &truth {
+            let pose: Vec<f64> = f.pose.iter().flatten().map(|&x| f64::from(x)).collect();
+            let rest64: Vec<[f64; 3]> = rest.iter().map(|j| j.map(f64::from)).collect();
+            let fk = forward_kinematics(&pose, [0.0; 3], &rest64, &body.parents);
+            for j in &fk.joints_posed {
+                expected += 300.0 * 0.02 / (3.0 - j[2]);
+            }
+        }
+        expected /= 4.0 * 24.0;
+        assert!(
+            (v.image_px - expected).abs() < 1e-6,
+            "{} {expected}",
+            v.image_px
+        );
+        // 5 cm along the ray: all depth, and a small image change only off the optical axis.
+        let deeper: Vec<FramePose> = truth
+            .iter()
+            .map(|f| FramePose {
+                transl: [0.0, 0.0, -0.05],
+                ..f.clone()
+            })
+            .collect();
+        let v = view_error(&truth, &deeper, &rest, &body.parents, &camera);
+        assert!(
+            (v.depth_mm - 50.0).abs() < 1e-4 && v.across_mm < 1e-6,
+            "{v:?}"
+        );
+        assert!(v.image_px > 0.0 && v.image_px < 1.0, "{v:?}");
     }
 
     #[test]
