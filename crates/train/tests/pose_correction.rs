@@ -59,6 +59,45 @@ fn a_correction_that_cannot_move_changes_no_bit() {
 }
 
 #[test]
+fn decaying_rates_take_the_first_step_whole_and_the_later_ones_smaller() {
+    let ctx = context();
+    let run = |fraction: f32, steps: usize| {
+        let mut t = Trainer::new(
+            &ctx,
+            TrainConfig {
+                lr_pose_correction_final_fraction: fraction,
+                ..correction_config(8)
+            },
+        )
+        .unwrap();
+        t.run(&ctx, steps, |_, _| Ok(())).unwrap();
+        t.model.pose_corrections.clone()
+    };
+    // The corrections start at step 2: its step is at the full rate whatever the fraction.
+    assert_eq!(run(1.0, 3), run(1e-3, 3));
+    assert!(run(1.0, 3).iter().any(|&v| v != 0.0));
+    // After it, the decayed rates (0.32, 0.10, ... of the first) move the corrections far less
+    // than the constant ones (1, 1, ...); unwired, the two runs would give the same bits.
+    let (constant, decayed) = (run(1.0, 8), run(1e-3, 8));
+    let size = |c: &[f32]| c.iter().map(|v| v.abs()).sum::<f32>();
+    let after_first = run(1.0, 3);
+    let moved = |c: &[f32]| {
+        size(
+            &c.iter()
+                .zip(&after_first)
+                .map(|(a, b)| a - b)
+                .collect::<Vec<_>>(),
+        )
+    };
+    assert!(
+        moved(&decayed) < 0.5 * moved(&constant),
+        "{} {}",
+        moved(&decayed),
+        moved(&constant)
+    );
+}
+
+#[test]
 fn pose_correction_learns_ignores_the_thread_count_and_resumes_bit_for_bit() {
     // With the change over the exposure learned too: every column keeps its rate across a resume.
     let config = TrainConfig {
