@@ -258,18 +258,18 @@ training_options! {
     /// exposure, regularised towards zero and towards the neighbouring frames' corrections.
     /// Held-out frames take corrections interpolated from their neighbouring training frames. Off
     /// by default (the default benchmark's poses are exact): on the `realistic` benchmark it
-    /// recovers about a fifth of the PSNR a fitter's pose error costs (`docs/BENCHMARKS.md`,
+    /// recovers about a quarter of the PSNR a fitter's pose error costs (`docs/BENCHMARKS.md`,
     /// "Estimated poses and learned pose correction"); turn it on for poses from a fitter.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction: bool = false,
-    /// Adam learning rate of the body joints' corrections (radians), per visit of a frame (the
-    /// corrections step lazily, frame by frame). The best of 3e-3 / 1e-2 / 3e-2 / 1e-1 on the
-    /// `realistic` benchmark's `quick` preset (`docs/BENCHMARKS.md`, "Estimated poses and learned
-    /// pose correction").
-    lr_pose_correction: f32 = 3e-2,
+    /// Adam learning rate of the body joints' corrections (radians), per step of a knot (the
+    /// corrections step lazily, knot by knot). With knots every 3 frames, 1e-2 (a third of the
+    /// best per-frame rate, 3e-2) is the best measured on the `realistic` benchmark's `quick`
+    /// preset (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
+    lr_pose_correction: f32 = 1e-2,
     /// Adam learning rate of the root's corrections (global orientation, radians; translation,
     /// metres). Faster root rates push the body out of the frame (`docs/BENCHMARKS.md`).
-    lr_pose_correction_root: f32 = 1e-2,
+    lr_pose_correction_root: f32 = 3e-3,
     /// λ₀ of the pose-correction prior: weight of ‖δ_k‖² (radians², m²) pulling each training
     /// frame's correction towards zero.
     pose_correction_zero_weight: f32 = 1e-3,
@@ -293,10 +293,11 @@ training_options! {
     /// Pose corrections are learned on knots every this many training frames (and on the last),
     /// and each frame's is interpolated linearly in frame number between the knots around it
     /// (`train::pose_correction::KnotSpan`): 1, a correction per training frame; larger, each
-    /// learned value hears several frames' gradients and the correction is smooth in time. 3 halves
-    /// the root's error on `realistic` (`quick`) but loses 0.20 dB in the box, so 1 is the default
+    /// learned value hears several frames' gradients and the correction is smooth in time. 3 with
+    /// the default rates: +0.17 dB in the box on `realistic` (`quick`) against a correction per
+    /// frame at three times the rates, and on exact poses it costs 1.78 dB instead of 3.72
     /// (`docs/BENCHMARKS.md`, "Estimated poses and learned pose correction").
-    pose_correction_knot_every: usize = 1,
+    pose_correction_knot_every: usize = 3,
     /// The pose corrections' rates decay log-linearly from `pose_correction_from` to the last step,
     /// to this fraction of `lr_pose_correction` / `lr_pose_correction_root` (1: constant rates).
     /// A frame's Adam step is about its rate whatever its gradient's size, so the rate is the

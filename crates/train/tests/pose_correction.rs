@@ -13,10 +13,13 @@ use train::trainer::Trainer;
 mod common;
 use common::*;
 
+/// Pose correction from step 2, one correction per training frame (the knots' layout has its own
+/// test below).
 fn correction_config(steps: usize) -> TrainConfig {
     TrainConfig {
         pose_correction: true,
         pose_correction_from: 2,
+        pose_correction_knot_every: 1,
         ..tiny_config(steps)
     }
 }
