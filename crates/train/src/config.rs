@@ -279,7 +279,8 @@ training_options! {
     /// Whether pose correction also learns the change of the pose over each exposure (with
     /// `blur_model = exposure`); off (the default): the sub-exposure poses keep their given spread
     /// and only shift with the mid-exposure correction. Off scores 23.36 dB in the box on
-    /// `realistic`, `quick`, against 23.12 on: the learned change is noise (`docs/BENCHMARKS.md`).
+    /// `realistic`, `quick` (a correction per frame), against 23.12 on: the learned change is
+    /// noise (`docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction_change: bool = false,
     /// Whether pose correction also corrects the root (global orientation and translation); off:
