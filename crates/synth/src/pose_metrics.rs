@@ -531,25 +531,28 @@ mod tests {
                 transl: [0.0, 0.0, 0.0],
             })
             .collect();
-        let same = view_error(&truth, &truth, &rest, &body.parents, &camera);
-        assert_eq!(same, ViewErrorStats::default());
+        // The truth moved by `transl` (world metres), seen from the camera.
+        let moved_by = |transl: [f32; 3]| {
+            let est: Vec<FramePose> = truth
+                .iter()
+                .map(|f| FramePose {
+                    transl,
+                    ..f.clone()
+                })
+                .collect();
+            view_error(&truth, &est, &rest, &body.parents, &camera)
+        };
+        assert_eq!(moved_by([0.0; 3]), ViewErrorStats::default());
         // 2 cm along world x: across the ray, 300·0.02/z pixels per joint; no depth error.
-        let shifted: Vec<FramePose> = truth
-            .iter()
-            .map(|f| FramePose {
-                transl: [0.02, 0.0, 0.0],
-                ..f.clone()
-            })
-            .collect();
-        let v = view_error(&truth, &shifted, &rest, &body.parents, &camera);
+        let v = moved_by([0.02, 0.0, 0.0]);
         assert!(
             (v.across_mm - 20.0).abs() < 1e-4 && v.depth_mm < 1e-6,
             "{v:?}"
         );
+        let rest64: Vec<[f64; 3]> = rest.iter().map(|j| j.map(f64::from)).collect();
         let mut expected = 0.0;
         for f in &truth {
             let pose: Vec<f64> = f.pose.iter().flatten().map(|&x| f64::from(x)).collect();
-            let rest64: Vec<[f64; 3]> = rest.iter().map(|j| j.map(f64::from)).collect();
             let fk = forward_kinematics(&pose, [0.0; 3], &rest64, &body.parents);
             for j in &fk.joints_posed {
                 expected += 300.0 * 0.02 / (3.0 - j[2]);
@@ -562,14 +565,7 @@ mod tests {
             v.image_px
         );
         // 5 cm along the ray: all depth, and a small image change only off the optical axis.
-        let deeper: Vec<FramePose> = truth
-            .iter()
-            .map(|f| FramePose {
-                transl: [0.0, 0.0, -0.05],
-                ..f.clone()
-            })
-            .collect();
-        let v = view_error(&truth, &deeper, &rest, &body.parents, &camera);
+        let v = moved_by([0.0, 0.0, -0.05]);
         assert!(
             (v.depth_mm - 50.0).abs() < 1e-4 && v.across_mm < 1e-6,
             "{v:?}"

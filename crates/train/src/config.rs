@@ -274,7 +274,8 @@ training_options! {
     /// frame's correction towards zero.
     pose_correction_zero_weight: f32 = 1e-3,
     /// λ_s of the pose-correction prior: weight of ‖δ_k − δ_{k±1}‖² between consecutive knots'
-    /// corrections (training frames' by default, `pose_correction_knot_every`) (1e-2 against 1e-3: +0.07 dB in the box on `realistic`, `quick`).
+    /// corrections (`pose_correction_knot_every`); 1e-2 against 1e-3: +0.07 dB in the box on
+    /// `realistic`, `quick` (a correction per frame).
     pose_correction_smooth_weight: f32 = 1e-2,
     /// Whether pose correction also learns the change of the pose over each exposure (with
     /// `blur_model = exposure`); off (the default): the sub-exposure poses keep their given spread

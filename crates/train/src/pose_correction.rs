@@ -2,8 +2,8 @@
 //! given — a fitter's estimate, never exact on real video — learned with the reconstruction, as HUGS
 //! and GauHuman optimise theirs.
 //!
-//! **Layout**: each knot (see below) holds [`CORRECTION_VALUES`] numbers: the mid-exposure correction of
-//! the 72 axis-angle values (radians) and the translation (metres), then the change of that
+//! **Layout**: each knot (see below) holds [`CORRECTION_VALUES`] numbers: the mid-exposure
+//! correction of the 72 axis-angle values (radians) and the translation (metres), then the change of that
 //! correction over the exposure (end minus start; same units). A pose at exposure offset
 //! `o = (s + ½)/S − ½ ∈ (−½, ½)` is corrected by `mid + o · change`; a frame rendered once (no
 //! exposure model) has `o = 0`, so the change there only feels the regulariser and stays zero.
