@@ -15,7 +15,7 @@ use image::{Rgb, RgbImage};
 use std::path::Path;
 use std::path::PathBuf;
 use train::blend::SemanticMode;
-use train::config::{BlurModel, EventPairs, FlowSource, TrainOn, TrainOptions};
+use train::config::{BlurModel, EventPairs, EventPenaltyKind, FlowSource, TrainOn, TrainOptions};
 
 /// Arguments of `ablate`.
 #[derive(clap::Args, Debug)]
@@ -31,8 +31,8 @@ pub struct Args {
     #[command(flatten)]
     pub training: crate::reconstruct::TrainingArgs,
     /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
-    /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net, exposure, exposure-events,
-    /// sharp-ceiling).
+    /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net, exposure,
+    /// exposure-events-squared, exposure-events, edi-cascade, sharp-ceiling).
     #[arg(long, value_delimiter = ',')]
     pub only: Option<Vec<String>>,
     /// Run the blur-level study (paper Figure 5) instead of the ablation set: one-hot, event-loss,
@@ -51,7 +51,7 @@ struct Run {
     options: fn() -> TrainOptions,
 }
 
-const RUNS: [Run; 10] = [
+const RUNS: [Run; 12] = [
     Run {
         name: "semantic-none",
         what: "no semantics (every Gaussian deformed), no events",
@@ -94,6 +94,7 @@ const RUNS: [Run; 10] = [
             event_loss: Some(true),
             event_pairs: Some(EventPairs::Frames),
             event_weight: Some(3.0),
+            event_penalty: Some(EventPenaltyKind::Squared),
             flow_loss: Some(false),
             ..TrainOptions::default()
         },
@@ -148,13 +149,43 @@ const RUNS: [Run; 10] = [
         },
     },
     Run {
-        name: "exposure-events",
-        what: "one-hot + exposure model + event-generation loss between sub-exposure renders",
+        name: "exposure-events-squared",
+        what: "one-hot + exposure model + event-generation loss between sub-exposure renders, \
+               squared penalty (the previous default)",
         options: || TrainOptions {
             semantic: Some(SemanticMode::OneHot),
             blur_model: Some(BlurModel::Exposure),
             event_loss: Some(true),
             event_pairs: Some(EventPairs::Exposure),
+            event_penalty: Some(EventPenaltyKind::Squared),
+            event_weight: Some(0.3),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
+    },
+    Run {
+        name: "exposure-events",
+        what: "one-hot + exposure model + events between sub-exposure renders, counts as lower \
+               bounds (the default)",
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            blur_model: Some(BlurModel::Exposure),
+            event_loss: Some(true),
+            event_pairs: Some(EventPairs::Exposure),
+            event_penalty: Some(EventPenaltyKind::Bound),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
+    },
+    Run {
+        name: "edi-cascade",
+        what: "one-hot trained on every frame deblurred by EDI from its events, one render per \
+               frame (deblur first, then reconstruct)",
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            train_on: Some(TrainOn::Edi),
+            blur_model: Some(BlurModel::None),
+            event_loss: Some(false),
             flow_loss: Some(false),
             ..TrainOptions::default()
         },

@@ -212,14 +212,28 @@ fn scene_defaults(
             config.event_threshold = c as f32;
         }
     }
+    let recorded_neg = data
+        .scene
+        .generator
+        .as_ref()
+        .and_then(|g| g.pointer("/config/event_threshold_neg"))
+        .and_then(serde_json::Value::as_f64);
+    if let Some(c) = recorded_neg.filter(|c| c.is_finite() && *c > 0.0) {
+        if !training.sets("event_threshold_neg")? {
+            config.event_threshold_neg = Some(c as f32);
+        }
+    }
     if config.blur_model == BlurModel::Exposure && !training.sets("event_loss")? {
         let with_events = data.scene.frames.iter().all(|f| f.events.is_some());
         config.event_loss = with_events;
         if with_events {
             println!(
-                "events: the event loss compares consecutive sub-exposure renders (weight {}, C {}; \
-                 --event-loss off to train without)",
-                config.event_weight, config.event_threshold
+                "events: the event loss compares consecutive sub-exposure renders (weight {}, C+ {}, \
+                 C- {}, {:?} penalty; --event-loss off to train without)",
+                config.event_weight,
+                config.event_threshold,
+                config.event_threshold_neg.unwrap_or(config.event_threshold),
+                config.event_penalty
             );
         } else {
             println!(
@@ -287,6 +301,16 @@ pub fn run(args: Args) -> Result<()> {
         ctx.use_sharp_images(&data)
             .context("training on the sharp references")?;
         println!("training on the sharp references (the benchmark's ceiling, not a method)");
+    }
+    if config.train_on == TrainOn::Edi {
+        let deblurred = ctx
+            .use_edi_images(&data, &config)
+            .context("deblurring the training frames by EDI")?;
+        println!(
+            "training on EDI-deblurred frames (the 2-D cascade baseline): {deblurred} of {} \
+             training frames deblurred, the others' exposures are not covered by events",
+            ctx.frames.len()
+        );
     }
     if config.blur_model == BlurModel::Exposure {
         ctx.enable_exposure(&data, config.subframes)

@@ -76,15 +76,31 @@ pub struct Args {
     /// Exposure as a fraction of the frame interval (0, 1].
     #[arg(long)]
     pub exposure_fraction: Option<f64>,
-    /// Event contrast threshold C± (log intensity).
+    /// Event contrast threshold C+ (log intensity; also C− unless --event-threshold-neg is given).
     #[arg(long)]
     pub event_threshold: Option<f32>,
+    /// Negative contrast threshold C− when it differs from C+ (log intensity, a positive number;
+    /// real sensors' do). Default: C− = C+.
+    #[arg(long)]
+    pub event_threshold_neg: Option<f32>,
     /// Per-pixel threshold noise σ (log intensity).
     #[arg(long)]
     pub event_sigma: Option<f32>,
-    /// Event refractory period (microseconds).
+    /// Event refractory period (microseconds; the presets' 1000, as a DAVIS pixel's). A crossing
+    /// closer than this to the pixel's previous event is dropped and its reference still moves.
     #[arg(long)]
     pub refractory_us: Option<i64>,
+    /// Background-activity noise per pixel (events per second, random polarity; a DAVIS346 shows
+    /// about 0.1 in daylight). Default 0.
+    #[arg(long, value_name = "HZ")]
+    pub background_rate_hz: Option<f64>,
+    /// Fraction of hot pixels, each firing one polarity at --hot-pixel-rate-hz whatever the scene
+    /// does (real sensors have about 1e-4 to 1e-3). Default 0.
+    #[arg(long)]
+    pub hot_pixel_fraction: Option<f64>,
+    /// Event rate of each hot pixel (events per second). Default 200.
+    #[arg(long, value_name = "HZ")]
+    pub hot_pixel_rate_hz: Option<f64>,
     /// Estimate event-only flow by contrast maximisation (`events_cm` flows): true or false.
     #[arg(long)]
     pub event_flow: Option<bool>,
@@ -137,9 +153,15 @@ pub fn config(args: &Args) -> ::synth::SynthConfig {
         event_threshold,
         event_sigma,
         refractory_us,
+        background_rate_hz,
+        hot_pixel_fraction,
+        hot_pixel_rate_hz,
         event_flow,
         body
     );
+    if let Some(neg) = args.event_threshold_neg {
+        c.event_threshold_neg = Some(neg);
+    }
     if let Some(s) = args.speed {
         c.speed = match s {
             SpeedArg::Slow => ::synth::Speed::Slow,

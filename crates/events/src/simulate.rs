@@ -5,7 +5,9 @@
 //! crossing of `reference ± k·C` inside `(L_prev, L_next]`, at the linearly interpolated time, and the
 //! reference moves to the last crossing. Each pixel has its own thresholds `C± ~ N(C±, σ)` clamped to
 //! at least `min_threshold`; events closer than the refractory period to the pixel's previous event
-//! are dropped (the reference still moves, as in ESIM); optional shot noise adds Poisson events.
+//! are dropped (the reference still moves, as in ESIM); optional shot noise (background activity)
+//! adds Poisson events of random polarity, and optional hot pixels fire at a fixed rate whatever
+//! the scene does (a leaky pixel of a real sensor: one polarity each, a random phase).
 //!
 //! Determinism: every random draw comes from ChaCha8 streams derived from the seed (thresholds from
 //! stream 0, row `r` from stream `r + 1`), rows run in parallel with rayon, and the output is merged
@@ -36,14 +38,22 @@ pub struct EsimConfig {
     /// Refractory period (microseconds): an event closer than this to the pixel's previous event is
     /// dropped. 0 disables it.
     pub refractory_us: i64,
-    /// Shot-noise rate per pixel (events per second, random polarity, uniform time). 0 disables it.
+    /// Shot-noise (background-activity) rate per pixel (events per second, random polarity,
+    /// uniform time; not subject to the refractory period). 0 disables it.
     pub shot_noise_hz: f64,
+    /// Fraction of the pixels that are hot, in [0, 1): chosen at random (their own ChaCha8 stream),
+    /// each fires events of one polarity (random, ON or OFF) every `1 / hot_pixel_rate_hz` seconds
+    /// from a random phase, whatever the scene does. 0 disables them (and draws nothing).
+    pub hot_pixel_fraction: f64,
+    /// Event rate of every hot pixel (events per second, > 0 when `hot_pixel_fraction` > 0).
+    pub hot_pixel_rate_hz: f64,
     /// Seed of every random draw.
     pub seed: u64,
 }
 
 impl Default for EsimConfig {
-    /// C± = 0.2, σ = 0.03, clamp 0.01, eps = 1e-3, no refractory period, no shot noise, seed 0.
+    /// C± = 0.2, σ = 0.03, clamp 0.01, eps = 1e-3, no refractory period, no shot noise, no hot
+    /// pixels (200 Hz when some are asked for), seed 0.
     fn default() -> Self {
         Self {
             c_pos: 0.2,
@@ -53,6 +63,8 @@ impl Default for EsimConfig {
             log_eps: 1e-3,
             refractory_us: 0,
             shot_noise_hz: 0.0,
+            hot_pixel_fraction: 0.0,
+            hot_pixel_rate_hz: 200.0,
             seed: 0,
         }
     }
@@ -78,7 +90,21 @@ struct RowState {
     last_log: Vec<f32>,
     last_event_us: Vec<i64>,
     rng: ChaCha8Rng,
+    /// The row's hot pixels: (column, polarity, first firing time in µs), by column.
+    hot: Vec<HotPixel>,
 }
+
+/// A pixel that fires at a fixed rate whatever the scene does.
+#[derive(Clone, Copy, Debug)]
+struct HotPixel {
+    x: u16,
+    polarity: i8,
+    /// Phase of its firing times, in [0, period) microseconds.
+    phase_us: f64,
+}
+
+/// ChaCha8 stream of the hot-pixel draws (the thresholds use stream 0, row r stream r + 1 ≤ 65536).
+const HOT_PIXEL_STREAM: u64 = 1 << 32;
 
 /// Stateful ESIM simulator: feed frames in time order with [`EventSimulator::add_frame`].
 pub struct EventSimulator {
@@ -138,6 +164,24 @@ impl EventSimulator {
                 format!("{} must be finite and >= 0", config.shot_noise_hz),
             ));
         }
+        if !(config.hot_pixel_fraction.is_finite()
+            && (0.0..1.0).contains(&config.hot_pixel_fraction))
+        {
+            return Err(EventsError::arg(
+                "hot_pixel_fraction",
+                format!("{} must be in [0, 1)", config.hot_pixel_fraction),
+            ));
+        }
+        if config.hot_pixel_fraction > 0.0
+            && !(config.hot_pixel_rate_hz.is_finite()
+                && config.hot_pixel_rate_hz > 0.0
+                && config.hot_pixel_rate_hz <= 1e6)
+        {
+            return Err(EventsError::arg(
+                "hot_pixel_rate_hz",
+                format!("{} must be in (0, 1e6]", config.hot_pixel_rate_hz),
+            ));
+        }
         if config.refractory_us < 0 {
             return Err(EventsError::arg(
                 "refractory_us",
@@ -163,6 +207,7 @@ impl EventSimulator {
         };
         let c_pos = draw(config.c_pos)?;
         let c_neg = draw(config.c_neg)?;
+        let mut hot_by_row = hot_pixels(&config, width, height);
         let rows = (0..height)
             .map(|r| {
                 let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
@@ -172,6 +217,7 @@ impl EventSimulator {
                     last_log: vec![0.0; width],
                     last_event_us: vec![i64::MIN; width],
                     rng,
+                    hot: std::mem::take(&mut hot_by_row[r]),
                 }
             })
             .collect();
@@ -289,6 +335,9 @@ impl EventSimulator {
                         row.reference[x] = cross;
                     }
                 }
+                for hot in &row.hot {
+                    push_hot_events(hot, r as u16, t_prev, t_us, cfg.hot_pixel_rate_hz, &mut out);
+                }
                 if cfg.shot_noise_hz > 0.0 {
                     let lambda = cfg.shot_noise_hz * w as f64 * dt * 1e-6;
                     if let Ok(poisson) = Poisson::new(lambda) {
@@ -320,6 +369,67 @@ impl EventSimulator {
         }
         s.sort_by_time_row_col();
         Ok(s)
+    }
+}
+
+/// The hot pixels of a sensor, per row: `round(fraction · W · H)` distinct pixels drawn from
+/// their own stream, each with a random polarity and phase. Empty rows without hot pixels.
+fn hot_pixels(config: &EsimConfig, width: usize, height: usize) -> Vec<Vec<HotPixel>> {
+    let mut rows = vec![Vec::new(); height];
+    let n = width * height;
+    let count = ((config.hot_pixel_fraction * n as f64).round() as usize).min(n);
+    if count == 0 {
+        return rows;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    rng.set_stream(HOT_PIXEL_STREAM);
+    let period_us = 1e6 / config.hot_pixel_rate_hz;
+    for i in rand::seq::index::sample(&mut rng, n, count).into_vec() {
+        let polarity = if rng.gen::<bool>() { 1 } else { -1 };
+        let phase_us = rng.gen::<f64>() * period_us;
+        rows[i / width].push(HotPixel {
+            x: (i % width) as u16,
+            polarity,
+            phase_us,
+        });
+    }
+    for row in &mut rows {
+        row.sort_by_key(|h| h.x);
+    }
+    rows
+}
+
+/// Appends a hot pixel's events in `(t_prev, t_us]`: its firing times `phase + k / rate` (µs,
+/// rounded), so that consecutive intervals never repeat or miss one.
+fn push_hot_events(
+    hot: &HotPixel,
+    y: u16,
+    t_prev: i64,
+    t_us: i64,
+    rate_hz: f64,
+    out: &mut Vec<Event>,
+) {
+    let period_us = 1e6 / rate_hz;
+    let firing = |k: f64| (hot.phase_us + k * period_us).round() as i64;
+    // The first k whose firing time is after t_prev (k from the real quotient, then corrected
+    // for the rounding of the times).
+    let mut k = ((t_prev as f64 - hot.phase_us) / period_us)
+        .floor()
+        .max(0.0);
+    while firing(k) <= t_prev {
+        k += 1.0;
+    }
+    while k > 0.0 && firing(k - 1.0) > t_prev {
+        k -= 1.0;
+    }
+    while firing(k) <= t_us {
+        out.push(Event {
+            t: firing(k),
+            x: hot.x,
+            y,
+            p: hot.polarity,
+        });
+        k += 1.0;
     }
 }
 

@@ -153,3 +153,64 @@ fn bad_frames_are_errors() {
     )
     .is_err());
 }
+
+#[test]
+fn hot_pixels_fire_at_their_rate_whatever_the_scene() {
+    // A static 20 × 10 scene: every event comes from the 10 hot pixels (5 % of 200).
+    let cfg = EsimConfig {
+        hot_pixel_fraction: 0.05,
+        hot_pixel_rate_hz: 1000.0,
+        ..exact(0.2)
+    };
+    let frame = vec![0.3f32; 200];
+    let times: Vec<i64> = (0..5).map(|k| k * 2500).collect();
+    let refs: Vec<&[f32]> = (0..5).map(|_| frame.as_slice()).collect();
+    let s = simulate_sequence(cfg, 20, 10, &times, &refs).expect("simulate");
+    let mut pixels: Vec<(u16, u16)> = s.x.iter().copied().zip(s.y.iter().copied()).collect();
+    pixels.sort_unstable();
+    pixels.dedup();
+    assert_eq!(pixels.len(), 10, "hot pixels {pixels:?}");
+    // 10 ms at 1 kHz: exactly 10 events per pixel (the intervals (t_prev, t] tile (0, 10 ms]),
+    // each pixel with one polarity and its events 1000 ± 1 µs apart (rounding to µs).
+    for &(x, y) in &pixels {
+        let mine: Vec<usize> = (0..s.len())
+            .filter(|&i| (s.x[i], s.y[i]) == (x, y))
+            .collect();
+        assert_eq!(mine.len(), 10, "pixel ({x}, {y})");
+        assert!(mine.iter().all(|&i| s.p[i] == s.p[mine[0]]));
+        for w in mine.windows(2) {
+            let gap = s.t[w[1]] - s.t[w[0]];
+            assert!((999..=1001).contains(&gap), "gap {gap} µs at ({x}, {y})");
+        }
+    }
+    // Without hot pixels the static scene is silent.
+    let quiet = EsimConfig {
+        hot_pixel_fraction: 0.0,
+        ..cfg
+    };
+    assert!(simulate_sequence(quiet, 20, 10, &times, &refs)
+        .expect("simulate")
+        .is_empty());
+    let bad = EsimConfig {
+        hot_pixel_fraction: 1.5,
+        ..cfg
+    };
+    assert!(EventSimulator::new(bad, 20, 10).is_err());
+}
+
+#[test]
+fn background_activity_adds_events_of_both_polarities() {
+    let cfg = EsimConfig {
+        shot_noise_hz: 50.0,
+        ..exact(0.2)
+    };
+    let frame = vec![0.3f32; 64 * 64];
+    let times: Vec<i64> = (0..11).map(|k| k * 10_000).collect();
+    let refs: Vec<&[f32]> = (0..11).map(|_| frame.as_slice()).collect();
+    let s = simulate_sequence(cfg, 64, 64, &times, &refs).expect("simulate");
+    // 4096 pixels × 50 Hz × 0.1 s = 20 480 expected; Poisson, so within 5 % (≈ 7 σ).
+    let n = s.len() as f64;
+    assert!((n - 20_480.0).abs() < 0.05 * 20_480.0, "{n} events");
+    let on = s.p.iter().filter(|&&p| p > 0).count() as f64;
+    assert!((on / n - 0.5).abs() < 0.05, "ON share {}", on / n);
+}

@@ -46,6 +46,19 @@ impl DensityStats {
         }
     }
 
+    /// Adds one view whose gradient norms are already taken: `norm[i]` is ‖∂L/∂(screen mean of
+    /// i)‖ in NDC units (e.g. summed over several renders of one view), `radius[i]` as in
+    /// [`DensityStats::accumulate`].
+    pub fn accumulate_norms(&mut self, norm: &[f32], radius: &[f32]) {
+        for i in 0..self.grad_accum.len() {
+            if radius[i] > 0.0 {
+                self.grad_accum[i] += norm[i];
+                self.visible_count[i] += 1;
+                self.max_radius[i] = self.max_radius[i].max(radius[i]);
+            }
+        }
+    }
+
     /// Mean accumulated gradient norm of Gaussian `i` (0 if never visible).
     pub fn mean_grad(&self, i: usize) -> f32 {
         if self.visible_count[i] == 0 {
@@ -288,6 +301,26 @@ mod tests {
             })
             .sum::<f32>()
             .sqrt()
+    }
+
+    #[test]
+    fn norms_taken_per_render_add_up_where_summed_gradients_cancel() {
+        // One Gaussian seen in two renders with opposite gradients: the summed statistic sees
+        // nothing, the per-render norms see both.
+        let (a, b) = ([[3.0f32, 4.0]], [[-3.0f32, -4.0]]);
+        let mut summed = DensityStats::new(1);
+        summed.accumulate(&[[a[0][0] + b[0][0], a[0][1] + b[0][1]]], &[2.0]);
+        let mut per_render = DensityStats::new(1);
+        per_render.accumulate_norms(&[5.0 + 5.0], &[2.0]);
+        assert_eq!(summed.mean_grad(0), 0.0);
+        assert_eq!(per_render.mean_grad(0), 10.0);
+        assert_eq!(per_render.max_radius, summed.max_radius);
+        // One render: the same statistic either way; invisible Gaussians are skipped.
+        let mut one = DensityStats::new(2);
+        one.accumulate(&[a[0], a[0]], &[2.0, 0.0]);
+        let mut norms = DensityStats::new(2);
+        norms.accumulate_norms(&[5.0, 5.0], &[2.0, 0.0]);
+        assert_eq!(one, norms);
     }
 
     #[test]

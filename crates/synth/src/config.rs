@@ -13,6 +13,21 @@ pub const MAX_FRAMES: u32 = 100_000;
 /// Largest accepted number of sub-frames per frame.
 pub const MAX_SUBFRAMES: u32 = 256;
 
+/// Event rate of a hot pixel unless set (events per second).
+pub const DEFAULT_HOT_PIXEL_RATE_HZ: f64 = 200.0;
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn default_hot_pixel_rate_hz() -> f64 {
+    DEFAULT_HOT_PIXEL_RATE_HZ
+}
+
+fn is_default_hot_pixel_rate(v: &f64) -> bool {
+    *v == DEFAULT_HOT_PIXEL_RATE_HZ
+}
+
 /// Named settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Preset {
@@ -54,12 +69,32 @@ pub struct SynthConfig {
     pub fps: f64,
     /// Exposure as a fraction of the frame interval (0, 1].
     pub exposure_fraction: f64,
-    /// Mean event contrast thresholds C+ = C− (log intensity).
+    /// Mean positive event contrast threshold C+ (log intensity); also C− unless
+    /// `event_threshold_neg` is set.
     pub event_threshold: f32,
+    /// Mean negative contrast threshold C− (log intensity, a positive number) when it differs from
+    /// C+ (real sensors' do); unset (and not serialised): C− = C+.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub event_threshold_neg: Option<f32>,
     /// Per-pixel threshold standard deviation σ (log intensity).
     pub event_sigma: f32,
     /// Event refractory period (microseconds).
     pub refractory_us: i64,
+    /// Background-activity noise: events per second per pixel, random polarity, uniform in time
+    /// (a real sensor's leak and shot noise; DAVIS346 ≈ 0.1 Hz in daylight). 0 (the default, not
+    /// serialised): none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub background_rate_hz: f64,
+    /// Fraction of hot pixels, each firing one polarity at `hot_pixel_rate_hz` whatever the scene
+    /// does. 0 (the default, not serialised): none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub hot_pixel_fraction: f64,
+    /// Event rate of each hot pixel (events per second; 200 by default, not serialised then).
+    #[serde(
+        default = "default_hot_pixel_rate_hz",
+        skip_serializing_if = "is_default_hot_pixel_rate"
+    )]
+    pub hot_pixel_rate_hz: f64,
     /// Also estimate event-only flow (contrast maximisation, `events_cm`) for every frame pair.
     pub event_flow: bool,
     /// Body model reference (`builtin:makehuman` or an SMPL `.npz` path).
@@ -90,6 +125,10 @@ impl SynthConfig {
             event_threshold: 0.2,
             event_sigma: 0.03,
             refractory_us: 1000,
+            event_threshold_neg: None,
+            background_rate_hz: 0.0,
+            hot_pixel_fraction: 0.0,
+            hot_pixel_rate_hz: DEFAULT_HOT_PIXEL_RATE_HZ,
             event_flow: true,
             body: "builtin:makehuman".into(),
             pose_error: PoseError::OFF,
@@ -205,11 +244,41 @@ impl SynthConfig {
                 "must be in [0, 1)",
             );
         }
+        if let Some(c) = self.event_threshold_neg {
+            if !(c.is_finite() && c > 0.0 && c < 10.0) {
+                return knob("event-threshold-neg", c.to_string(), "must be in (0, 10)");
+            }
+        }
         if self.refractory_us < 0 {
             return knob(
                 "refractory-us",
                 self.refractory_us.to_string(),
                 "must be >= 0",
+            );
+        }
+        if !(self.background_rate_hz.is_finite() && (0.0..=1e4).contains(&self.background_rate_hz))
+        {
+            return knob(
+                "background-rate-hz",
+                self.background_rate_hz.to_string(),
+                "must be in [0, 10000] events per second per pixel",
+            );
+        }
+        if !(self.hot_pixel_fraction.is_finite() && (0.0..0.5).contains(&self.hot_pixel_fraction)) {
+            return knob(
+                "hot-pixel-fraction",
+                self.hot_pixel_fraction.to_string(),
+                "must be in [0, 0.5)",
+            );
+        }
+        if !(self.hot_pixel_rate_hz.is_finite()
+            && self.hot_pixel_rate_hz > 0.0
+            && self.hot_pixel_rate_hz <= 1e5)
+        {
+            return knob(
+                "hot-pixel-rate-hz",
+                self.hot_pixel_rate_hz.to_string(),
+                "must be in (0, 100000] events per second",
             );
         }
         self.pose_error.validate()

@@ -309,9 +309,12 @@ pub fn generate_with_body(
 
     let esim = events::EsimConfig {
         c_pos: cfg.event_threshold,
-        c_neg: cfg.event_threshold,
+        c_neg: cfg.event_threshold_neg.unwrap_or(cfg.event_threshold),
         sigma: cfg.event_sigma,
         refractory_us: cfg.refractory_us,
+        shot_noise_hz: cfg.background_rate_hz,
+        hot_pixel_fraction: cfg.hot_pixel_fraction,
+        hot_pixel_rate_hz: cfg.hot_pixel_rate_hz,
         seed: cfg.seed ^ 0xE5E5_E5E5,
         ..events::EsimConfig::default()
     };

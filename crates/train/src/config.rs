@@ -67,6 +67,20 @@ macro_rules! training_options {
         }
 
         impl TrainConfig {
+    /// The event loss's penalty as `train::event_loss` takes it (thresholds C± from
+    /// `event_threshold` and `event_threshold_neg`).
+    pub fn event_penalty(&self) -> crate::event_loss::EventPenalty {
+        match self.event_penalty {
+            EventPenaltyKind::Squared => crate::event_loss::EventPenalty::Squared,
+            EventPenaltyKind::Bound => crate::event_loss::EventPenalty::Bound {
+                c_pos: f64::from(self.event_threshold),
+                c_neg: f64::from(self.event_threshold_neg.unwrap_or(self.event_threshold)),
+                margin: f64::from(self.event_bound_margin),
+                dead_zone: f64::from(self.event_dead_zone),
+            },
+        }
+    }
+
             /// The `quick` preset: every option's declared default.
             fn quick() -> Self {
                 Self { $($name: $default,)* }
@@ -170,14 +184,21 @@ training_options! {
     densify_every: usize = 100,
     /// Mean screen-space (NDC) gradient above which a Gaussian is densified (3DGS: 2e-4).
     densify_grad_threshold: f32 = 2e-4,
+    /// The screen-space gradient a step adds to a Gaussian's densification statistic with
+    /// `blur_model = exposure`: `summed` (the norm of the sum of the sub-exposure passes' gradients:
+    /// a moving Gaussian's partly cancel) or `per-pass` (the sum of each pass's norm, as if every
+    /// pass were a view of its own, scaled like one render).
+    density_gradient: DensityGradient = DensityGradient::Summed,
     /// Gaussians with opacity below this are pruned (3DGS-Avatar: 0.05, 3DGS: 0.005).
     prune_min_opacity: f32 = 0.005,
     /// Steps between opacity resets (0: never).
     opacity_reset_every: usize = 0,
     /// Steps between checkpoints (0: only at the end).
     checkpoint_every: usize = 500,
-    /// Which images are trained on: `blurred` (the observed frames) or `sharp` (the sharp references
-    /// of a synthetic benchmark: the ceiling a model of the blur can chase; not for real data).
+    /// Which images are trained on: `blurred` (the observed frames), `sharp` (the sharp references
+    /// of a synthetic benchmark: the ceiling a model of the blur can chase; not for real data) or
+    /// `edi` (each frame deblurred on its own by the event double integral from its events, the
+    /// 2-D cascade baseline; with `--blur-model none --event-loss off`).
     train_on: TrainOn = TrainOn::Blurred,
     /// How a training frame's prediction is formed: `exposure` (the default: the mean, in linear
     /// intensity, of `subframes` renders at poses spread over the frame's exposure;
@@ -240,18 +261,42 @@ training_options! {
     /// pairs) or `all` (every pair, S(S − 1)/2; the counts of a longer interval are the sums of its
     /// consecutive ones).
     exposure_pairs: ExposurePairs = ExposurePairs::Consecutive,
-    /// Weight of the event-generation loss: 0.3, the best of a sweep over 0.3 / 1 / 3 with
-    /// `exposure` pairs on the default benchmark's `quick` preset (human box 28.89 / 28.58 / 27.88
-    /// dB). With `frames` pairs the best of 0.3 / 1 / 3 / 10 was 3 (human box 25.05 / 25.60 / 25.89
-    /// / 25.27 dB; `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick` preset").
-    event_weight: f32 = 0.3,
+    /// Weight of the event-generation loss: 1, with the `bound` penalty the better of 0.3 / 1 on the
+    /// default benchmark's `quick` preset (human box 29.64 / 29.74 dB). With the `squared` penalty
+    /// (the previous default) 0.3 was the best of 0.3 / 1 / 3 (28.89 / 28.58 / 27.88 dB): pulled to
+    /// the under-counted changes of a refractory sensor, more weight blurred more. With `frames`
+    /// pairs and the squared penalty the best of 0.3 / 1 / 3 / 10 was 3 (human box 25.05 / 25.60 /
+    /// 25.89 / 25.27 dB; `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick`
+    /// preset").
+    event_weight: f32 = 1.0,
     /// Contrast threshold C of the camera (log-intensity units): 0.2, the benchmark simulator's;
     /// `cargo xtask reconstruct` takes the one the scene's generator recorded
     /// (`generator.config.event_threshold` in scene.json) unless this option or the config file
     /// sets it.
     event_threshold: f32 = 0.2,
+    /// Negative contrast threshold C− (log-intensity units, a positive number) when it differs from
+    /// C+ (`event_threshold`); unset: C− = C+. `cargo xtask reconstruct` takes the generator's
+    /// (`generator.config.event_threshold_neg`) when the scene records one.
+    event_threshold_neg: Option<f32> = None,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
     event_log_eps: f32 = 1e-3,
+    /// Hot pixels — pixels whose event count (or net count, n⁺ − n⁻) over the whole recording
+    /// towers over their neighbours' (`events::hot_pixels`) — are found before training and their
+    /// events are not used (event loss and EDI frames); off: every event is used.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    event_hot_pixel_filter: bool = true,
+    /// How a pixel's log-intensity change is held to its events (`train::event_loss`): `bound`
+    /// (the default: a count is a lower bound on the change with the events' sign, as on a sensor
+    /// with a refractory period; no events, a change within the dead zone) or `squared` ((ΔL −
+    /// C·E)², EventNeRF / E-NeRF and the paper's event loss: every crossing fired; the default
+    /// before 2026-11-27, with `--event-weight 0.3`). On the default benchmark's 1 ms sensor,
+    /// `quick`: 34.17 / 29.74 dB (full frame / human box) against 33.38 / 28.91 for the squared
+    /// penalty (`docs/BENCHMARKS.md`).
+    event_penalty: EventPenaltyKind = EventPenaltyKind::Bound,
+    /// m of the `bound` penalty: a count of n events bounds the change by (n − m) thresholds.
+    event_bound_margin: f32 = 0.5,
+    /// z of the `bound` penalty: a pixel without events changes freely within ±z thresholds.
+    event_dead_zone: f32 = 1.0,
     /// Learned pose correction (`train::pose_correction`), for poses estimated by a fitter: per
     /// training frame, additive corrections of the 24 joint rotations (axis-angle, radians) and the
     /// translation (m) at mid exposure and, with `blur_model = exposure`, of their change over the
@@ -316,6 +361,9 @@ pub enum TrainOn {
     Blurred,
     /// The sharp references (benchmarks only).
     Sharp,
+    /// Every training frame deblurred on its own by EDI from its events (the 2-D cascade
+    /// baseline, "deblur first, then reconstruct"; use with `blur_model = none`).
+    Edi,
 }
 
 /// How a training frame's prediction is formed (see [`TrainConfig::blur_model`]).
@@ -349,6 +397,28 @@ pub enum ExposureNetworks {
     Once,
     /// At every sub-exposure pose.
     PerSubframe,
+}
+
+/// Which screen-space gradient feeds densification (see [`TrainConfig::density_gradient`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum DensityGradient {
+    /// ‖Σ_s g_s‖: the norm of the passes' summed gradient.
+    #[default]
+    Summed,
+    /// Σ_s ‖g_s‖: the passes' norms summed.
+    PerPass,
+}
+
+/// How the event loss holds a change to its events (see [`TrainConfig::event_penalty`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum EventPenaltyKind {
+    /// (ΔL − C·E)²: ideal events.
+    Squared,
+    /// Counts as lower bounds, silence as a dead zone (a sensor with a refractory period).
+    #[default]
+    Bound,
 }
 
 /// Which renders the event-generation loss compares (see [`TrainConfig::event_pairs`]).
@@ -571,6 +641,18 @@ impl TrainConfig {
         }
         if !(self.event_threshold > 0.0 && self.event_threshold.is_finite()) {
             return bad("event_threshold", "must be a finite number > 0");
+        }
+        if let Some(c) = self.event_threshold_neg {
+            if !(c > 0.0 && c.is_finite()) {
+                return bad("event_threshold_neg", "must be a finite number > 0");
+            }
+        }
+        if !(self.event_bound_margin.is_finite() && (0.0..=1.0).contains(&self.event_bound_margin))
+        {
+            return bad("event_bound_margin", "must be in [0, 1]");
+        }
+        if !(self.event_dead_zone.is_finite() && (0.0..=4.0).contains(&self.event_dead_zone)) {
+            return bad("event_dead_zone", "must be in [0, 4]");
         }
         if !(self.event_log_eps > 0.0 && self.event_log_eps.is_finite()) {
             return bad("event_log_eps", "must be a finite number > 0");

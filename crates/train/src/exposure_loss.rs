@@ -7,7 +7,7 @@
 //! one render, so the single-render model is the S = 1 case bit for bit); each event pair —
 //! consecutive renders, or every pair — adds its weighted cotangents to its two renders.
 
-use crate::event_loss::pair_event_loss;
+use crate::event_loss::{pair_event_loss_with, EventPenalty};
 use crate::image_loss::{l1, ssim, ImageShape};
 use nn::Real;
 
@@ -19,6 +19,8 @@ pub struct ExposureEvents<'a, T> {
     pub expected: &'a [Option<Vec<T>>],
     /// Weight of the event-generation loss.
     pub weight: T,
+    /// How a change is held to its events.
+    pub penalty: EventPenalty,
     /// ε of log(Y + ε).
     pub log_eps: T,
     /// Every pair of renders (s < s′, against the summed counts of the consecutive intervals
@@ -99,7 +101,13 @@ pub fn exposure_loss<T: Real>(
                 let Some(expected) = interval_counts(events.expected, s, s2) else {
                     continue;
                 };
-                let el = pair_event_loss(renders[s], renders[s2], &expected, events.log_eps);
+                let el = pair_event_loss_with(
+                    renders[s],
+                    renders[s2],
+                    &expected,
+                    events.log_eps,
+                    events.penalty,
+                );
                 event_value = event_value + events.weight * el.loss;
                 add_scaled(&mut d_renders[s], &el.d_first, events.weight);
                 add_scaled(&mut d_renders[s2], &el.d_second, events.weight);

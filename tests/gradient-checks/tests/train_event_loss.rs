@@ -1,16 +1,27 @@
-//! Finite-difference check of the event-generation loss (`train::event_loss::pair_event_loss`)
-//! w.r.t. both renders. The loss is smooth where the luma is positive (log of a positive value,
-//! squared residual); renders are drawn in [0.05, 1] so no probe reaches the clamp at 0.
+//! Finite-difference check of the event-generation loss (`train::event_loss::pair_event_loss_with`)
+//! w.r.t. both renders, with the squared penalty and with the bound penalty (counts as lower
+//! bounds, a dead zone without events). The loss is smooth where the luma is positive (log of a
+//! positive value, squared residual); renders are drawn in [0.05, 1] so no probe reaches the clamp
+//! at 0. The bound penalty's residual is continuous and piecewise linear in ΔL, so r² has a
+//! continuous first derivative; a probe of h = 1e-6 straddles one of its kinks with probability
+//! ~1e-6 per pixel, as L1's kinks elsewhere.
 //! Tolerance in f64 with h = 1e-6: |num − ana| ≤ 1e-9 + 1e-6·max(|num|, |ana|) (loss O(1): rounding
 //! ≈ 1e-10, truncation ≈ h²·|L'''| with |L'''| ≤ ~1e4 at luma ≥ 0.05 gives ≤ 1e-8 relative).
 
 use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
 use proptest::prelude::*;
-use train::event_loss::pair_event_loss;
+use train::event_loss::{pair_event_loss_with, EventPenalty};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;
-const N: usize = 12;
+const N: usize = 24;
+
+const BOUND: EventPenalty = EventPenalty::Bound {
+    c_pos: 0.2,
+    c_neg: 0.25,
+    margin: 0.5,
+    dead_zone: 1.0,
+};
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
@@ -19,16 +30,30 @@ proptest! {
     fn event_loss_gradient_matches(
         images in prop::collection::vec(0.05f64..1.0, 2 * 3 * N),
         counts in prop::collection::vec(-3i32..4, N),
+        bound in any::<bool>(),
     ) {
-        let expected: Vec<f64> = counts.iter().map(|&c| 0.2 * f64::from(c)).collect();
-        let eval = |x: &[f64]| pair_event_loss(&x[..3 * N], &x[3 * N..], &expected, 1e-3).loss;
-        let out = pair_event_loss(&images[..3 * N], &images[3 * N..], &expected, 1e-3);
+        let penalty = if bound { BOUND } else { EventPenalty::Squared };
+        let expected: Vec<f64> = counts
+            .iter()
+            .map(|&c| if c > 0 { 0.2 * f64::from(c) } else { 0.25 * f64::from(c) })
+            .collect();
+        let loss = |x: &[f64]| pair_event_loss_with(&x[..3 * N], &x[3 * N..], &expected, 1e-3, penalty);
+        let out = loss(&images);
         let analytic: Vec<f64> = out.d_first.iter().chain(&out.d_second).copied().collect();
-        let numeric = central_differences(eval, &images, H);
+        let numeric = central_differences(|x| loss(x).loss, &images, H);
         let mut checker = GradientChecker::new();
-        checker.check("event loss d(render k, render k+1)", &numeric, &analytic, TOL);
+        checker.check(&format!("event loss d(render k, render k+1), {penalty:?}"), &numeric, &analytic, TOL);
+        // Fails on a wrong sign, and the gradient is not trivially zero (24 random pixels all
+        // inside their bounds has probability ≈ 2^-24).
         let neg: Vec<f64> = analytic.iter().map(|a| -a).collect();
         prop_assert!(!compare("negated", &numeric, &neg, TOL).passed());
+        prop_assert!(analytic.iter().any(|&a| a != 0.0));
+        if bound {
+            // The bound is not the squared penalty: the squared gradient fails it.
+            let squared = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, EventPenalty::Squared);
+            let other: Vec<f64> = squared.d_first.iter().chain(&squared.d_second).copied().collect();
+            prop_assert!(!compare("squared for bound", &numeric, &other, TOL).passed());
+        }
         checker.finish();
     }
 }

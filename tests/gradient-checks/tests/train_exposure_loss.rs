@@ -11,11 +11,13 @@
 //! which a probe of 1e-6 crosses with probability ~1e-6 per pixel for values drawn apart;
 //! truncation h²·|L'''| is ≤ 1e-8 at luma ≥ 0.05. |num − ana| ≤ 1e-9 + 1e-6·max(|num|, |ana|) keeps
 //! more than an order of magnitude of margin. Dropping the 1/S of the mean, or the weight of the
-//! event pairs, fails it (asserted below).
+//! event pairs, fails it (asserted below). The event terms run with the squared or the bound
+//! penalty (`train::event_loss::EventPenalty`).
 
 use gradient_checks::{central_differences, compare, rng, GradientChecker, Tolerance};
 use proptest::prelude::*;
 use rand::Rng;
+use train::event_loss::EventPenalty;
 use train::exposure_loss::{exposure_loss, ExposureEvents};
 use train::image_loss::ImageShape;
 
@@ -24,6 +26,13 @@ const H: f64 = 1e-6;
 const SIDE: usize = 12;
 const HW: usize = SIDE * SIDE;
 const PLANES: usize = 4;
+/// The bound penalty of `train::event_loss` (its kinks: see `train_event_loss.rs`).
+const BOUND: EventPenalty = EventPenalty::Bound {
+    c_pos: 0.2,
+    c_neg: 0.2,
+    margin: 0.5,
+    dead_zone: 1.0,
+};
 
 /// The terms' value for S renders laid out one after the other in `x` (PLANES × HW each).
 fn value(
@@ -33,6 +42,7 @@ fn value(
     event_weight: f64,
     all_pairs: bool,
     grey: bool,
+    penalty: EventPenalty,
 ) -> (f64, Vec<Vec<f64>>) {
     let renders: Vec<&[f64]> = x.chunks(PLANES * HW).collect();
     let shape = ImageShape {
@@ -48,6 +58,7 @@ fn value(
         Some(ExposureEvents {
             expected,
             weight: event_weight,
+            penalty,
             log_eps: 1e-3,
             all_pairs,
         }),
@@ -61,7 +72,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(8))]
 
     #[test]
-    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4, all_pairs in any::<bool>(), grey in any::<bool>()) {
+    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4, all_pairs in any::<bool>(), grey in any::<bool>(), bound in any::<bool>()) {
+        let penalty = if bound { BOUND } else { EventPenalty::Squared };
         let subframes = [1, 2, 3, 5][which];
         let mut rng = rng(seed);
         let x: Vec<f64> = (0..subframes * PLANES * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
@@ -75,14 +87,14 @@ proptest! {
         let expected: Vec<Option<Vec<f64>>> = (0..subframes.saturating_sub(1))
             .map(|s| (s % 2 == 1 || subframes == 2).then(|| (0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
             .collect();
-        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs, grey);
+        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs, grey, penalty);
         let analytic: Vec<f64> = d.concat();
-        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs, grey).0, &x, H);
+        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs, grey, penalty).0, &x, H);
         let mut checker = GradientChecker::new();
         checker.check(&format!("exposure terms, S = {subframes}, all pairs {all_pairs}, grey {grey}"), &numeric, &analytic, TOL);
         if grey {
             // The luminance's adjoint is needed: the colour cotangent fails a grey frame.
-            let (_, colour) = value(&x, &observed, &expected, 0.7, all_pairs, false);
+            let (_, colour) = value(&x, &observed, &expected, 0.7, all_pairs, false, penalty);
             prop_assert!(!compare("colour cotangent on a grey frame", &numeric, &colour.concat(), TOL).passed());
         }
         // The probability plane is not part of the terms.
@@ -91,7 +103,7 @@ proptest! {
         }
         if subframes > 1 {
             // The mean's 1/S is needed: the unscaled photometric cotangent fails.
-            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs, grey);
+            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs, grey, penalty);
             let unscaled: Vec<f64> = d.iter().zip(&d_no_events).flat_map(|(with, without)| {
                 with.iter().zip(without).map(move |(&a, &b)| a + (subframes as f64 - 1.0) * b)
             }).collect();

@@ -5,6 +5,7 @@
 //! module only converts, and reports which file failed to decode if one does. [`TrainingData`] is the
 //! training split prepared for the loop (poses, skinning samples, pair supervision).
 
+pub mod edi;
 mod training;
 
 pub use training::{

@@ -152,6 +152,36 @@ impl TrainingData {
         Ok(())
     }
 
+    /// Replaces every training frame's image by its EDI deblurring (`--train-on edi`, the 2-D
+    /// cascade baseline; [`super::edi`]), with C± and ε from `config`. Frames whose exposure the
+    /// event files do not cover keep their blurred image; returns how many were deblurred. A scene
+    /// without events is an error naming the first frame without an `events` file.
+    pub fn use_edi_images(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+    ) -> Result<usize, TrainError> {
+        let edi = events::EdiConfig {
+            c_pos: f64::from(config.event_threshold),
+            c_neg: f64::from(config.event_threshold_neg.unwrap_or(config.event_threshold)),
+        };
+        let training = data
+            .frames
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.split == Split::Train);
+        let hot = hot_pixels(data, config.event_hot_pixel_filter, "EDI deblurring")?;
+        let mut deblurred = 0;
+        for (frame, (p, source)) in self.frames.iter_mut().zip(training) {
+            let log_eps = f64::from(config.event_log_eps);
+            if let Some(image) = super::edi::edi_image(data, p, source, edi, log_eps, &hot)? {
+                frame.image = image;
+                deblurred += 1;
+            }
+        }
+        Ok(deblurred)
+    }
+
     /// Prepares the exposure model: for every training frame, the body poses at `subframes`
     /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the frame's
     /// exposure: its own `exposure_s`, else the scene's), interpolated from the SMPL parameters of
@@ -206,14 +236,15 @@ impl TrainingData {
     ) -> Result<(), TrainError> {
         let (w, h) = (self.camera.width, self.camera.height);
         let sensor = events::SensorSize::new(w, h);
+        let hot = hot_pixels(data, config.event_hot_pixel_filter, "the event loss")?;
         let mut pairs = vec![None; self.frames.len()];
         let found = consecutive_training_pairs(data);
         for &(slot, p) in &found {
             let stream = read_frame_events(data, p, "the event loss")?;
-            let counts = events::count_frame(&stream.as_slice(), sensor, events::CountMode::Signed);
+            let expected = expected_change(&stream.as_slice(), sensor, config, &hot);
             pairs[slot] = Some(EventPair {
                 next_slot: slot + 1,
-                expected: counts.iter().map(|c| c * config.event_threshold).collect(),
+                expected,
             });
         }
         if found.is_empty() {
@@ -240,6 +271,11 @@ impl TrainingData {
         config: &TrainConfig,
     ) -> Result<(), TrainError> {
         let sensor = events::SensorSize::new(self.camera.width, self.camera.height);
+        let hot = hot_pixels(
+            data,
+            config.event_hot_pixel_filter,
+            "the event loss inside exposures",
+        )?;
         // Each file is read once: an exposure reaches at most one file back, so the streams of
         // frames before p − 1 are dropped as the loop moves on.
         let mut loaded: std::collections::BTreeMap<usize, events::EventStream> = Default::default();
@@ -288,11 +324,7 @@ impl TrainingData {
                 .windows(2)
                 .map(|w| {
                     (w[0] >= covered_from && w[1] <= covered_to).then(|| {
-                        let window = slice.window(us(w[0]), us(w[1]));
-                        events::count_frame(&window, sensor, events::CountMode::Signed)
-                            .iter()
-                            .map(|c| c * config.event_threshold)
-                            .collect()
+                        expected_change(&slice.window(us(w[0]), us(w[1])), sensor, config, &hot)
                     })
                 })
                 .collect();
@@ -391,6 +423,71 @@ impl TrainingData {
     }
 }
 
+/// C+·n⁺ − C−·n⁻ per pixel (row-major H × W) of `events`: the log-intensity change they report,
+/// with C± from `config` (C·(n⁺ − n⁻) when C− is not set).
+/// The pixels `hot` marks (empty: none) report no change, as if their events were removed.
+fn expected_change(
+    events: &events::EventSlice<'_>,
+    sensor: events::SensorSize,
+    config: &TrainConfig,
+    hot: &[bool],
+) -> Vec<f32> {
+    let mut change = counted_change(events, sensor, config);
+    for (c, _) in change.iter_mut().zip(hot).filter(|(_, &h)| h) {
+        *c = 0.0;
+    }
+    change
+}
+
+/// [`expected_change`] of every pixel.
+fn counted_change(
+    events: &events::EventSlice<'_>,
+    sensor: events::SensorSize,
+    config: &TrainConfig,
+) -> Vec<f32> {
+    let c_pos = config.event_threshold;
+    match config.event_threshold_neg {
+        None => events::count_frame(events, sensor, events::CountMode::Signed)
+            .iter()
+            .map(|c| c * c_pos)
+            .collect(),
+        Some(c_neg) => {
+            let two = events::count_frame(events, sensor, events::CountMode::TwoChannel);
+            let (pos, neg) = two.split_at(two.len() / 2);
+            pos.iter()
+                .zip(neg)
+                .map(|(p, n)| p * c_pos - n * c_neg)
+                .collect()
+        }
+    }
+}
+
+/// The hot pixels of the scene's events (row-major H × W; `events::hot_pixel_mask` over every
+/// frame's file), or an empty mask unless `filter` (`config.event_hot_pixel_filter`). Prints how
+/// many were found.
+pub fn hot_pixels(data: &Dataset, filter: bool, needed_by: &str) -> Result<Vec<bool>, TrainError> {
+    if !filter {
+        return Ok(Vec::new());
+    }
+    let sensor = events::SensorSize::new(data.camera.width, data.camera.height);
+    let mut all = events::EventStream::new();
+    for p in 0..data.frames.len() {
+        if data.scene.frames[p].events.is_some() {
+            all.extend_from(&read_frame_events(data, p, needed_by)?.as_slice());
+        }
+    }
+    let hot = events::hot_pixel_mask(&all.as_slice(), sensor, events::HotPixelRule::default());
+    let count = hot.iter().filter(|&&h| h).count();
+    if count > 0 {
+        println!(
+            "events: {count} hot pixels (event count or net count towering over their \
+             neighbours', events::hot_pixels) are not used (--event-hot-pixel-filter off to keep \
+             them)"
+        );
+    }
+    Ok(hot)
+}
+
 /// How a frame's event file is read: a Prophesee `.raw` file with the scene's recorded encoding
 /// (`events_raw_format`) for headers that do not state it; other formats as they are.
 pub fn event_read_options(data: &Dataset, path: &std::path::Path) -> events::io::ReadOptions {
@@ -412,7 +509,7 @@ pub fn event_read_options(data: &Dataset, path: &std::path::Path) -> events::io:
 
 /// The events of frame `p`'s `events` file ([t_p, t_{p+1})); a frame without one is an error naming
 /// the frame, the field and what needed it (`needed_by`).
-fn read_frame_events(
+pub(super) fn read_frame_events(
     data: &Dataset,
     p: usize,
     needed_by: &str,
@@ -569,4 +666,31 @@ pub fn sharp_flow_pairs(
         });
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_are_weighted_by_their_polarity_threshold_and_hot_pixels_report_nothing() {
+        let sensor = events::SensorSize::new(3, 1);
+        let mut stream = events::EventStream::new();
+        for (t, x, p) in [(1, 0, 1), (2, 0, 1), (3, 1, -1), (4, 1, 1), (5, 2, -1)] {
+            stream.push(events::Event { t, x, y: 0, p });
+        }
+        let mut config = TrainConfig {
+            event_threshold: 0.2,
+            ..TrainConfig::default()
+        };
+        let same = expected_change(&stream.as_slice(), sensor, &config, &[]);
+        assert_eq!(same, vec![0.4, 0.0, -0.2]);
+        config.event_threshold_neg = Some(0.3);
+        let two = expected_change(&stream.as_slice(), sensor, &config, &[]);
+        assert!((two[0] - 0.4).abs() < 1e-7 && (two[1] + 0.1).abs() < 1e-7);
+        assert!((two[2] + 0.3).abs() < 1e-7, "{two:?}");
+        let hot = expected_change(&stream.as_slice(), sensor, &config, &[true, false, false]);
+        assert_eq!(hot[0], 0.0);
+        assert_eq!(hot[1..], two[1..]);
+    }
 }

@@ -20,7 +20,7 @@ pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
 use crate::body::PreparedPose;
-use crate::config::{BlurModel, ExposureNetworks, ExposurePairs, TrainConfig};
+use crate::config::{BlurModel, DensityGradient, ExposureNetworks, ExposurePairs, TrainConfig};
 use crate::data::TrainingData;
 use crate::exposure_loss::{exposure_loss, ExposureEvents};
 use crate::image_loss::{psnr, ImageShape};
@@ -69,6 +69,8 @@ fn extent_of(cube: &([f32; 3], [f32; 3])) -> f32 {
 struct RefineInputs {
     means_2d: Vec<[f32; 2]>,
     radii: Vec<u32>,
+    /// With `density_gradient = per-pass`: Σ_s ‖g_s‖ per Gaussian, in NDC units.
+    pass_norms: Option<Vec<f32>>,
 }
 
 impl Trainer {
@@ -241,6 +243,7 @@ impl Trainer {
             Some(expected) if config.event_loss && passes.len() > 1 => Some(ExposureEvents {
                 expected,
                 weight: config.event_weight,
+                penalty: config.event_penalty(),
                 log_eps: config.event_log_eps,
                 all_pairs: config.exposure_pairs == ExposurePairs::All,
             }),
@@ -325,6 +328,9 @@ impl Trainer {
         let (aiap_value, aiap_canonical) =
             aiap_terms(&self.aiap, model, &first.posed, &config, &mut posed_grads);
         let mut sub_render_backward_seconds = 0.0;
+        let mut pass_norms = (config.density_gradient == DensityGradient::PerPass
+            && passes.len() > 1)
+            .then(|| vec![0.0f32; first.out.radii.len()]);
         // Per pass, ∂L/∂bones and ∂L/∂pose code (for the pose correction).
         let mut pass_bones = vec![Vec::new(); passes.len()];
         let mut pass_codes = vec![Vec::new(); passes.len()];
@@ -332,11 +338,17 @@ impl Trainer {
             // One backward through the networks for every sub-exposure pass.
             let mut opacity_grads = std::mem::take(&mut posed_grads.opacity_logits);
             let mut means_2d = std::mem::take(&mut posed_grads.means_2d);
+            if let Some(norms) = pass_norms.as_mut() {
+                add_ndc_norms(norms, &means_2d, camera);
+            }
             let mut subs = Vec::with_capacity(passes.len() - 1);
             for (s, pass) in passes.iter().enumerate().filter(|&(s, _)| s != mid) {
                 let t = Instant::now();
                 let sub = pass.render_backward(&d_images[s], None)?;
                 sub_render_backward_seconds += t.elapsed().as_secs_f64();
+                if let Some(norms) = pass_norms.as_mut() {
+                    add_ndc_norms(norms, &sub.means_2d, camera);
+                }
                 add_to(&mut opacity_grads, &sub.opacity_logits);
                 add_to(means_2d.as_flattened_mut(), sub.means_2d.as_flattened());
                 subs.push(sub);
@@ -355,10 +367,16 @@ impl Trainer {
             add_aiap_canonical(&self.aiap, model, &aiap_canonical, &mut grads);
             let mut opacity_grads = posed_grads.opacity_logits;
             let mut means_2d = posed_grads.means_2d;
+            if let Some(norms) = pass_norms.as_mut() {
+                add_ndc_norms(norms, &means_2d, camera);
+            }
             for (s, pass) in passes.iter().enumerate().filter(|&(s, _)| s != mid) {
                 let t = Instant::now();
                 let sub = pass.render_backward(&d_images[s], None)?;
                 sub_render_backward_seconds += t.elapsed().as_secs_f64();
+                if let Some(norms) = pass_norms.as_mut() {
+                    add_ndc_norms(norms, &sub.means_2d, camera);
+                }
                 let g = pass.model_backward(&sub)?;
                 grads.add_shared(&g);
                 add_to(&mut grads.latent, &g.latent);
@@ -464,6 +482,7 @@ impl Trainer {
         let refine_inputs = RefineInputs {
             means_2d,
             radii: first.out.radii.clone(),
+            pass_norms,
         };
         drop(second);
         drop(passes);
@@ -583,12 +602,18 @@ impl Trainer {
     /// schedule (AIAP neighbourhoods refreshed after), and the opacity reset; advances the step count.
     fn refine(&mut self, data: &TrainingData, inputs: &RefineInputs) {
         let config = self.model.config.clone();
-        accumulate_screen_stats(
-            &mut self.stats,
-            &data.camera,
-            &inputs.means_2d,
-            &inputs.radii,
-        );
+        match &inputs.pass_norms {
+            Some(norms) => {
+                let radius: Vec<f32> = inputs.radii.iter().map(|&r| r as f32).collect();
+                self.stats.accumulate_norms(norms, &radius);
+            }
+            None => accumulate_screen_stats(
+                &mut self.stats,
+                &data.camera,
+                &inputs.means_2d,
+                &inputs.radii,
+            ),
+        }
         let done = self.step + 1;
         if on_schedule(
             done,
@@ -619,6 +644,15 @@ impl Trainer {
             reset_opacity(&mut self.model.set, &mut self.optimisers.gaussians, 0.01);
         }
         self.step = done;
+    }
+}
+
+/// `norms[i] += ‖g_i‖` with `g` the screen-space mean gradients (pixels) scaled to NDC units (× W/2,
+/// H/2, as `accumulate_screen_stats` does).
+fn add_ndc_norms(norms: &mut [f32], g: &[[f32; 2]], camera: &rasterize_cpu::Camera) {
+    let (hw, hh) = (camera.width as f32 * 0.5, camera.height as f32 * 0.5);
+    for (n, &[gx, gy]) in norms.iter_mut().zip(g) {
+        *n += ((gx * hw).powi(2) + (gy * hh).powi(2)).sqrt();
     }
 }
 

@@ -5,7 +5,7 @@
 use crate::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP_NEIGHBOURS};
 use crate::config::{EventPairs, FlowGradient, FlowMeasure, TrainConfig};
 use crate::data::{EventPair, FlowPair, TrainingData};
-use crate::event_loss::pair_event_loss;
+use crate::event_loss::pair_event_loss_with;
 use crate::exposure_loss::add_scaled;
 use crate::flow_loss::{pair_flow_loss, pair_warp_loss};
 use crate::model::{Model, PosedGradients, RENDER_CHANNELS};
@@ -113,7 +113,13 @@ pub(super) fn pair_terms(
         }
     }
     if let Some(event_pair) = pair.events {
-        let el = pair_event_loss(rgb, rgb2, &event_pair.expected, config.event_log_eps);
+        let el = pair_event_loss_with(
+            rgb,
+            rgb2,
+            &event_pair.expected,
+            config.event_log_eps,
+            config.event_penalty(),
+        );
         let lambda = config.event_weight;
         terms.event = lambda * el.loss;
         add_scaled(&mut d_first[..3 * hw], &el.d_first, lambda);

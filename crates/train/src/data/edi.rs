@@ -1,0 +1,90 @@
+//! The frames of the 2-D cascade baseline (`--train-on edi`): every training frame deblurred on its
+//! own by the event double integral (`events::edi`), from the events of its exposure, before any
+//! 3-D model sees it — the paper's "deblur first, then reconstruct" rows with the weight-free event
+//! deblurring.
+
+pub use super::training::hot_pixels;
+use super::training::read_frame_events;
+use super::{Dataset, TrainFrame};
+use crate::TrainError;
+
+/// The events of `[from_s, to_s)` around frame `p` (its own file and its neighbours', joined in
+/// time order), or `None` when the frames' files do not cover that span (before the first frame's
+/// time, after the last file's end).
+pub fn span_events(
+    data: &Dataset,
+    p: usize,
+    from_s: f64,
+    to_s: f64,
+    needed_by: &str,
+) -> Result<Option<events::EventStream>, TrainError> {
+    let frames = &data.frames;
+    let first = (0..=p).rev().find(|&q| frames[q].time_s <= from_s);
+    let Some(first) = first else {
+        return Ok(None);
+    };
+    // The file of frame q covers [t_q, t_{q+1}); the last frame's one frame interval.
+    let end_of = |q: usize| {
+        frames
+            .get(q + 1)
+            .map_or(frames[q].time_s + 1.0 / data.scene.fps, |f| f.time_s)
+    };
+    let mut last = first;
+    while end_of(last) < to_s {
+        if last + 1 >= frames.len() {
+            return Ok(None);
+        }
+        last += 1;
+    }
+    let mut stream = events::EventStream::new();
+    for q in first..=last {
+        stream.extend_from(&read_frame_events(data, q, needed_by)?.as_slice());
+    }
+    Ok(Some(stream))
+}
+
+/// The EDI image of `frame` (position `p` in `data.frames`) over its exposure, deblurred to its
+/// mid-exposure time, or `None` when the event files do not cover the exposure. The pixels `hot`
+/// marks (row-major H × W; empty: none) keep their blurred value.
+pub fn edi_image(
+    data: &Dataset,
+    p: usize,
+    frame: &TrainFrame,
+    config: events::EdiConfig,
+    log_eps: f64,
+    hot: &[bool],
+) -> Result<Option<Vec<f32>>, TrainError> {
+    let (from, to) = (
+        frame.time_s - 0.5 * frame.exposure_s,
+        frame.time_s + 0.5 * frame.exposure_s,
+    );
+    let why = format!("EDI deblurring of frame {}", frame.index);
+    let Some(stream) = span_events(data, p, from, to, &why)? else {
+        return Ok(None);
+    };
+    let us = |t: f64| (t * 1e6).round() as i64;
+    let exposure = events::Exposure {
+        start_us: us(from),
+        end_us: us(to),
+        reference_us: us(frame.time_s),
+    };
+    let sensor = events::SensorSize::new(data.camera.width, data.camera.height);
+    let mut gain = events::edi_gain(&stream.as_slice(), sensor, exposure, config).map_err(|e| {
+        TrainError::Config(format!(
+            "{}: frame {}: {e}",
+            data.dir.display(),
+            frame.index
+        ))
+    })?;
+    for (g, _) in gain.iter_mut().zip(hot).filter(|(_, &h)| h) {
+        *g = 1.0;
+    }
+    let image = events::apply_gain(&frame.image, &gain, log_eps).map_err(|e| {
+        TrainError::Config(format!(
+            "{}: frame {}: {e}",
+            data.dir.display(),
+            frame.index
+        ))
+    })?;
+    Ok(Some(image))
+}
