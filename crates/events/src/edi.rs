@@ -105,7 +105,7 @@ pub fn edi_gain(
 /// per-pixel gains of [`edi_gain`]: `(B + ε)·gain − ε`, clamped at 0.
 pub fn apply_gain(blurred: &[f32], gain: &[f64], log_eps: f64) -> Result<Vec<f32>> {
     let n = gain.len();
-    if n == 0 || blurred.len() % n != 0 {
+    if n == 0 || !blurred.len().is_multiple_of(n) {
         return Err(EventsError::arg(
             "blurred",
             format!(
