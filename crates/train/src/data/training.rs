@@ -471,9 +471,11 @@ pub fn hot_pixels(data: &Dataset, filter: bool, needed_by: &str) -> Result<Vec<b
     }
     let sensor = events::SensorSize::new(data.camera.width, data.camera.height);
     let mut all = events::EventStream::new();
+    // Every event counts, wherever a file's events lie in time (which the losses check when
+    // they read a frame's file for its own interval).
     for p in 0..data.frames.len() {
         if data.scene.frames[p].events.is_some() {
-            all.extend_from(&read_frame_events(data, p, needed_by)?.as_slice());
+            all.extend_from(&read_frame_file(data, p, needed_by)?.0.as_slice());
         }
     }
     let hot = events::hot_pixel_mask(&all.as_slice(), sensor, events::HotPixelRule::default());
@@ -514,16 +516,7 @@ pub(super) fn read_frame_events(
     p: usize,
     needed_by: &str,
 ) -> Result<events::EventStream, TrainError> {
-    let Some(rel) = &data.scene.frames[p].events else {
-        return Err(TrainError::Config(format!(
-            "{}: frame {} has no `events` file (needed by {needed_by})",
-            data.dir.display(),
-            data.frames[p].index
-        )));
-    };
-    let path = scene::Scene::resolve(&data.dir, rel);
-    let stream = events::io::read_events_with(&path, &event_read_options(data, &path))
-        .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+    let (stream, path) = read_frame_file(data, p, needed_by)?;
     // The file holds the events of [t_p, t_{p+1}) (the last frame: one frame interval); events
     // outside it mean the file is another frame's or on another clock, and would supervise the
     // wrong renders. One microsecond of slack covers the rounding of times to microseconds.
@@ -545,6 +538,26 @@ pub(super) fn read_frame_events(
         }
     }
     Ok(stream)
+}
+
+/// The events of frame `p`'s `events` file as they are, and its path; a frame without one is an
+/// error naming the frame, the field and what needed it (`needed_by`).
+fn read_frame_file(
+    data: &Dataset,
+    p: usize,
+    needed_by: &str,
+) -> Result<(events::EventStream, std::path::PathBuf), TrainError> {
+    let Some(rel) = &data.scene.frames[p].events else {
+        return Err(TrainError::Config(format!(
+            "{}: frame {} has no `events` file (needed by {needed_by})",
+            data.dir.display(),
+            data.frames[p].index
+        )));
+    };
+    let path = scene::Scene::resolve(&data.dir, rel);
+    let stream = events::io::read_events_with(&path, &event_read_options(data, &path))
+        .map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+    Ok((stream, path))
 }
 
 /// Slots of consecutive training frames: `(slot of k, position of k in data.frames)` for every
