@@ -480,6 +480,8 @@ pub fn run(args: Args) -> Result<()> {
             "event_pairs": config.event_pairs,
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,
+            "event_threshold_neg": config.event_threshold_neg,
+            "event_penalty": config.event_penalty,
             "lpips_weight": config.lpips_weight,
             "pose_correction": config.pose_correction,
             "pose_error": pose_error,
