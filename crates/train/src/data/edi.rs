@@ -3,7 +3,7 @@
 //! 3-D model sees it — the paper's "deblur first, then reconstruct" rows with the weight-free event
 //! deblurring.
 
-pub use super::training::hot_pixels;
+pub use super::event_counts::hot_pixels;
 use super::training::read_frame_events;
 use super::{Dataset, TrainFrame};
 use crate::TrainError;

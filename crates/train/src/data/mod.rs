@@ -6,6 +6,7 @@
 //! training split prepared for the loop (poses, skinning samples, pair supervision).
 
 pub mod edi;
+mod event_counts;
 mod training;
 
 pub use training::{
