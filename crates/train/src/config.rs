@@ -261,8 +261,8 @@ training_options! {
     /// pairs) or `all` (every pair, S(S − 1)/2; the counts of a longer interval are the sums of its
     /// consecutive ones).
     exposure_pairs: ExposurePairs = ExposurePairs::Consecutive,
-    /// Weight of the event-generation loss: 1, with the `bound` penalty the better of 0.3 / 1 on the
-    /// default benchmark's `quick` preset (human box 29.64 / 29.74 dB). With the `squared` penalty
+    /// Weight of the event-generation loss: 1, with the `bound` penalty the best of 0.3 / 1 / 3 on
+    /// the default benchmark's `quick` preset (human box 29.64 / 29.74 / 29.43 dB). With the `squared` penalty
     /// (the previous default) 0.3 was the best of 0.3 / 1 / 3 (28.89 / 28.58 / 27.88 dB): pulled to
     /// the under-counted changes of a refractory sensor, more weight blurred more. With `frames`
     /// pairs and the squared penalty the best of 0.3 / 1 / 3 / 10 was 3 (human box 25.05 / 25.60 /
