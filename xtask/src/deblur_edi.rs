@@ -43,20 +43,13 @@ pub fn run(args: Args) -> Result<()> {
     };
     let data = train::data::load_dataset(&dir)
         .with_context(|| format!("loading the scene {}", dir.display()))?;
-    let recorded = |key: &str| {
-        data.scene
-            .generator
-            .as_ref()
-            .and_then(|g| g.pointer(&format!("/config/{key}")))
-            .and_then(serde_json::Value::as_f64)
-    };
     let c_pos = args
         .threshold
-        .or_else(|| recorded("event_threshold"))
+        .or_else(|| data.recorded_positive("event_threshold"))
         .unwrap_or(0.2);
     let c_neg = args
         .threshold_neg
-        .or_else(|| recorded("event_threshold_neg"))
+        .or_else(|| data.recorded_positive("event_threshold_neg"))
         .unwrap_or(c_pos);
     let config = events::EdiConfig { c_pos, c_neg };
     std::fs::create_dir_all(&args.out)

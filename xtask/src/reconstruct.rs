@@ -201,24 +201,12 @@ fn scene_defaults(
     training: &TrainingArgs,
     data: &train::data::Dataset,
 ) -> Result<TrainConfig> {
-    let recorded = data
-        .scene
-        .generator
-        .as_ref()
-        .and_then(|g| g.pointer("/config/event_threshold"))
-        .and_then(serde_json::Value::as_f64);
-    if let Some(c) = recorded.filter(|c| c.is_finite() && *c > 0.0) {
+    if let Some(c) = data.recorded_positive("event_threshold") {
         if !training.sets("event_threshold")? {
             config.event_threshold = c as f32;
         }
     }
-    let recorded_neg = data
-        .scene
-        .generator
-        .as_ref()
-        .and_then(|g| g.pointer("/config/event_threshold_neg"))
-        .and_then(serde_json::Value::as_f64);
-    if let Some(c) = recorded_neg.filter(|c| c.is_finite() && *c > 0.0) {
+    if let Some(c) = data.recorded_positive("event_threshold_neg") {
         if !training.sets("event_threshold_neg")? {
             config.event_threshold_neg = Some(c as f32);
         }

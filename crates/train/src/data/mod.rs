@@ -59,6 +59,17 @@ impl Dataset {
     pub fn split(&self, split: Split) -> Vec<usize> {
         self.scene.split_indices(split)
     }
+
+    /// A positive finite number the scene's generator recorded under `config.<key>` (e.g. the
+    /// sensor's `event_threshold`), if it recorded one.
+    pub fn recorded_positive(&self, key: &str) -> Option<f64> {
+        self.scene
+            .generator
+            .as_ref()
+            .and_then(|g| g.pointer(&format!("/config/{key}")))
+            .and_then(serde_json::Value::as_f64)
+            .filter(|c| c.is_finite() && *c > 0.0)
+    }
 }
 
 /// Loads and validates `dir` (see `scene::load`) and decodes every frame.
