@@ -77,6 +77,7 @@ macro_rules! training_options {
                 c_neg: f64::from(self.event_threshold_neg.unwrap_or(self.event_threshold)),
                 margin: f64::from(self.event_bound_margin),
                 dead_zone: f64::from(self.event_dead_zone),
+                overshoot: f64::from(self.event_overshoot_weight),
             },
         }
     }
@@ -297,6 +298,10 @@ training_options! {
     event_bound_margin: f32 = 0.5,
     /// z of the `bound` penalty: a pixel without events changes freely within ±z thresholds.
     event_dead_zone: f32 = 1.0,
+    /// o of the `bound` penalty: the weight of a change's squared overshoot past its count by
+    /// more than m thresholds (0: counts are pure lower bounds; the refractory period hides
+    /// crossings, so a count is never too high, but a count at a slowly changing pixel is exact).
+    event_overshoot_weight: f32 = 0.0,
     /// Learned pose correction (`train::pose_correction`), for poses estimated by a fitter: per
     /// training frame, additive corrections of the 24 joint rotations (axis-angle, radians) and the
     /// translation (m) at mid exposure and, with `blur_model = exposure`, of their change over the
@@ -653,6 +658,11 @@ impl TrainConfig {
         }
         if !(self.event_dead_zone.is_finite() && (0.0..=4.0).contains(&self.event_dead_zone)) {
             return bad("event_dead_zone", "must be in [0, 4]");
+        }
+        if !(self.event_overshoot_weight.is_finite()
+            && (0.0..=1.0).contains(&self.event_overshoot_weight))
+        {
+            return bad("event_overshoot_weight", "must be in [0, 1]");
         }
         if !(self.event_log_eps > 0.0 && self.event_log_eps.is_finite()) {
             return bad("event_log_eps", "must be a finite number > 0");

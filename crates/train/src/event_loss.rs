@@ -19,8 +19,12 @@
 //! r(p) = min(0, ΔL − (C+·n⁺ − C−·n⁻ − m·C+)) where the events sum positive,
 //! r(p) = max(0, ΔL − (C+·n⁺ − C−·n⁻ + m·C−)) where they sum negative,
 //! r(p) = sign(ΔL)·max(0, |ΔL| − z·C) without events (C the mean of C±),
-//! L_ev = (1/N) Σ_p r(p)², with the margin m for the quantisation of the counts (the change between
-//! two crossings is up to one threshold either side) and the dead zone z.
+//! L_ev = (1/N) Σ_p w(p)·r(p)², with the margin m for the quantisation of the counts (the change
+//! between two crossings is up to one threshold either side) and the dead zone z; w = 1 but for an
+//! overshoot past the count (ΔL beyond C+·n⁺ − C−·n⁻ ± m·C in the events' direction), which costs
+//! its squared excess times the overshoot weight o (0: a pure bound; 1 with m = 0: the squared
+//! penalty on pixels with events). o between the two trusts an unsaturated count a little: the
+//! refractory period hides crossings, it never invents them.
 
 use nn::Real;
 
@@ -40,6 +44,9 @@ pub enum EventPenalty {
         /// z: a pixel without events may change by up to z·(C+ + C−)/2 unpenalised; 0 holds it
         /// to no change, as the squared penalty does.
         dead_zone: f64,
+        /// o: the weight of the squared overshoot of a change past its count by more than m
+        /// thresholds (0: counts are pure lower bounds).
+        overshoot: f64,
     },
 }
 
@@ -70,30 +77,40 @@ pub fn pair_event_loss<T: Real>(
 }
 
 /// The residual r(p) of a pixel whose log-intensity change is `change` and whose events sum to
-/// `expected` = C+·n⁺ − C−·n⁻ (see the module doc); the loss is r², its derivative in `change` 2r.
-pub fn event_residual<T: Real>(change: T, expected: T, penalty: EventPenalty) -> T {
+/// `expected` = C+·n⁺ − C−·n⁻, and its weight w(p) (see the module doc): the loss is w·r², its
+/// derivative in `change` 2·w·r.
+pub fn event_residual<T: Real>(change: T, expected: T, penalty: EventPenalty) -> (T, T) {
+    let one = T::one();
     match penalty {
-        EventPenalty::Squared => change - expected,
+        EventPenalty::Squared => (change - expected, one),
         EventPenalty::Bound {
             c_pos,
             c_neg,
             margin,
             dead_zone,
+            overshoot,
         } => {
             let zero = T::zero();
+            // r outside [low, high], weighted by the side's weight; 0 inside.
+            let outside = |low: T, high: T, below: T, above: T| {
+                if change < low {
+                    (change - low, below)
+                } else if change > high {
+                    (change - high, above)
+                } else {
+                    (zero, one)
+                }
+            };
+            let over = T::of(overshoot);
             if expected > zero {
-                (change - (expected - T::of(margin * c_pos))).min(zero)
+                let m = T::of(margin * c_pos);
+                outside(expected - m, expected + m, one, over)
             } else if expected < zero {
-                (change - (expected + T::of(margin * c_neg))).max(zero)
+                let m = T::of(margin * c_neg);
+                outside(expected - m, expected + m, over, one)
             } else {
                 let zone = T::of(0.5 * dead_zone * (c_pos + c_neg));
-                if change > zone {
-                    change - zone
-                } else if change < -zone {
-                    change + zone
-                } else {
-                    zero
-                }
+                outside(-zone, zone, one, one)
             }
         }
     }
@@ -120,9 +137,9 @@ pub fn pair_event_loss_with<T: Real>(
         let (ya, yb) = (grey(first, i), grey(second, i));
         let (ca, cb) = (ya.max(T::zero()), yb.max(T::zero()));
         let change = (cb + log_eps).ln() - (ca + log_eps).ln();
-        let r = event_residual(change, expected[i], penalty);
-        loss = loss + r * r * inv;
-        let g = two * r * inv;
+        let (r, w) = event_residual(change, expected[i], penalty);
+        loss = loss + w * r * r * inv;
+        let g = two * w * r * inv;
         // d/dY of log(max(Y, 0) + ε): 1/(Y + ε) above 0, 0 below (the clamp).
         let ga = if ya > T::zero() {
             -g / (ca + log_eps)
@@ -174,20 +191,44 @@ mod tests {
             c_neg: 0.25,
             margin: 0.5,
             dead_zone: 1.0,
+            overshoot: 0.0,
         };
+        let r = |change: f64, expected: f64, penalty| event_residual(change, expected, penalty).0;
         // Two positive events (0.4): any change above 0.3 is free, a smaller one costs.
-        assert_eq!(event_residual(0.9, 0.4, bound), 0.0);
-        assert_eq!(event_residual(0.31, 0.4, bound), 0.0);
-        assert!((event_residual(0.1f64, 0.4, bound) + 0.2).abs() < 1e-12);
+        let (over, weight) = event_residual(0.9f64, 0.4, bound);
+        assert!((over - 0.4).abs() < 1e-12 && weight == 0.0);
+        assert_eq!(r(0.31, 0.4, bound), 0.0);
+        assert!((r(0.1, 0.4, bound) + 0.2).abs() < 1e-12);
         // A change against the events' sign always costs.
-        assert!(event_residual(-0.1, 0.4, bound) < 0.0);
+        assert!(r(-0.1, 0.4, bound) < 0.0);
         // One negative event (−0.25): the change must fall below −0.125.
-        assert_eq!(event_residual(-0.6, -0.25, bound), 0.0);
-        assert!((event_residual(0.0f64, -0.25, bound) - 0.125).abs() < 1e-12);
+        assert_eq!(event_residual(-0.6, -0.25, bound).1, 0.0);
+        assert!((r(0.0, -0.25, bound) - 0.125).abs() < 1e-12);
         // No events: free inside ±0.225 (the mean threshold), linear beyond.
-        assert_eq!(event_residual(0.2, 0.0, bound), 0.0);
-        assert!((event_residual(-0.3f64, 0.0, bound) + 0.075).abs() < 1e-12);
+        assert_eq!(r(0.2, 0.0, bound), 0.0);
+        assert_eq!(event_residual(-0.3, 0.0, bound).1, 1.0);
+        assert!((r(-0.3, 0.0, bound) + 0.075).abs() < 1e-12);
         // The squared penalty is the plain difference.
-        assert_eq!(event_residual(0.9, 0.4, EventPenalty::Squared), 0.5);
+        assert_eq!(event_residual(0.9, 0.4, EventPenalty::Squared), (0.5, 1.0));
+    }
+
+    #[test]
+    fn an_overshoot_past_the_count_costs_its_weight() {
+        let bound = EventPenalty::Bound {
+            c_pos: 0.2,
+            c_neg: 0.25,
+            margin: 0.5,
+            dead_zone: 1.0,
+            overshoot: 0.1,
+        };
+        // Two positive events: free in [0.3, 0.5]; 0.9 overshoots by 0.4 at weight 0.1.
+        let (r, w) = event_residual(0.9f64, 0.4, bound);
+        assert!((r - 0.4).abs() < 1e-12 && w == 0.1);
+        assert_eq!(event_residual(0.45, 0.4, bound), (0.0, 1.0));
+        // One negative event: free in [−0.375, −0.125]; −0.6 overshoots downwards.
+        let (r, w) = event_residual(-0.6f64, -0.25, bound);
+        assert!((r + 0.225).abs() < 1e-12 && w == 0.1);
+        // Falling short still costs in full.
+        assert_eq!(event_residual(0.0, -0.25, bound).1, 1.0);
     }
 }

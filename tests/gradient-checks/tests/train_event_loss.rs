@@ -1,6 +1,6 @@
 //! Finite-difference check of the event-generation loss (`train::event_loss::pair_event_loss_with`)
 //! w.r.t. both renders, with the squared penalty and with the bound penalty (counts as lower
-//! bounds, a dead zone without events). The loss is smooth where the luma is positive (log of a
+//! bounds, a dead zone without events, a weighted overshoot past the count). The loss is smooth where the luma is positive (log of a
 //! positive value, squared residual); renders are drawn in [0.05, 1] so no probe reaches the clamp
 //! at 0. The bound penalty's residual is continuous and piecewise linear in ΔL, so r² has a
 //! continuous first derivative; a probe of h = 1e-6 straddles one of its kinks with probability
@@ -21,6 +21,7 @@ const BOUND: EventPenalty = EventPenalty::Bound {
     c_neg: 0.25,
     margin: 0.5,
     dead_zone: 1.0,
+    overshoot: 0.3,
 };
 
 proptest! {
@@ -53,6 +54,14 @@ proptest! {
             let squared = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, EventPenalty::Squared);
             let other: Vec<f64> = squared.d_first.iter().chain(&squared.d_second).copied().collect();
             prop_assert!(!compare("squared for bound", &numeric, &other, TOL).passed());
+            // The overshoot term is there: where a pixel overshoots (the losses differ), the
+            // gradient of the pure bound fails it.
+            let pure = EventPenalty::Bound { c_pos: 0.2, c_neg: 0.25, margin: 0.5, dead_zone: 1.0, overshoot: 0.0 };
+            let pure = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, pure);
+            if pure.loss != out.loss {
+                let other: Vec<f64> = pure.d_first.iter().chain(&pure.d_second).copied().collect();
+                prop_assert!(!compare("pure bound for bound with overshoot", &numeric, &other, TOL).passed());
+            }
         }
         checker.finish();
     }

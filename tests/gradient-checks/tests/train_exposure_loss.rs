@@ -32,6 +32,7 @@ const BOUND: EventPenalty = EventPenalty::Bound {
     c_neg: 0.2,
     margin: 0.5,
     dead_zone: 1.0,
+    overshoot: 0.3,
 };
 
 /// The terms' value for S renders laid out one after the other in `x` (PLANES × HW each).
