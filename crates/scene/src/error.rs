@@ -41,7 +41,7 @@ pub enum SceneError {
         source: serde_json::Error,
     },
     /// The scene has problems; all of them are listed.
-    #[error("{dir}: {} problem(s) in scene:\n  {}", problems.len(), join(problems))]
+    #[error("{}: {} problem(s):\n  {}", dir.join("scene.json").display(), problems.len(), join(problems))]
     Invalid {
         /// The scene directory.
         dir: PathBuf,

@@ -43,6 +43,13 @@ pub struct Scene {
     /// as stated (and refused if this disagrees).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub events_raw_format: Option<RawEventsFormat>,
+    /// `[first, last]`: the times (seconds, the frames' clock) of a recording's first and last
+    /// event, which the frames' event files hold only between (a DAVIS camera's first frames can
+    /// precede its first event). Outside it, a pixel without events is no evidence of a still
+    /// pixel, and no loss reads those times ([`Scene::event_evidence_span`]). Absent: the files are
+    /// a complete record of every frame's span (the generator, simulated events).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub events_recorded_s: Option<[f64; 2]>,
     /// Free-form information from the tool that made the scene (generator name, knobs). Readers
     /// must not depend on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -293,6 +300,29 @@ impl Scene {
             .get(k)
             .and_then(|f| f.exposure_s)
             .unwrap_or(self.exposure_s)
+    }
+
+    /// The time span `[from, to)` (seconds) of the events that frame `k`'s `events` file holds —
+    /// the scene format's one rule for it (docs/FORMATS.md): from its `time_s` to the next frame's;
+    /// the last frame's file holds every later event of the recording (`to` = +∞), of which the
+    /// losses read only what lies inside its exposure. Every writer of event files (the
+    /// generator, the importers) splits a recording by this rule, and every reader checks it.
+    pub fn event_file_span(&self, k: usize) -> (f64, f64) {
+        let from = self.frames[k].time_s;
+        let to = self.frames.get(k + 1).map_or(f64::INFINITY, |f| f.time_s);
+        (from, to)
+    }
+
+    /// The part of [`Scene::event_file_span`] over which frame `k`'s events are a complete record:
+    /// the span cut to [`Scene::events_recorded_s`] when it is set. `None` when nothing is left
+    /// (the frame's file holds no evidence).
+    pub fn event_evidence_span(&self, k: usize) -> Option<(f64, f64)> {
+        let (mut from, mut to) = self.event_file_span(k);
+        if let Some([first, last]) = self.events_recorded_s {
+            from = from.max(first);
+            to = to.min(last);
+        }
+        (from < to).then_some((from, to))
     }
 
     /// Absolute path of a file named in the scene.

@@ -349,6 +349,27 @@ impl Checker<'_> {
         }
     }
 
+    /// `events_recorded_s`: two finite times, the first not after the second.
+    fn recorded_span(&mut self, v: &Value) {
+        let path = "events_recorded_s";
+        match v.as_array().map(Vec::as_slice) {
+            Some([a, b]) => {
+                if let (Some(a), Some(b)) = (self.num(a, path), self.num(b, path)) {
+                    if a > b {
+                        self.bad(
+                            path,
+                            format!("first event at {a} s after the last at {b} s"),
+                        );
+                    }
+                }
+            }
+            _ => self.bad(
+                path,
+                format!("expected [first, last], found {}", describe(v)),
+            ),
+        }
+    }
+
     fn scene(&mut self, v: &Value) {
         let Some(m) = self.obj(
             v,
@@ -362,10 +383,13 @@ impl Checker<'_> {
                 "images",
                 "frames",
             ],
-            &["generator", "events_raw_format"],
+            &["generator", "events_raw_format", "events_recorded_s"],
         ) else {
             return;
         };
+        if let Some(span) = m.get("events_recorded_s") {
+            self.recorded_span(span);
+        }
         if let Some(f) = m.get("events_raw_format") {
             if let Some(name) = self.string(f, "events_raw_format") {
                 if name != "evt2" && name != "evt3" {

@@ -69,6 +69,7 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
     }
     let s = Scene {
         events_raw_format: None,
+        events_recorded_s: None,
         format_version: FORMAT_VERSION,
         camera: Camera {
             width: W,
@@ -172,6 +173,8 @@ fn every_problem_is_reported() {
         missing.is_empty(),
         "not reported: {missing:?}\nreport:\n{text}"
     );
+    // The report names the description's file, each problem its frame and field.
+    assert!(text.starts_with(&path.display().to_string()), "{text}");
     // The valid mask of frame 0's flow is the same file as frame 1's mask: reported there too.
     assert_eq!(problems.len(), expect.len() + 1, "report:\n{text}");
 }
@@ -260,5 +263,33 @@ fn grey_frames_and_per_frame_exposures_round_trip_and_are_checked() {
     assert!(
         msg.contains("frames[2].image") && msg.contains("single channel"),
         "{msg}"
+    );
+}
+
+#[test]
+fn event_files_span_from_their_frame_to_the_next_and_the_last_to_the_end() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut s = make_scene(tmp.path(), 3);
+    let t = |k: usize| s.frames[k].time_s;
+    assert_eq!(s.event_file_span(0), (t(0), t(1)));
+    assert_eq!(s.event_file_span(2), (t(2), f64::INFINITY));
+    assert_eq!(s.event_evidence_span(2), Some((t(2), f64::INFINITY)));
+    // A recording's events between 0.01 s and 0.05 s: frame 0's evidence starts at its first
+    // event, frame 2's (from 0.0667 s) is empty, and the written scene keeps the span.
+    s.events_recorded_s = Some([0.01, 0.05]);
+    assert_eq!(s.event_evidence_span(0), Some((0.01, t(1))));
+    assert_eq!(s.event_evidence_span(1), Some((t(1), 0.05)));
+    assert_eq!(s.event_evidence_span(2), None);
+    s.write(tmp.path()).unwrap();
+    assert_eq!(
+        scene::load(tmp.path()).unwrap().events_recorded_s,
+        Some([0.01, 0.05])
+    );
+    // A span that runs backwards is refused, naming the field.
+    s.events_recorded_s = Some([0.05, 0.01]);
+    let err = s.write(tmp.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("events_recorded_s") && err.contains("after the last"),
+        "{err}"
     );
 }

@@ -316,6 +316,7 @@ pub fn write_scene_from_frames(
         images: cfg.encoding,
         frames,
         events_raw_format: None,
+        events_recorded_s: None,
         generator: Some(generator),
     };
     scene.write(out)?;

@@ -671,6 +671,7 @@ pub fn generate_with_body(
     }
     let sc = scene::Scene {
         events_raw_format: None,
+        events_recorded_s: None,
         format_version: scene::FORMAT_VERSION,
         camera: cam.to_scene(),
         body: scene::BodySpec {

@@ -45,6 +45,7 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
     }
     let s = Scene {
         events_raw_format: None,
+        events_recorded_s: None,
         format_version: 1,
         camera: Camera {
             width: w,

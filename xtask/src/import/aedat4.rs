@@ -265,7 +265,12 @@ pub fn run(args: Args) -> Result<()> {
     bar.finish_and_clear();
 
     // Events, streamed into per-frame files.
-    let (written, before) = split_events(&args.file, &args.out, t0, &mid_us, (w, h))?;
+    let split = split_events(&args.file, &args.out, t0, &mid_us, (w, h))?;
+    let exposure_us: Vec<(i64, i64)> = frames
+        .iter()
+        .map(|f| (f.exposure_begin_us - t0, f.exposure_end_us - t0))
+        .collect();
+    note_exposures_outside_events(&split, &exposure_us);
 
     let s = scene::Scene {
         format_version: scene::FORMAT_VERSION,
@@ -279,6 +284,9 @@ pub fn run(args: Args) -> Result<()> {
         images: encoding,
         frames: scene_frames,
         events_raw_format: None,
+        events_recorded_s: split
+            .recorded_us
+            .map(|(a, b)| [a as f64 * 1e-6, b as f64 * 1e-6]),
         generator: Some(serde_json::json!({
             "name": "xtask import aedat4",
             "config": {
@@ -294,33 +302,75 @@ pub fn run(args: Args) -> Result<()> {
         .with_context(|| format!("writing {}", args.out.display()))?;
     scene::load(&args.out).with_context(|| format!("checking {}", args.out.display()))?;
     eprintln!(
-        "{} frames ({}, {}x{w}x{h}), exposure {:.2}–{:.2} ms; {written} events ({before} before the first frame's time, not written)",
+        "{} frames ({}, {}x{w}x{h}), exposure {:.2}–{:.2} ms; {} events ({} before the first \
+         frame's time, not written; {} after the last exposure, kept in the last frame's file)",
         frames.len(),
         if grey { "grey" } else { "colour" },
         if grey { 1 } else { 3 },
         sorted[0] * 1e3,
-        longest * 1e3
+        longest * 1e3,
+        split.written,
+        split.before,
+        split.after_last_exposure(exposure_us[exposure_us.len() - 1].1),
     );
     println!("{}", crate::common::shown(&args.out).display());
     Ok(())
 }
 
-/// Streams the recording's events into `out/events/NNNNNN.npz`, frame `k` holding
-/// `[mid_k, mid_{k+1})` (µs from `t0`; the last frame every later event); returns (written, before
-/// the first frame).
+/// What [`split_events`] wrote.
+struct SplitEvents {
+    /// Events written into the frames' files.
+    written: u64,
+    /// Events before the first frame's time (not written).
+    before: u64,
+    /// Times (µs from time 0) of the recording's first and last event; `None` without events.
+    recorded_us: Option<(i64, i64)>,
+    /// Times (µs from time 0) of the events in the last frame's file.
+    last_file_times: Vec<i64>,
+}
+
+impl SplitEvents {
+    /// How many events of the last frame's file come after `end_us` (the last exposure's end).
+    fn after_last_exposure(&self, end_us: i64) -> usize {
+        self.last_file_times.iter().filter(|&&t| t > end_us).count()
+    }
+}
+
+/// Says which exposures (µs from time 0, `[begin, end]` per frame) reach outside the recording's
+/// events: those times are no evidence, and the scene's `events_recorded_s` keeps the losses off
+/// them (`scene::Scene::event_evidence_span`).
+fn note_exposures_outside_events(split: &SplitEvents, exposure_us: &[(i64, i64)]) {
+    let Some((first, last)) = split.recorded_us else {
+        eprintln!("note: the recording holds no events: the scene's frames have empty event files");
+        return;
+    };
+    for (k, &(begin, end)) in exposure_us.iter().enumerate() {
+        if begin < first || end > last {
+            eprintln!(
+                "note: frame {k}'s exposure [{begin}, {end}] µs reaches outside the recording's \
+                 events [{first}, {last}] µs: no loss reads events there"
+            );
+        }
+    }
+}
+
+/// Streams the recording's events into `out/events/NNNNNN.npz` by the scene format's rule
+/// (`scene::Scene::event_file_span`): frame `k` holds `[mid_k, mid_{k+1})` (µs from `t0`), the
+/// last frame every later event; events before the first frame are counted, not written.
 fn split_events(
     file: &Path,
     out: &Path,
     t0: i64,
     mid_us: &[i64],
     (w, h): (u32, u32),
-) -> Result<(u64, u64)> {
+) -> Result<SplitEvents> {
     let mut reader = events::io::aedat4::Aedat4Reader::open(file)
         .with_context(|| format!("reading the events of {}", file.display()))?;
     let sensor = events::SensorSize::new(w, h);
     let mut bucket = events::EventStream::new();
     bucket.sensor = Some(sensor);
     let (mut k, mut written, mut before) = (0usize, 0u64, 0u64);
+    let mut recorded = None;
     let flush = |k: usize, b: &mut events::EventStream| -> Result<u64> {
         let p = out.join(format!("events/{k:06}.npz"));
         events::write_events(&p, b).with_context(|| format!("writing {}", p.display()))?;
@@ -340,6 +390,7 @@ fn split_events(
         }
         for i in 0..chunk.len() {
             let t = chunk.t[i] - t0;
+            recorded = Some(recorded.map_or((t, t), |(a, b): (i64, i64)| (a.min(t), b.max(t))));
             if t < mid_us[0] {
                 before += 1;
                 continue;
@@ -364,9 +415,18 @@ fn split_events(
             });
         }
     }
+    let mut last_file_times = Vec::new();
     while k < mid_us.len() {
+        if k + 1 == mid_us.len() {
+            last_file_times.clone_from(&bucket.t);
+        }
         written += flush(k, &mut bucket)?;
         k += 1;
     }
-    Ok((written, before))
+    Ok(SplitEvents {
+        written,
+        before,
+        recorded_us: recorded,
+        last_file_times,
+    })
 }

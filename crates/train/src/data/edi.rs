@@ -9,8 +9,8 @@ use super::{Dataset, TrainFrame};
 use crate::TrainError;
 
 /// The events of `[from_s, to_s)` around frame `p` (its own file and its neighbours', joined in
-/// time order), or `None` when the frames' files do not cover that span (before the first frame's
-/// time, after the last file's end).
+/// time order), or `None` when the frames' files are no evidence over that whole span (before the
+/// first frame's time, outside a recording's events: `scene::Scene::event_evidence_span`).
 pub fn span_events(
     data: &Dataset,
     p: usize,
@@ -23,15 +23,15 @@ pub fn span_events(
     let Some(first) = first else {
         return Ok(None);
     };
-    // The file of frame q covers [t_q, t_{q+1}); the last frame's one frame interval.
-    let end_of = |q: usize| {
-        frames
-            .get(q + 1)
-            .map_or(frames[q].time_s + 1.0 / data.scene.fps, |f| f.time_s)
-    };
+    // Consecutive files whose evidence (`scene::Scene::event_evidence_span`) joins into one
+    // interval, which must hold [from_s, to_s].
+    let evidence = |q: usize| data.scene.event_evidence_span(q);
+    if evidence(first).is_none_or(|(from, _)| from > from_s) {
+        return Ok(None);
+    }
     let mut last = first;
-    while end_of(last) < to_s {
-        if last + 1 >= frames.len() {
+    while evidence(last).is_some_and(|(_, to)| to < to_s) {
+        if last + 1 >= frames.len() || evidence(last + 1).is_none() {
             return Ok(None);
         }
         last += 1;

@@ -241,6 +241,11 @@ impl TrainingData {
         let mut pairs = vec![None; self.frames.len()];
         let found = consecutive_training_pairs(data);
         for &(slot, p) in &found {
+            // A pair whose interval a recording's events do not cover supervises nothing.
+            let whole = data.scene.event_file_span(p);
+            if data.scene.event_evidence_span(p) != Some(whole) {
+                continue;
+            }
             let stream = read_frame_events(data, p, "the event loss")?;
             let expected = expected_change(&stream.as_slice(), sensor, config, &hot);
             pairs[slot] = Some(EventPair {
@@ -248,10 +253,10 @@ impl TrainingData {
                 expected,
             });
         }
-        if found.is_empty() {
+        if pairs.iter().all(Option::is_none) {
             return Err(TrainError::Config(format!(
-                "{}: no two consecutive frames are both training frames, so the event loss has \
-                 nothing to supervise",
+                "{}: no two consecutive frames are both training frames with the recording's \
+                 events between them, so the event loss has nothing to supervise",
                 data.dir.display()
             )));
         }
@@ -264,8 +269,9 @@ impl TrainingData {
     /// pixel (C = `config.event_threshold`, E the signed count of the events with t_s ≤ t < t_{s+1}).
     /// An exposure spans the event files of frames k−1 ([t_{k−1}, t_k)) and k ([t_k, t_{k+1})),
     /// which are joined; a frame whose exposure needs a file that `scene.json` does not name is an
-    /// error naming the frame and the field. Intervals before the first frame's time are covered by
-    /// no file and get no supervision.
+    /// error naming the frame and the field. Intervals outside the files' evidence
+    /// (`scene::Scene::event_evidence_span`: before the first frame's time, or outside a
+    /// recording's events) get no supervision.
     pub fn enable_exposure_events(
         &mut self,
         data: &Dataset,
@@ -288,22 +294,22 @@ impl TrainingData {
             }
             let times =
                 crate::exposure::subframe_times(frame.time_s, frame.exposure_s, config.subframes);
-            // The files this exposure reaches into, joined in time order, and the span they cover.
+            // The files this exposure reaches into, joined in time order, and the span over which
+            // they are evidence (`scene::Scene::event_evidence_span`: consecutive files' spans
+            // join into one interval).
             let (first, last) = (times[0], times[times.len() - 1]);
-            let mut files = Vec::new();
-            let mut covered_from = frame.time_s;
-            if p > 0 && first < frame.time_s {
-                files.push(p - 1);
-                covered_from = data.frames[p - 1].time_s;
-            }
-            files.push(p);
-            let covered_to = match data.frames.get(p + 1) {
-                Some(next) if last >= next.time_s => {
-                    files.push(p + 1);
-                    data.frames.get(p + 2).map_or(f64::INFINITY, |f| f.time_s)
-                }
-                Some(next) => next.time_s,
-                None => f64::INFINITY,
+            let reached = (p.saturating_sub(1)..=p + 1).filter(|&q| {
+                q == p
+                    || (q < p && first < frame.time_s)
+                    || (q > p && data.frames.get(q).is_some_and(|f| last >= f.time_s))
+            });
+            let spans: Vec<(usize, (f64, f64))> = reached
+                .filter_map(|q| data.scene.event_evidence_span(q).map(|s| (q, s)))
+                .collect();
+            let files: Vec<usize> = spans.iter().map(|&(q, _)| q).collect();
+            let (covered_from, covered_to) = match (spans.first(), spans.last()) {
+                (Some(&(_, (from, _))), Some(&(_, (_, to)))) => (from, to),
+                _ => (f64::INFINITY, f64::NEG_INFINITY),
             };
             loaded.retain(|&q, _| q + 1 >= p);
             let mut stream = events::EventStream::new();
@@ -443,29 +449,32 @@ pub fn event_read_options(data: &Dataset, path: &std::path::Path) -> events::io:
     }
 }
 
-/// The events of frame `p`'s `events` file ([t_p, t_{p+1})); a frame without one is an error naming
-/// the frame, the field and what needed it (`needed_by`).
+/// The events of frame `p`'s `events` file (its span, `scene::Scene::event_file_span`: [t_p,
+/// t_{p+1}), the last frame every later event); a frame without one is an error naming the frame,
+/// the field and what needed it (`needed_by`).
 pub(super) fn read_frame_events(
     data: &Dataset,
     p: usize,
     needed_by: &str,
 ) -> Result<events::EventStream, TrainError> {
     let (stream, path) = read_frame_file(data, p, needed_by)?;
-    // The file holds the events of [t_p, t_{p+1}) (the last frame: one frame interval); events
-    // outside it mean the file is another frame's or on another clock, and would supervise the
-    // wrong renders. One microsecond of slack covers the rounding of times to microseconds.
+    // Events outside the file's span mean the file is another frame's or on another clock, and
+    // would supervise the wrong renders. One microsecond of slack covers the rounding of times to
+    // microseconds.
     let us = |t: f64| (t * 1e6).round() as i64;
-    let from = us(data.frames[p].time_s);
-    let to = data.frames.get(p + 1).map_or_else(
-        || us(data.frames[p].time_s + 1.0 / data.scene.fps),
-        |next| us(next.time_s),
-    );
+    let (from_s, to_s) = data.scene.event_file_span(p);
+    let from = us(from_s);
+    let to = to_s.is_finite().then(|| us(to_s));
     if let (Some(&first), Some(&last)) = (stream.t.iter().min(), stream.t.iter().max()) {
-        if first < from - 1 || last > to + 1 {
+        if first < from - 1 || to.is_some_and(|to| last > to + 1) {
+            let span = to.map_or_else(
+                || format!("[{from} µs, the end of the recording) (the last frame's file)"),
+                |to| format!("[{from}, {to}) µs (its `time_s` to the next frame's)"),
+            );
             return Err(TrainError::Config(format!(
                 "{}: the `events` file of frame {} holds events from {first} µs to {last} µs, \
-                 outside the frame's interval [{from}, {to}) µs (its `time_s` to the next frame's): \
-                 it does not cover this frame's exposure (needed by {needed_by})",
+                 outside the frame's span {span}: it is another frame's file or on another clock \
+                 (needed by {needed_by})",
                 path.display(),
                 data.frames[p].index
             )));
