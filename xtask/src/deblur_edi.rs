@@ -89,7 +89,7 @@ pub fn run(args: Args) -> Result<()> {
                 render: &rgb.data,
                 reference: sharp,
                 blurred: &frame.image,
-                mask,
+                mask: Some(mask),
                 human_probability: &probability,
             };
             scored.push(evaluate_frame(&eval, Some(&lpips))?);

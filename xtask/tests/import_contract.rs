@@ -47,6 +47,8 @@ fn trains_evaluates_and_renders(scene_dir: &Path, dir: &Path) -> String {
         .arg(&runs)
         .arg("--config")
         .arg(tiny_config(dir)));
+    // A figure that cannot be measured (no mask, no sharp reference) is a dash, not NaN.
+    assert!(!stdout.contains("NaN"), "{stdout}");
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(runs.join("metrics.json")).unwrap()).unwrap();
     let tests = scene.split_indices(scene::Split::Test).len();
@@ -226,6 +228,9 @@ fn import_aedat4_real_recording_trains_evaluates_and_renders() {
     );
     let stdout = trains_evaluates_and_renders(&out, dir.path());
     assert!(stdout.contains("event loss: "), "{stdout}");
+    // No sharp references and no masks: scored against the observed frames, without mask figures.
+    assert!(stdout.contains("PSNR render vs observed"), "{stdout}");
+    assert!(!stdout.contains("PSNR blurred"), "{stdout}");
 }
 
 /// The real recording cut to `frames[keep]` and the events between `from_us` and `to_us`

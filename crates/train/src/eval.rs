@@ -28,8 +28,8 @@ pub struct EvalFrame<'a> {
     pub reference: &'a [f32],
     /// The blurred input frame (for the blurred-input baseline figures).
     pub blurred: &'a [f32],
-    /// Reference human mask (true = human).
-    pub mask: &'a [bool],
+    /// Reference human mask (true = human); `None` when the frame has none (real data).
+    pub mask: Option<&'a [bool]>,
     /// Rendered human probability per pixel, in [0, 1].
     pub human_probability: &'a [f32],
 }
@@ -45,7 +45,7 @@ pub struct FrameMetrics {
     pub psnr_human_box: f64,
     /// SSIM inside the human bounding box (NaN if the mask is empty).
     pub ssim_human_box: f64,
-    /// IoU of rendered human probability > 0.5 against the mask.
+    /// IoU of rendered human probability > 0.5 against the mask (NaN without a mask).
     pub mask_iou: f64,
     /// PSNR (dB) of the blurred input against the reference, full frame.
     pub blurred_psnr_full: f64,
@@ -148,10 +148,10 @@ pub fn evaluate_frame(
         ssim_full: f64::from(ssim(f.render, f.reference, shape, None)),
         psnr_human_box: f64::NAN,
         ssim_human_box: f64::NAN,
-        mask_iou: {
-            let m: Vec<f32> = f.mask.iter().map(|&b| if b { 1.0 } else { 0.0 }).collect();
+        mask_iou: f.mask.map_or(f64::NAN, |mask| {
+            let m: Vec<f32> = mask.iter().map(|&b| if b { 1.0 } else { 0.0 }).collect();
             mask_iou(f.human_probability, &m)
-        },
+        }),
         blurred_psnr_full: psnr(f.blurred, f.reference),
         blurred_psnr_human_box: f64::NAN,
         blurred_ssim_full: f64::from(ssim(f.blurred, f.reference, shape, None)),
@@ -165,7 +165,7 @@ pub fn evaluate_frame(
         (out.lpips_full, out.blurred_lpips_full) =
             lpips_pair(net, f.render, f.blurred, f.reference, f.height, f.width)?;
     }
-    let Some(bbox) = mask_bbox(f.mask, f.width, f.height) else {
+    let Some(bbox) = f.mask.and_then(|mask| mask_bbox(mask, f.width, f.height)) else {
         return Ok(out);
     };
     let (x0, y0, x1, y1) = bbox;
@@ -283,14 +283,13 @@ pub fn evaluate_split(
             .images
             .is_grey()
             .then(|| crate::image_loss::luminance3(&r.rgb, w * h));
-        let no_mask = vec![false; w * h];
         let frame = EvalFrame {
             width: w,
             height: h,
             render: grey_render.as_deref().unwrap_or(&r.rgb),
             reference: f.sharp.as_deref().unwrap_or(&f.image),
             blurred: &f.image,
-            mask: f.mask.as_deref().unwrap_or(&no_mask),
+            mask: f.mask.as_deref(),
             human_probability: &r.human,
         };
         out.push(EvaluatedFrame {
@@ -325,7 +324,7 @@ mod tests {
             render: &render,
             reference: &reference,
             blurred: &reference,
-            mask: &mask,
+            mask: Some(&mask),
             human_probability: &prob,
         };
         assert_eq!(mask_bbox(&mask, w, h), Some((4, 3, 9, 6)));
@@ -412,7 +411,7 @@ mod tests {
             render: &reference,
             reference: &reference,
             blurred: &blurred,
-            mask: &mask,
+            mask: Some(&mask),
             human_probability: &prob,
         };
         let m = evaluate_frame(&f, Some(&net)).expect("sizes");
