@@ -9,6 +9,35 @@ fn xtask() -> Command {
     Command::new(env!("CARGO_BIN_EXE_xtask"))
 }
 
+/// Every fuzz target, in the order `--target all` runs them.
+const TARGETS: [&str; 15] = [
+    "ply",
+    "camera",
+    "scene",
+    "npz",
+    "motion",
+    "safetensors",
+    "flo",
+    "flow-png",
+    "aedat4",
+    "aedat4-frames",
+    "zju-model",
+    "events-raw",
+    "dat",
+    "events-text",
+    "t7",
+];
+
+#[test]
+fn the_readme_counts_and_lists_the_fuzz_targets_that_run() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let count = format!("fuzzing ({} targets)", TARGETS.len());
+    assert!(readme.contains(&count), "README.md lacks `{count}`");
+    let listed = format!("`cargo xtask fuzz --target all\\|{}", TARGETS.join("\\|"));
+    assert!(readme.contains(&listed), "README.md lacks `{listed}`");
+}
+
 #[test]
 fn every_parser_survives_a_few_thousand_mutated_inputs() {
     let o = xtask()
@@ -23,23 +52,10 @@ fn every_parser_survives_a_few_thousand_mutated_inputs() {
         "fuzzing found something:\n{stdout}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    for target in [
-        "ply",
-        "camera",
-        "scene",
-        "npz",
-        "motion",
-        "safetensors",
-        "flo",
-        "flow-png",
-        "aedat4",
-        "aedat4-frames",
-        "zju-model",
-        "events-raw",
-        "dat",
-        "events-text",
-        "t7",
-    ] {
+    // No target runs that this list (and the README) does not name.
+    let summaries = stdout.lines().filter(|l| l.ends_with(" findings")).count();
+    assert_eq!(summaries, TARGETS.len(), "{stdout}");
+    for target in TARGETS {
         let line = stdout
             .lines()
             .find(|l| l.starts_with(&format!("{target}: ")))
