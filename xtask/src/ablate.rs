@@ -41,6 +41,10 @@ pub struct Args {
     /// benchmark (ignores --data).
     #[arg(long)]
     pub blur_levels: bool,
+    /// The benchmark preset whose slow, medium and fast variants the blur-level study runs on
+    /// (`tiny` for a smoke run of the study).
+    #[arg(long, value_enum, default_value = "default", requires = "blur_levels")]
+    pub blur_levels_preset: crate::synth::PresetArg,
 }
 
 /// One configuration of the ablation set: its name, a description and the training options it sets
@@ -252,9 +256,10 @@ pub fn run(args: Args) -> Result<()> {
         ] {
             let cfg = ::synth::SynthConfig {
                 speed,
-                ..::synth::SynthConfig::preset(::synth::Preset::Default)
+                ..::synth::SynthConfig::preset(args.blur_levels_preset.preset())
             };
-            let data = crate::common::benchmark(&cfg, &format!("default-{label}"))?;
+            let base = format!("{:?}", args.blur_levels_preset).to_lowercase();
+            let data = crate::common::benchmark(&cfg, &format!("{base}-{label}"))?;
             for r in selected(&[
                 "one-hot",
                 "event-loss",

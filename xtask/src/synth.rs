@@ -20,6 +20,18 @@ pub enum PresetArg {
     Realistic,
 }
 
+impl PresetArg {
+    /// The generator's preset of this name.
+    pub fn preset(self) -> ::synth::Preset {
+        match self {
+            PresetArg::Tiny => ::synth::Preset::Tiny,
+            PresetArg::Default => ::synth::Preset::Default,
+            PresetArg::Paper => ::synth::Preset::Paper,
+            PresetArg::Realistic => ::synth::Preset::Realistic,
+        }
+    }
+}
+
 /// Motion speed names of the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum SpeedArg {
@@ -128,13 +140,7 @@ pub struct Args {
 
 /// Builds the generator settings from the preset and the flags.
 pub fn config(args: &Args) -> ::synth::SynthConfig {
-    let preset = match args.preset {
-        PresetArg::Tiny => ::synth::Preset::Tiny,
-        PresetArg::Default => ::synth::Preset::Default,
-        PresetArg::Paper => ::synth::Preset::Paper,
-        PresetArg::Realistic => ::synth::Preset::Realistic,
-    };
-    let mut c = ::synth::SynthConfig::preset(preset);
+    let mut c = ::synth::SynthConfig::preset(args.preset.preset());
     macro_rules! set {
         ($($f:ident),*) => { $( if let Some(v) = args.$f.clone() { c.$f = v; } )* };
     }

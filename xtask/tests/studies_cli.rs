@@ -1,0 +1,88 @@
+//! The README's study commands on tiny inputs, to success, checking what they wrote:
+//! `reconstruct --pose-correction on` on a scene with estimated poses (and its pose report), and
+//! `ablate --blur-levels` on the slow, medium and fast variants of the tiny benchmark.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+mod common;
+
+fn xtask() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_xtask"));
+    c.env("RUST_BACKTRACE", "0");
+    c
+}
+
+/// Runs `command`, asserts success, returns its standard output.
+fn run(command: &mut Command) -> String {
+    let o = command.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn pose_correction_trains_on_estimated_poses_and_reports_their_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene: PathBuf = dir.path().join("scene");
+    run(xtask()
+        .args(["synth", "--preset", "tiny", "--pose-error", "16", "--out"])
+        .arg(&scene));
+    assert!(scene.join("poses_true.json").is_file());
+    let out = dir.path().join("run");
+    let stdout = run(xtask()
+        .args(["reconstruct", "--pose-correction", "on", "--data"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .arg("--config")
+        .arg(common::tiny_config(dir.path())));
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("pose error of the training frames"))
+        .unwrap_or_else(|| panic!("no pose report:\n{stdout}"));
+    assert!(
+        line.contains(" → ") && line.contains("held-out frames"),
+        "{line}"
+    );
+    let metrics = json(&out.join("metrics.json"));
+    let report = &metrics["pose_error"];
+    let given = report["given"]["joint_mean_deg"].as_f64().unwrap();
+    let corrected = report["corrected"]["joint_mean_deg"].as_f64().unwrap();
+    // 16° RMS per joint as generated; a few steps of correction move it, but not far.
+    assert!(given > 5.0 && given < 30.0, "{given}");
+    assert!((corrected - given).abs() < 5.0, "{given} → {corrected}");
+    assert!(report["view"]["test_given"]["image_px"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn the_blur_level_study_runs_on_the_slow_medium_and_fast_variants() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("study");
+    run(xtask()
+        .args(["ablate", "--blur-levels", "--blur-levels-preset", "tiny"])
+        .args(["--only", "one-hot", "--out"])
+        .arg(&out)
+        .arg("--config")
+        .arg(common::tiny_config(dir.path())));
+    let rows = json(&out.join("ablation.json"));
+    let rows = rows.as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["run"].as_str().unwrap()).collect();
+    assert_eq!(names, ["slow/one-hot", "medium/one-hot", "fast/one-hot"]);
+    // The input frames blur more as the motion speeds up.
+    let blurred: Vec<f64> = rows
+        .iter()
+        .map(|r| r["metrics"]["blurred_psnr_full"].as_f64().unwrap())
+        .collect();
+    assert!(
+        blurred[0] > blurred[1] && blurred[1] > blurred[2],
+        "{blurred:?}"
+    );
+    let md = std::fs::read_to_string(out.join("ablation.md")).unwrap();
+    assert!(md.contains("| 3 | `fast/one-hot` |"), "{md}");
+    assert!(out.join("ablation_grid.png").is_file());
+}
