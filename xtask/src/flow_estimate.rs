@@ -20,12 +20,10 @@ pub struct Args {
     /// Output flow file (.flo, .png, .npy or .exr).
     #[arg(long)]
     pub out: PathBuf,
-    /// Network weights (safetensors, see the `flow` crate docs).
-    #[arg(
-        long,
-        default_value = "data-fixtures/flow/spynet-synthetic.safetensors"
-    )]
-    pub weights: PathBuf,
+    /// Network weights (safetensors, see the `flow` crate docs; default: the project's own,
+    /// `data-fixtures/flow/spynet-synthetic.safetensors` of the workspace, from any directory).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
     /// Optional colour-coded visualisation (Middlebury colour wheel) as PNG.
     #[arg(long)]
     pub viz: Option<PathBuf>,
@@ -42,8 +40,12 @@ pub fn run(args: Args) -> Result<()> {
             args.img2.display()
         );
     }
-    let net = flow::load_safetensors(&args.weights)
-        .with_context(|| format!("loading flow weights {}", args.weights.display()))?;
+    let weights = args
+        .weights
+        .clone()
+        .unwrap_or_else(crate::common::shipped_flow_network);
+    let net = flow::load_safetensors(&weights)
+        .with_context(|| format!("loading flow weights {}", weights.display()))?;
     let t = std::time::Instant::now();
     let tape = net.forward(&a, &b, h1, w1)?;
     eprintln!(
