@@ -202,7 +202,7 @@ fn load_scene_pairs(
         };
         let (a, b) = (&data.frames[k], &data.frames[k + 1]);
         let valid = pair.valid.filter(|_| weights.valid_only);
-        let target = train::flow_loss::prepare_target(
+        let target = train::loss::optical_flow::prepare_target(
             &pair.flow,
             valid.as_deref(),
             h,

@@ -14,14 +14,14 @@
 //! L1, without λ) of those renders is printed next to the same loss on the sharp references and on
 //! the blurred input frames. A loss that scores a run's renders below the sharp truth pulls the
 //! reconstruction away from it. Next to the network's loss it prints the ideal-estimator loss
-//! (`train::flow_loss::pair_warp_loss`: render k against render k+1 warped back by the exact flow)
+//! (`train::loss::optical_flow::pair_warp_loss`: render k against render k+1 warped back by the exact flow)
 //! at the loss's 1/4 resolution (τ as given) and at full resolution (τ × 4 px): whether even a
 //! perfect flow estimator would prefer the sharp frames.
 
 use nn::resize_bilinear_forward;
 use std::path::{Path, PathBuf};
 use train::data::{read_pair_flow, sharp_flow_pairs};
-use train::flow_loss::prepare_target;
+use train::loss::optical_flow::prepare_target;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -170,9 +170,9 @@ fn compare_renders(
         let mut sum = [0.0f64; 3];
         for (&(slot, pair), full) in pairs.iter().zip(&full_targets) {
             let (a, b) = (images(slot)?, images(pair.next_slot)?);
-            let fl = train::flow_loss::pair_flow_loss(&net, &a, &b, h, w, &pair.target)?;
-            let quarter = train::flow_loss::pair_warp_loss(&a, &b, h, w, &pair.target)?;
-            let whole = train::flow_loss::pair_warp_loss(&a, &b, h, w, full)?;
+            let fl = train::loss::optical_flow::pair_flow_loss(&net, &a, &b, h, w, &pair.target)?;
+            let quarter = train::loss::optical_flow::pair_warp_loss(&a, &b, h, w, &pair.target)?;
+            let whole = train::loss::optical_flow::pair_warp_loss(&a, &b, h, w, full)?;
             sum[0] += f64::from(fl.loss);
             sum[1] += f64::from(quarter.loss);
             sum[2] += f64::from(whole.loss);

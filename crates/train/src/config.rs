@@ -67,12 +67,12 @@ macro_rules! training_options {
         }
 
         impl TrainConfig {
-    /// The event loss's penalty as `train::event_loss` takes it (thresholds C± from
+    /// The event loss's penalty as `train::loss::event` takes it (thresholds C± from
     /// `event_threshold` and `event_threshold_neg`).
-    pub fn event_penalty(&self) -> crate::event_loss::EventPenalty {
+    pub fn event_penalty(&self) -> crate::loss::event::EventPenalty {
         match self.event_penalty {
-            EventPenaltyKind::Squared => crate::event_loss::EventPenalty::Squared,
-            EventPenaltyKind::Bound => crate::event_loss::EventPenalty::Bound {
+            EventPenaltyKind::Squared => crate::loss::event::EventPenalty::Squared,
+            EventPenaltyKind::Bound => crate::loss::event::EventPenalty::Bound {
                 c_pos: f64::from(self.event_threshold),
                 c_neg: f64::from(self.event_threshold_neg.unwrap_or(self.event_threshold)),
                 margin: f64::from(self.event_bound_margin),
@@ -137,7 +137,7 @@ training_options! {
     ssim_weight: f32 = 0.2,
     /// Weight of the perceptual loss: LPIPS (AlexNet, v0.1, on sRGB-encoded images) of the frame's
     /// prediction (the mean of its sub-exposure renders) against the observed frame
-    /// (`train::perceptual`; 3DGS-Avatar's third term). 0 = off (no LPIPS work at all).
+    /// (`train::loss::perceptual`; 3DGS-Avatar's third term). 0 = off (no LPIPS work at all).
     lpips_weight: f32 = 0.0,
     /// Weight of the skinning loss (learned weights vs the body's, on surface samples).
     skinning_weight: f32 = 10.0,
@@ -216,7 +216,7 @@ training_options! {
     exposure_networks: ExposureNetworks = ExposureNetworks::Once,
     /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
-    /// between the two renders is pulled towards that flow (see `train::flow_loss`).
+    /// between the two renders is pulled towards that flow (see `train::loss::optical_flow`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     flow_loss: bool = false,
     /// Which flow supervises: a flow of `scene.json` (`ground-truth`, `events`, `file`) or the
@@ -226,7 +226,7 @@ training_options! {
     /// default benchmark, `quick` preset, with `sharp-network` targets: 0.005 / 0.015 / 0.03 / 0.05
     /// gave +0.12 / +0.20 / +0.03 / −0.30 dB in the human box against no flow loss;
     /// `docs/notes/benchmarks-history.md`, "Flow targets from the network on the sharp frames"). With `ground-truth` or `events` targets every λ
-    /// tried lowers PSNR, which is why `flow_loss` is off by default.
+    /// tried lowers PSNR, which is why `loss::optical_flow` is off by default.
     flow_weight: f32 = 0.015,
     /// τ: pixels whose target flow is at most this long (pixels at the network's resolution) are not
     /// supervised (default 0.25 px; not swept).
@@ -239,14 +239,14 @@ training_options! {
     flow_gradient: FlowGradient = FlowGradient::All,
     /// How the renders' flow is compared with the target: `network` (the paper: the frozen flow
     /// network's prediction between the renders) or `warp` (an ideal flow estimator: render k
-    /// against render k+1 warped back by the target flow, `train::flow_loss::pair_warp_loss`; an
+    /// against render k+1 warped back by the target flow, `train::loss::optical_flow::pair_warp_loss`; an
     /// ablation outside the paper that measures what the flow constraint can give without any
     /// network's error). λ_flow weighs either; their units differ (pixels of flow vs intensity).
     flow_measure: FlowMeasure = FlowMeasure::Network,
     /// SPyNet-style weights (safetensors) of the frozen flow network; unset: the project's shipped
     /// weights (`data-fixtures/flow/spynet-synthetic.safetensors`, resolved by the driver).
     flow_network: Option<std::path::PathBuf> = None,
-    /// The event-generation loss of EventNeRF / E-NeRF (see `train::event_loss`) on the pairs of
+    /// The event-generation loss of EventNeRF / E-NeRF (see `train::loss::event`) on the pairs of
     /// renders `event_pairs` names, from each frame's `events` file. Off in a bare configuration;
     /// `cargo xtask reconstruct` turns it on (between sub-exposure renders) when the blur model is
     /// `exposure` and the scene has events, unless `--event-loss` or the config file sets it.
@@ -286,7 +286,7 @@ training_options! {
     /// events are not used (event loss and EDI frames); off: every event is used.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_hot_pixel_filter: bool = true,
-    /// How a pixel's log-intensity change is held to its events (`train::event_loss`): `bound`
+    /// How a pixel's log-intensity change is held to its events (`train::loss::event`): `bound`
     /// (the default: a count is a lower bound on the change with the events' sign, as on a sensor
     /// with a refractory period; no events, a change within the dead zone) or `squared` ((ΔL −
     /// C·E)², EventNeRF / E-NeRF and the paper's event loss: every crossing fired; the default
@@ -475,7 +475,7 @@ pub enum FlowSource {
     /// Flow made by another tool (`external`).
     File,
     /// The frozen flow network's own prediction between the *sharp reference* frames k and k+1 at
-    /// the loss's resolution (`train::flow_loss::network_target`): the paper's ZJU-MoCap-Blur
+    /// the loss's resolution (`train::loss::optical_flow::network_target`): the paper's ZJU-MoCap-Blur
     /// protocol, which infers the target from the sharp frames with a pretrained network (RAFT
     /// there). Needs sharp references, so synthetic or reference data only; reads no flow file.
     #[value(alias = "sharp-net")]

@@ -3,15 +3,15 @@
 //! human probability thresholded at 0.5, and side-by-side strips for a person to look at.
 //!
 //! Works on images already rendered, so it is independent of how the model produced them. SSIM is the
-//! project's one SSIM (`image_loss::ssim`: 11×11 Gaussian window, σ 1.5, zero padding, data range 1).
-//! LPIPS is AlexNet v0.1 on the sRGB-encoded images (`perceptual`: the images here are linear, the
+//! project's one SSIM (`loss::image::ssim`: 11×11 Gaussian window, σ 1.5, zero padding, data range 1).
+//! LPIPS is AlexNet v0.1 on the sRGB-encoded images (`loss::perceptual`: the images here are linear, the
 //! network was trained on sRGB). The network needs at least `lpips::MIN_SIZE` (31) pixels per side:
 //! a human box smaller than that is grown symmetrically about its centre (kept inside the frame) to
 //! that size for LPIPS only — so a small box's LPIPS also sees a little of the scene around it — and
 //! a frame smaller than that gets NaN.
 
-use crate::image_loss::{crop, mask_iou, psnr, ssim, ImageShape};
-use crate::perceptual::{lpips_distance, reference_features};
+use crate::loss::image::{crop, ssim, ImageShape};
+use crate::loss::perceptual::{lpips_distance, reference_features};
 use crate::TrainError;
 use lpips::Lpips;
 
@@ -65,6 +65,33 @@ pub struct FrameMetrics {
     pub blurred_lpips_full: f64,
     /// LPIPS of the blurred input against the reference, human box.
     pub blurred_lpips_human_box: f64,
+}
+
+/// Peak signal-to-noise ratio (dB) for data range 1: −10·log10(MSE). Identical images give +∞.
+pub fn psnr(pred: &[f32], target: &[f32]) -> f64 {
+    let n = pred.len().max(1) as f64;
+    let mse = pred
+        .iter()
+        .zip(target)
+        .map(|(&p, &t)| (f64::from(p) - f64::from(t)).powi(2))
+        .sum::<f64>()
+        / n;
+    -10.0 * mse.log10()
+}
+
+/// Intersection over union of two binary masks given as values thresholded at 0.5. Both empty gives 1.
+pub fn mask_iou(pred: &[f32], target: &[f32]) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (&p, &t) in pred.iter().zip(target) {
+        let (p, t) = (p > 0.5, t > 0.5);
+        inter += usize::from(p && t);
+        union += usize::from(p || t);
+    }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    }
 }
 
 /// Tight bounding box `(x0, y0, x1, y1)` (exclusive ends) of the true pixels of an (H, W) mask.
@@ -282,7 +309,7 @@ pub fn evaluate_split(
             .scene
             .images
             .is_grey()
-            .then(|| crate::image_loss::luminance3(&r.rgb, w * h));
+            .then(|| crate::loss::image::luminance3(&r.rgb, w * h));
         let frame = EvalFrame {
             width: w,
             height: h,
@@ -304,6 +331,16 @@ pub fn evaluate_split(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn psnr_and_iou_basics() {
+        assert!((psnr(&[0.5; 4], &[0.6; 4]) - 20.0).abs() < 1e-5);
+        assert_eq!(
+            mask_iou(&[1.0, 1.0, 0.0, 0.0], &[1.0, 0.0, 1.0, 0.0]),
+            1.0 / 3.0
+        );
+        assert_eq!(mask_iou(&[0.0; 3], &[0.0; 3]), 1.0);
+    }
 
     #[test]
     fn bbox_psnr_and_iou_on_a_toy_frame() {

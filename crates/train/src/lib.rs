@@ -2,7 +2,6 @@
 //! networks), losses, the optimisation loop, checkpoints and evaluation. This is the only crate that
 //! knows the method; everything it builds on is generic.
 
-pub mod aiap;
 pub mod blend;
 pub mod body;
 pub mod checkpoint;
@@ -10,16 +9,12 @@ pub mod colour;
 pub mod config;
 pub mod data;
 pub mod eval;
-pub mod event_loss;
 pub mod export;
 pub mod exposure;
-pub mod exposure_loss;
-pub mod flow_loss;
-pub mod image_loss;
 pub mod init;
+pub mod loss;
 pub mod model;
 pub mod optimisers;
-pub mod perceptual;
 pub mod pose_correction;
 pub mod posing;
 pub mod reposing;

@@ -711,8 +711,8 @@ fn interleave_channels(posed: &PosedFrame<f32>) -> Vec<f32> {
 }
 
 /// The exposure model's prediction: the mean of the passes' RGB renders, (3, H, W) (the render
-/// itself for one pass; `crate::exposure_loss::mean_image`).
+/// itself for one pass; `crate::loss::photometric::mean_image`).
 pub fn mean_rgb(passes: &[FramePass<'_>]) -> Vec<f32> {
     let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
-    crate::exposure_loss::mean_image(&renders, renders.first().map_or(0, |r| r.len()))
+    crate::loss::photometric::mean_image(&renders, renders.first().map_or(0, |r| r.len()))
 }

@@ -206,7 +206,7 @@ fn a_flow_source_the_scene_lacks_is_refused_at_load_time() {
 #[test]
 fn sharp_network_targets_make_the_sharp_frames_a_zero_of_the_flow_loss() {
     use train::config::FlowSource;
-    use train::flow_loss::pair_flow_loss;
+    use train::loss::optical_flow::pair_flow_loss;
     assert_eq!(
         <FlowSource as clap::ValueEnum>::from_str("sharp-net", false),
         Ok(FlowSource::SharpNetwork)

@@ -1,4 +1,4 @@
-//! Finite-difference check of the as-isometric-as-possible losses (`train::aiap`) w.r.t. canonical and
+//! Finite-difference check of the as-isometric-as-possible losses (`train::loss::aiap`) w.r.t. canonical and
 //! deformed positions (D = 3) and covariance vectors (D = 6).
 //!
 //! The loss is piecewise smooth: |·| has a kink where a canonical and a deformed neighbour distance are
@@ -8,7 +8,7 @@
 
 use gradient_checks::{central_differences, GradientChecker, Tolerance};
 use proptest::prelude::*;
-use train::aiap::{aiap_loss, AIAP_NEIGHBOURS};
+use train::loss::aiap::{aiap_loss, AIAP_NEIGHBOURS};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;

@@ -1,4 +1,4 @@
-//! Finite-difference check of the event-generation loss (`train::event_loss::pair_event_loss_with`)
+//! Finite-difference check of the event-generation loss (`train::loss::event::pair_event_loss_with`)
 //! w.r.t. both renders, with the squared penalty and with the bound penalty (counts as lower
 //! bounds, a dead zone without events, a weighted overshoot past the count). The loss is smooth where the luma is positive (log of a
 //! positive value, squared residual); renders are drawn in [0.05, 1] so no probe reaches the clamp
@@ -10,7 +10,7 @@
 
 use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
 use proptest::prelude::*;
-use train::event_loss::{pair_event_loss_with, EventPenalty};
+use train::loss::event::{pair_event_loss_with, EventPenalty};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;

@@ -1,4 +1,4 @@
-//! Finite-difference check of the exposure model's image terms (`train::exposure_loss`): the
+//! Finite-difference check of the exposure model's image terms (`train::loss::photometric`): the
 //! photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) — of the mean of S sub-exposure renders against the
 //! observed frame, plus the weighted event-generation loss between consecutive renders, or between
 //! every pair of renders (some intervals without events), w.r.t. every render, for S = 1, 2, 3 and 5. Each render carries a fourth plane
@@ -12,21 +12,21 @@
 //! truncation h²·|L'''| is ≤ 1e-8 at luma ≥ 0.05. |num − ana| ≤ 1e-9 + 1e-6·max(|num|, |ana|) keeps
 //! more than an order of magnitude of margin. Dropping the 1/S of the mean, or the weight of the
 //! event pairs, fails it (asserted below). The event terms run with the squared or the bound
-//! penalty (`train::event_loss::EventPenalty`).
+//! penalty (`train::loss::event::EventPenalty`).
 
 use gradient_checks::{central_differences, compare, rng, GradientChecker, Tolerance};
 use proptest::prelude::*;
 use rand::Rng;
-use train::event_loss::EventPenalty;
-use train::exposure_loss::{exposure_loss, ExposureEvents};
-use train::image_loss::ImageShape;
+use train::loss::event::EventPenalty;
+use train::loss::image::ImageShape;
+use train::loss::photometric::{exposure_loss, ExposureEvents};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;
 const SIDE: usize = 12;
 const HW: usize = SIDE * SIDE;
 const PLANES: usize = 4;
-/// The bound penalty of `train::event_loss` (its kinks: see `train_event_loss.rs`).
+/// The bound penalty of `train::loss::event` (its kinks: see `train_event_loss.rs`).
 const BOUND: EventPenalty = EventPenalty::Bound {
     c_pos: 0.2,
     c_neg: 0.2,

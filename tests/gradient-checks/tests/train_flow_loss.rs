@@ -1,4 +1,4 @@
-//! Finite-difference check of the masked flow L1 (`train::flow_loss::masked_l1`) w.r.t. the predicted
+//! Finite-difference check of the masked flow L1 (`train::loss::optical_flow::masked_l1`) w.r.t. the predicted
 //! flow. The loss is piecewise linear; predictions are kept at least 1e-3 away from the target (≫ h),
 //! so no kink is crossed and central differences are exact up to rounding (~1e-10). Tolerance
 //! |num − ana| ≤ 1e-9 + 1e-6·max(|num|, |ana|). Unsupervised pixels must get exactly zero gradient,
@@ -6,7 +6,7 @@
 
 use gradient_checks::{central_differences, GradientChecker, Tolerance};
 use proptest::prelude::*;
-use train::flow_loss::{masked_l1, prepare_target};
+use train::loss::optical_flow::{masked_l1, prepare_target};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;

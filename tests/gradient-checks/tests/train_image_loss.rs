@@ -1,4 +1,4 @@
-//! Finite-difference checks of the image losses in `train::image_loss`: SSIM (hence D-SSIM) and L1
+//! Finite-difference checks of the image losses in `train::loss::image`: SSIM (hence D-SSIM) and L1
 //! w.r.t. the predicted image.
 //!
 //! SSIM is a smooth rational function of blurred moments; with values in [0.05, 0.95] its denominators
@@ -9,7 +9,7 @@
 
 use gradient_checks::{central_differences, GradientChecker, Tolerance};
 use proptest::prelude::*;
-use train::image_loss::{l1, ssim, ImageShape};
+use train::loss::image::{l1, ssim, ImageShape};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;

@@ -1,4 +1,4 @@
-//! End-to-end finite-difference check of the event-flow loss (`train::flow_loss::pair_flow_loss`,
+//! End-to-end finite-difference check of the event-flow loss (`train::loss::optical_flow::pair_flow_loss`,
 //! paper §4.4) on a tiny scene: Gaussians' colours → rasterizer (frames k and k+1, the Gaussians moved
 //! between them) → bilinear resize to 1/4 (`align_corners = true`) → frozen 2-level SPyNet-style
 //! network → masked L1 against a target flow; differentiated w.r.t. the colour channels of both
@@ -23,7 +23,7 @@ use gradient_checks::{central_differences, check_pair_gradient, Tolerance};
 use proptest::prelude::*;
 use rasterize_cpu::{render, render_backward, Camera, Cotangents, RenderSettings, Splats};
 use std::cell::RefCell;
-use train::flow_loss::{pair_flow_loss, prepare_target};
+use train::loss::optical_flow::{pair_flow_loss, prepare_target};
 
 const TOL: Tolerance = Tolerance::new(1e-8, 1e-5);
 const H: f64 = 1e-6;
@@ -76,7 +76,7 @@ fn network(seed: u64) -> SpyNet<f64> {
 fn evaluate(
     s: &Scene,
     net: &SpyNet<f64>,
-    target: &train::flow_loss::FlowTarget<f64>,
+    target: &train::loss::optical_flow::FlowTarget<f64>,
     x: &[f64],
     grads: bool,
 ) -> (f64, u64, Vec<f64>) {

@@ -1,4 +1,4 @@
-//! f64 finite-difference check of the perceptual training term (`train::perceptual::perceptual_term`):
+//! f64 finite-difference check of the perceptual training term (`train::loss::perceptual::perceptual_term`):
 //! LPIPS of the mean of S sub-exposure renders, sRGB-encoded, against an observed frame, with its
 //! cotangent reaching every render — the trainer's exact code path, generic, in f64.
 //!
@@ -13,8 +13,8 @@
 use gradient_checks::{central_differences, rng, GradientChecker, Tolerance};
 use lpips::Lpips;
 use rand::Rng;
-use train::exposure_loss::mean_image;
-use train::perceptual::{perceptual_term, srgb_image};
+use train::loss::perceptual::{perceptual_term, srgb_image};
+use train::loss::photometric::mean_image;
 
 const H: f64 = 1e-6;
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);

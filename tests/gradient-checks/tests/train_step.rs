@@ -101,7 +101,7 @@ proptest! {
 mod static_step {
     use rasterize_cpu::{render, render_backward, Camera, Cotangents, RenderSettings, Splats};
     use train::colour::{ColourInputs, ColourNet};
-    use train::image_loss::{l1, ssim, ImageShape};
+    use train::loss::image::{l1, ssim, ImageShape};
     use train::TrainError;
 
     /// Stored parameters of N statically coloured Gaussians (same conventions as `gaussians::GaussianSet`).

@@ -1,4 +1,4 @@
-//! Finite-difference check of the ideal-estimator flow loss (`train::flow_loss::pair_warp_loss`):
+//! Finite-difference check of the ideal-estimator flow loss (`train::loss::optical_flow::pair_warp_loss`):
 //! two full-resolution renders → bilinear resize to 1/4 (`align_corners = true`) → render k+1 warped
 //! back by the fixed target flow (bilinear, border padding) → masked L1 against render k over RGB;
 //! differentiated w.r.t. every pixel of both renders.
@@ -16,7 +16,7 @@
 
 use gradient_checks::{central_differences, check_pair_gradient, Tolerance};
 use proptest::prelude::*;
-use train::flow_loss::{pair_warp_loss, prepare_target, FlowTarget};
+use train::loss::optical_flow::{pair_warp_loss, prepare_target, FlowTarget};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;

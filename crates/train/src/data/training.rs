@@ -6,7 +6,7 @@ use super::event_counts::{expected_change, hot_pixels};
 use super::Dataset;
 use crate::body::{Body, PreparedPose};
 use crate::config::TrainConfig;
-use crate::flow_loss::{network_target, prepare_target, FlowTarget};
+use crate::loss::optical_flow::{network_target, prepare_target, FlowTarget};
 use crate::TrainError;
 use flow::SpyNet;
 use rasterize_cpu::Camera;

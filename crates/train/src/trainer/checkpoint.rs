@@ -5,10 +5,10 @@
 
 use super::terms::AiapNeighbours;
 use super::Trainer;
-use crate::aiap::AIAP_NEIGHBOURS;
 use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::data::TrainingData;
+use crate::loss::aiap::AIAP_NEIGHBOURS;
 use crate::model::Model;
 use crate::optimisers::{OptimiserSteps, Optimisers};
 use crate::TrainError;

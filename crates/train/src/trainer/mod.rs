@@ -22,12 +22,13 @@ pub use terms::warm_up_skinning;
 use crate::body::PreparedPose;
 use crate::config::{BlurModel, DensityGradient, ExposureNetworks, ExposurePairs, TrainConfig};
 use crate::data::TrainingData;
-use crate::exposure_loss::{exposure_loss, ExposureEvents};
-use crate::image_loss::{psnr, ImageShape};
+use crate::eval::psnr;
 use crate::init::{initialise, InitConfig};
+use crate::loss::image::ImageShape;
+use crate::loss::perceptual::perceptual_term;
+use crate::loss::photometric::{exposure_loss, ExposureEvents};
 use crate::model::{FramePass, Model, PosedGradients, RENDER_CHANNELS};
 use crate::optimisers::Optimisers;
-use crate::perceptual::perceptual_term;
 use crate::posing::ModelGradients;
 use crate::schedule::{
     accumulate_screen_stats, correction_rate_scale, exponential_rate, on_schedule,

@@ -1,13 +1,13 @@
 //! The loss terms of one training step, each returning its value and its cotangents (the frame's
-//! own photometric and in-exposure event terms are `crate::exposure_loss`): the pair losses (flow, events) between the passes of frames k and k+1,
+//! own photometric and in-exposure event terms are `crate::loss::photometric`): the pair losses (flow, events) between the passes of frames k and k+1,
 //! the AIAP regulariser on the human Gaussians and the skinning loss on canonical surface samples.
 
-use crate::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP_NEIGHBOURS};
 use crate::config::{EventPairs, FlowGradient, FlowMeasure, TrainConfig};
 use crate::data::{EventPair, FlowPair, TrainingData};
-use crate::event_loss::pair_event_loss_with;
-use crate::exposure_loss::add_scaled;
-use crate::flow_loss::{pair_flow_loss, pair_warp_loss};
+use crate::loss::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP_NEIGHBOURS};
+use crate::loss::event::pair_event_loss_with;
+use crate::loss::optical_flow::{pair_flow_loss, pair_warp_loss};
+use crate::loss::photometric::add_scaled;
 use crate::model::{Model, PosedGradients, RENDER_CHANNELS};
 use crate::posing::{ModelGradients, PosedFrame};
 use crate::TrainError;

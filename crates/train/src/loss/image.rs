@@ -1,5 +1,6 @@
-//! Image-space losses and metrics with their analytic backward: L1, SSIM / D-SSIM (11×11 Gaussian window,
-//! σ = 1.5, zero padding, C1 = 0.01², C2 = 0.03², as in the 3DGS training code), PSNR and mask IoU.
+//! Image-space losses with their analytic backward: L1 and SSIM / D-SSIM (11×11 Gaussian window,
+//! σ = 1.5, zero padding, C1 = 0.01², C2 = 0.03², as in the 3DGS training code). The metrics built
+//! on them (PSNR, mask IoU) are in `eval`.
 //!
 //! Images are planar (C, H, W) linear values with data range 1. The SSIM here is the one the loss
 //! optimises and the one the metrics report; it is the 3DGS variant
@@ -235,18 +236,6 @@ pub fn ssim<T: Float + Send + Sync>(
     per_channel.iter().fold(T::zero(), |acc, (s, _)| acc + *s) / total
 }
 
-/// Peak signal-to-noise ratio (dB) for data range 1: −10·log10(MSE). Identical images give +∞.
-pub fn psnr(pred: &[f32], target: &[f32]) -> f64 {
-    let n = pred.len().max(1) as f64;
-    let mse = pred
-        .iter()
-        .zip(target)
-        .map(|(&p, &t)| (f64::from(p) - f64::from(t)).powi(2))
-        .sum::<f64>()
-        / n;
-    -10.0 * mse.log10()
-}
-
 /// Crops a planar (C, H, W) image to rows `y0..y1`, columns `x0..x1`.
 pub fn crop(
     image: &[f32],
@@ -264,21 +253,6 @@ pub fn crop(
         }
     }
     out
-}
-
-/// Intersection over union of two binary masks given as values thresholded at 0.5. Both empty gives 1.
-pub fn mask_iou(pred: &[f32], target: &[f32]) -> f64 {
-    let (mut inter, mut union) = (0usize, 0usize);
-    for (&p, &t) in pred.iter().zip(target) {
-        let (p, t) = (p > 0.5, t > 0.5);
-        inter += usize::from(p && t);
-        union += usize::from(p || t);
-    }
-    if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    }
 }
 
 /// Grey frames (`images.channels = 1`, held in memory as three equal planes): the Rec. 601
@@ -422,16 +396,6 @@ mod tests {
         for i in 0..SSIM_WINDOW {
             assert_eq!(k[i], k[SSIM_WINDOW - 1 - i]);
         }
-    }
-
-    #[test]
-    fn psnr_and_iou_basics() {
-        assert!((psnr(&[0.5; 4], &[0.6; 4]) - 20.0).abs() < 1e-5);
-        assert_eq!(
-            mask_iou(&[1.0, 1.0, 0.0, 0.0], &[1.0, 0.0, 1.0, 0.0]),
-            1.0 / 3.0
-        );
-        assert_eq!(mask_iou(&[0.0; 3], &[0.0; 3]), 1.0);
     }
 
     #[test]

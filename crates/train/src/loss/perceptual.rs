@@ -89,8 +89,8 @@ pub fn lpips_loss<T: Real>(
 /// `prediction` the mean of the frame's S renders (linear planar (3, H, W)), its cotangent added to
 /// every render's `d_renders[s]` (whose first 3·H·W values are its RGB planes) scaled like the
 /// photometric loss's: by `weight / S`, or `weight` for one render. With `grey` (grey frames),
-/// `prediction` is the luminance of the mean render, as [`crate::exposure_loss::exposure_loss`]
-/// returns it, and the cotangent goes back through [`crate::image_loss::luminance3`]. Returns the
+/// `prediction` is the luminance of the mean render, as [`crate::loss::photometric::exposure_loss`]
+/// returns it, and the cotangent goes back through [`crate::loss::image::luminance3`]. Returns the
 /// weighted value.
 pub fn perceptual_term<T: Real>(
     net: &Lpips<T>,
@@ -105,7 +105,7 @@ pub fn perceptual_term<T: Real>(
     let reference = reference_features(net, observed, height, width)?;
     let (value, mut d_prediction) = lpips_loss(net, prediction, height, width, &reference)?;
     if grey {
-        d_prediction = crate::image_loss::luminance3_backward(&d_prediction, height * width);
+        d_prediction = crate::loss::image::luminance3_backward(&d_prediction, height * width);
     }
     let share = match d_renders.len() {
         1 => weight,
@@ -119,7 +119,7 @@ pub fn perceptual_term<T: Real>(
                 found: d.len(),
             });
         }
-        crate::exposure_loss::add_scaled(&mut d[..d_prediction.len()], &d_prediction, share);
+        crate::loss::photometric::add_scaled(&mut d[..d_prediction.len()], &d_prediction, share);
     }
     Ok(weight * value)
 }

@@ -1,14 +1,14 @@
 //! The exposure model's image terms on one training frame, generic over f32 / f64 (the trainer runs
 //! f32; the gradient checks run f64): the photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) — of the mean
 //! of the frame's S sub-exposure renders against the observed frame, and the event-generation loss
-//! between consecutive renders against the events between their times (`train::event_loss`).
+//! between consecutive renders against the events between their times (`train::loss::event`).
 //!
 //! Backward: the photometric cotangent of the mean reaches every render scaled by 1/S (unscaled for
 //! one render, so the single-render model is the S = 1 case bit for bit); each event pair —
 //! consecutive renders, or every pair — adds its weighted cotangents to its two renders.
 
-use crate::event_loss::{pair_event_loss_with, EventPenalty};
-use crate::image_loss::{l1, ssim, ImageShape};
+use crate::loss::event::{pair_event_loss_with, EventPenalty};
+use crate::loss::image::{l1, ssim, ImageShape};
 use nn::Real;
 
 /// The events between consecutive sub-exposure renders of a frame.
@@ -49,7 +49,7 @@ pub struct ExposureLoss<T> {
 /// further planes, ignored), `observed` the frame (3, H, W), `ssim_weight` λ; the cotangents are
 /// laid out with `channels` ≥ 3 planes (the trainer's renders carry the human probability as a
 /// fourth). With `grey` the frame is a grey one (three equal planes) and the photometric terms
-/// compare the luminance of the mean render ([`crate::image_loss::luminance3`]); the prediction
+/// compare the luminance of the mean render ([`crate::loss::image::luminance3`]); the prediction
 /// returned is that luminance. The event terms always use the renders' colour.
 pub fn exposure_loss<T: Real>(
     renders: &[&[T]],
@@ -63,7 +63,7 @@ pub fn exposure_loss<T: Real>(
     let hw = shape.height * shape.width;
     let mean = mean_image(renders, 3 * hw);
     let prediction = if grey {
-        crate::image_loss::luminance3(&mean, hw)
+        crate::loss::image::luminance3(&mean, hw)
     } else {
         mean
     };
@@ -78,7 +78,7 @@ pub fn exposure_loss<T: Real>(
         *o = (T::one() - w) * a - w * b;
     }
     if grey {
-        d_mean = crate::image_loss::luminance3_backward(&d_mean, hw);
+        d_mean = crate::loss::image::luminance3_backward(&d_mean, hw);
     }
     let mut d_renders = if renders.len() == 1 {
         vec![d_mean]

@@ -1,0 +1,12 @@
+//! The method's losses, each with its backward: the photometric loss of a frame (the mean of its
+//! sub-exposure renders against the observation; one render with `blur_model = none`), the image
+//! terms it is made of (L1, SSIM), the event-generation loss, the flow loss, the perceptual (LPIPS)
+//! loss and the as-isometric-as-possible regulariser of the human Gaussians. The trainer weights
+//! and sums them (`trainer::terms`).
+
+pub mod aiap;
+pub mod event;
+pub mod image;
+pub mod optical_flow;
+pub mod perceptual;
+pub mod photometric;
