@@ -1,0 +1,161 @@
+//! The named choices among the training options (which images, which blur model, which penalty,
+//! …) and the command-line parsers of `on|off` and colour values.
+
+use serde::{Deserialize, Serialize};
+
+/// Which images are trained on (see [`TrainConfig::train_on`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum TrainOn {
+    /// The observed (blurred) frames.
+    #[default]
+    Blurred,
+    /// The sharp references (benchmarks only).
+    Sharp,
+    /// Every training frame deblurred on its own by EDI from its events (the 2-D cascade
+    /// baseline, "deblur first, then reconstruct"; use with `blur_model = none`).
+    Edi,
+}
+
+/// How a training frame's prediction is formed (see [`TrainConfig::blur_model`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum BlurModel {
+    /// One render at the frame's mid-exposure pose (the paper).
+    None,
+    /// The mean of renders at sub-exposure poses: the physical model of motion blur.
+    #[default]
+    Exposure,
+}
+
+/// Which sub-exposure renders the event loss pairs (see [`TrainConfig::exposure_pairs`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExposurePairs {
+    /// Consecutive renders.
+    #[default]
+    Consecutive,
+    /// Every pair of renders.
+    All,
+}
+
+/// Network evaluations per exposure (see [`TrainConfig::exposure_networks`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExposureNetworks {
+    /// Once per frame, at mid exposure; sub-exposure renders re-pose by LBS.
+    #[default]
+    Once,
+    /// At every sub-exposure pose.
+    PerSubframe,
+}
+
+/// Which screen-space gradient feeds densification (see [`TrainConfig::density_gradient`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum DensityGradient {
+    /// ‖Σ_s g_s‖: the norm of the passes' summed gradient.
+    #[default]
+    Summed,
+    /// Σ_s ‖g_s‖: the passes' norms summed.
+    PerPass,
+}
+
+/// How the event loss holds a change to its events (see [`TrainConfig::event_penalty`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum EventPenaltyKind {
+    /// (ΔL − C·E)²: ideal events.
+    Squared,
+    /// Counts as lower bounds, silence as a dead zone (a sensor with a refractory period).
+    #[default]
+    Bound,
+}
+
+/// Which renders the event-generation loss compares (see [`TrainConfig::event_pairs`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum EventPairs {
+    /// Renders of consecutive training frames.
+    Frames,
+    /// Consecutive sub-exposure renders of one frame.
+    #[default]
+    Exposure,
+}
+
+/// Which parameters the flow loss's gradient reaches (see [`TrainConfig::flow_gradient`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlowGradient {
+    /// Every parameter the two renders depend on (the paper).
+    #[default]
+    All,
+    /// Only the rasterizer's mean and covariance inputs: colours, opacities and semantic
+    /// probabilities get no share of the flow loss's gradient.
+    Geometry,
+}
+
+/// How the flow loss compares the renders' motion with the target (see
+/// [`TrainConfig::flow_measure`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlowMeasure {
+    /// The frozen flow network's prediction between the two renders, masked L1 against the target
+    /// flow (the paper).
+    #[default]
+    Network,
+    /// Brightness constancy along the target flow: masked L1 between render k and render k+1 warped
+    /// back by the target (what a perfect flow estimator would enforce; not in the paper).
+    Warp,
+}
+
+/// Source of the flow that supervises the flow loss.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlowSource {
+    /// The generator's exact flow (`ground_truth` in `scene.json`; the paper's "ideal event flow").
+    #[value(alias = "gt")]
+    GroundTruth,
+    /// Flow from the events alone by contrast maximisation (`events_cm`).
+    Events,
+    /// Flow made by another tool (`external`).
+    File,
+    /// The frozen flow network's own prediction between the *sharp reference* frames k and k+1 at
+    /// the loss's resolution (`train::loss::optical_flow::network_target`): the paper's ZJU-MoCap-Blur
+    /// protocol, which infers the target from the sharp frames with a pretrained network (RAFT
+    /// there). Needs sharp references, so synthetic or reference data only; reads no flow file.
+    #[value(alias = "sharp-net")]
+    SharpNetwork,
+}
+
+impl FlowSource {
+    /// The `scene.json` flow kind this source reads; `None` for [`FlowSource::SharpNetwork`],
+    /// which reads the sharp reference frames instead.
+    pub fn kind(self) -> Option<scene::FlowKind> {
+        match self {
+            Self::GroundTruth => Some(scene::FlowKind::GroundTruth),
+            Self::Events => Some(scene::FlowKind::EventsCm),
+            Self::File => Some(scene::FlowKind::External),
+            Self::SharpNetwork => None,
+        }
+    }
+}
+
+/// Parses `on` / `off` (the command line's spelling of a switch).
+pub fn parse_on_off(s: &str) -> Result<bool, String> {
+    match s {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("`{s}`: expected on or off")),
+    }
+}
+
+/// Parses a linear RGB colour written `r,g,b`.
+pub fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
+    let values: Vec<f32> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e} (expected r,g,b)"))?;
+    <[f32; 3]>::try_from(values).map_err(|_| format!("`{s}`: expected three values r,g,b"))
+}
