@@ -18,9 +18,15 @@ use super::kernels::{centres, splat_lanes, BackwardScratch, PairSplat, BUF_C, BU
 use super::Cotangents;
 use crate::{lit, TILE_PIXELS, TILE_SIZE};
 
-/// Whether this CPU runs the kernels of this module.
+/// Whether this CPU runs the kernels of this module: it has AVX-512F, and the environment variable
+/// `E_SEM3DGS_PORTABLE_KERNELS` is not set (set, the portable kernels run instead, with the same
+/// bits: for measuring one against the other on a CPU).
 pub(super) fn available() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f")
+    static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVAILABLE.get_or_init(|| {
+        std::arch::is_x86_feature_detected!("avx512f")
+            && std::env::var_os("E_SEM3DGS_PORTABLE_KERNELS").is_none()
+    })
 }
 
 /// Runs [`backward_tile`] and returns `true`, or returns `false` (doing nothing) if this CPU lacks
