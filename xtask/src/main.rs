@@ -12,6 +12,7 @@ mod bench_events;
 mod bench_flow;
 mod bench_lpips;
 mod bench_raster;
+mod bench_step;
 mod body;
 mod body_convert;
 mod common;
@@ -117,6 +118,8 @@ enum BenchCommand {
     Deform(bench_deform::Args),
     /// Rasterizer forward and forward + backward times on seeded random scenes.
     Raster(bench_raster::Args),
+    /// The training step's stage breakdown from a saved checkpoint (a few unsaved steps).
+    Step(bench_step::Args),
 }
 
 fn main() -> Result<()> {
@@ -142,6 +145,7 @@ fn main() -> Result<()> {
         Command::Bench(BenchCommand::Lpips(args)) => bench_lpips::run(args),
         Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
         Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
+        Command::Bench(BenchCommand::Step(args)) => bench_step::run(args),
         Command::Render(args) => render::run(args),
         Command::Fuzz(args) => fuzz::run(args),
         Command::Import(command) => import::run(command),

@@ -234,6 +234,85 @@ fn scene_defaults(
     Ok(config)
 }
 
+/// Finishes `ctx` for `config`: the frozen flow network, the LPIPS network, the images trained on,
+/// the exposure model's sub-exposure poses and the event supervision, each said in one line.
+pub fn prepare_training_data(
+    ctx: &mut TrainingData,
+    data: &train::data::Dataset,
+    config: &TrainConfig,
+) -> Result<()> {
+    if config.flow_loss {
+        enable_flow(ctx, data, config)?;
+    }
+    if config.lpips_weight > 0.0 {
+        let weights = shipped_lpips_weights();
+        let net = lpips::load_safetensors(&weights)
+            .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
+        ctx.enable_lpips(net)
+            .context("preparing the perceptual (LPIPS) loss")?;
+        println!(
+            "perceptual loss: LPIPS (AlexNet, v0.1) of each frame's prediction, weight {}",
+            config.lpips_weight
+        );
+    }
+    if config.train_on == TrainOn::Sharp {
+        ctx.use_sharp_images(data)
+            .context("training on the sharp references")?;
+        println!("training on the sharp references (the benchmark's ceiling, not a method)");
+    }
+    if config.train_on == TrainOn::Edi {
+        let deblurred = ctx
+            .use_edi_images(data, config)
+            .context("deblurring the training frames by EDI")?;
+        println!(
+            "training on EDI-deblurred frames (the 2-D cascade baseline): {deblurred} of {} \
+             training frames deblurred, the others' exposures are not covered by events",
+            ctx.frames.len()
+        );
+    }
+    if config.blur_model == BlurModel::Exposure {
+        ctx.enable_exposure(data, config.subframes)
+            .context("preparing the exposure model")?;
+        let (shortest, longest) = data.frames.iter().fold((f64::MAX, 0.0f64), |(a, b), f| {
+            (a.min(f.exposure_s), b.max(f.exposure_s))
+        });
+        let span = if longest - shortest > 1e-9 {
+            format!("{:.1}–{:.1} ms", 1e3 * shortest, 1e3 * longest)
+        } else {
+            format!("{:.1} ms", 1e3 * longest)
+        };
+        println!(
+            "exposure model: each training frame is the mean of {} renders over its {span} exposure",
+            config.subframes
+        );
+    }
+    if config.event_loss {
+        match config.event_pairs {
+            EventPairs::Frames => {
+                ctx.enable_events(data, config)
+                    .context("preparing the event-generation loss")?;
+                println!(
+                    "event loss: {} pairs of consecutive training frames, weight {}, C {}",
+                    ctx.event_pairs.iter().flatten().count(),
+                    config.event_weight,
+                    config.event_threshold
+                );
+            }
+            EventPairs::Exposure => {
+                ctx.enable_exposure_events(data, config)
+                    .context("preparing the event-generation loss inside exposures")?;
+                println!(
+                    "event loss: {} pairs of consecutive sub-exposure renders, weight {}, C {}",
+                    ctx.exposure_events.iter().flatten().flatten().count(),
+                    config.event_weight,
+                    config.event_threshold
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Runs `reconstruct`.
 pub fn run(args: Args) -> Result<()> {
     let data_dir = match &args.data {
@@ -271,75 +350,7 @@ pub fn run(args: Args) -> Result<()> {
         (Trainer::new(&ctx, config)?, 0.0)
     };
     let config = trainer.config().clone();
-    if config.flow_loss {
-        enable_flow(&mut ctx, &data, &config)?;
-    }
-    if config.lpips_weight > 0.0 {
-        let weights = shipped_lpips_weights();
-        let net = lpips::load_safetensors(&weights)
-            .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
-        ctx.enable_lpips(net)
-            .context("preparing the perceptual (LPIPS) loss")?;
-        println!(
-            "perceptual loss: LPIPS (AlexNet, v0.1) of each frame's prediction, weight {}",
-            config.lpips_weight
-        );
-    }
-    if config.train_on == TrainOn::Sharp {
-        ctx.use_sharp_images(&data)
-            .context("training on the sharp references")?;
-        println!("training on the sharp references (the benchmark's ceiling, not a method)");
-    }
-    if config.train_on == TrainOn::Edi {
-        let deblurred = ctx
-            .use_edi_images(&data, &config)
-            .context("deblurring the training frames by EDI")?;
-        println!(
-            "training on EDI-deblurred frames (the 2-D cascade baseline): {deblurred} of {} \
-             training frames deblurred, the others' exposures are not covered by events",
-            ctx.frames.len()
-        );
-    }
-    if config.blur_model == BlurModel::Exposure {
-        ctx.enable_exposure(&data, config.subframes)
-            .context("preparing the exposure model")?;
-        let (shortest, longest) = data.frames.iter().fold((f64::MAX, 0.0f64), |(a, b), f| {
-            (a.min(f.exposure_s), b.max(f.exposure_s))
-        });
-        let span = if longest - shortest > 1e-9 {
-            format!("{:.1}–{:.1} ms", 1e3 * shortest, 1e3 * longest)
-        } else {
-            format!("{:.1} ms", 1e3 * longest)
-        };
-        println!(
-            "exposure model: each training frame is the mean of {} renders over its {span} exposure",
-            config.subframes
-        );
-    }
-    if config.event_loss {
-        match config.event_pairs {
-            EventPairs::Frames => {
-                ctx.enable_events(&data, &config)
-                    .context("preparing the event-generation loss")?;
-                println!(
-                    "event loss: {} pairs of consecutive training frames, weight {}, C {}",
-                    ctx.event_pairs.iter().flatten().count(),
-                    config.event_weight,
-                    config.event_threshold
-                );
-            }
-            EventPairs::Exposure => {
-                ctx.enable_exposure_events(&data, &config)
-                    .context("preparing the event-generation loss inside exposures")?;
-                println!(
-                    "event loss: {} pairs of consecutive sub-exposure renders, weight {}, C {}",
-                    ctx.exposure_events.iter().flatten().flatten().count(),
-                    config.event_weight,
-                    config.event_threshold
-                );
-            }
-        }
-    }
+    prepare_training_data(&mut ctx, &data, &config)?;
     let config_path = out.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
@@ -509,7 +520,7 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// Mean seconds per step stage over `recent`, in the step's order, with their total.
-fn mean_times(recent: &[StepReport]) -> Vec<(&'static str, f64)> {
+pub fn mean_times(recent: &[StepReport]) -> Vec<(&'static str, f64)> {
     let n = recent.len().max(1) as f64;
     let sum = |f: fn(&StepReport) -> f64| recent.iter().map(f).sum::<f64>() / n;
     vec![

@@ -1,6 +1,7 @@
 //! The README's study commands on tiny inputs, to success, checking what they wrote:
-//! `reconstruct --pose-correction on` on a scene with estimated poses (and its pose report), and
-//! `ablate --blur-levels` on the slow, medium and fast variants of the tiny benchmark.
+//! `reconstruct --pose-correction on` on a scene with estimated poses (and its pose report),
+//! `bench step` from that run's checkpoint, and `ablate --blur-levels` on the slow, medium and fast
+//! variants of the tiny benchmark.
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
@@ -57,6 +58,27 @@ fn pose_correction_trains_on_estimated_poses_and_reports_their_error() {
     assert!(given > 5.0 && given < 30.0, "{given}");
     assert!((corrected - given).abs() < 5.0, "{given} → {corrected}");
     assert!(report["view"]["test_given"]["image_px"].as_f64().unwrap() > 0.0);
+
+    // The step's breakdown from the run's checkpoint: every stage measured, the total their sum.
+    let line = run(xtask()
+        .args(["bench", "step", "--steps", "2", "--run"])
+        .arg(&out)
+        .arg("--data")
+        .arg(&scene));
+    let bench: serde_json::Value = serde_json::from_str(line.lines().last().unwrap()).unwrap();
+    assert_eq!(bench["checkpoint_step"].as_u64(), Some(4), "{bench}");
+    assert_eq!(
+        bench["gaussians"].as_u64(),
+        metrics["gaussians_human"]
+            .as_u64()
+            .zip(metrics["gaussians_scene"].as_u64())
+            .map(|(h, s)| h + s)
+    );
+    let total = bench["total_ms"].as_f64().unwrap();
+    assert!(
+        total > 0.0 && bench["render_ms"].as_f64().unwrap() > 0.0,
+        "{bench}"
+    );
 }
 
 #[test]

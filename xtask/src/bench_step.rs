@@ -1,0 +1,76 @@
+//! `cargo xtask bench step`: the training step's stage breakdown, measured the same way for every
+//! change — from a saved checkpoint (a `reconstruct` run's `checkpoint.safetensors`, e.g. at its
+//! Gaussian peak), with the run's own configuration and data preparation, for a few steps that
+//! are not saved. One JSON line: the checkpoint's step and Gaussians, the threads, and the mean
+//! milliseconds of each stage (`StepReport::times`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use train::data::TrainingData;
+use train::trainer::Trainer;
+
+/// Arguments of `cargo xtask bench step`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The run directory whose `checkpoint.safetensors` is stepped from (default: the `quick`
+    /// run of the default benchmark, `target/reconstruct/default-quick`).
+    #[arg(long)]
+    pub run: Option<PathBuf>,
+    /// The scene the run trained on (default: the synthetic benchmark's `default` preset).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Timed steps (after one warm-up step).
+    #[arg(long, default_value_t = 10)]
+    pub steps: usize,
+}
+
+/// Runs the benchmark.
+pub fn run(args: Args) -> Result<()> {
+    let run = args.run.unwrap_or_else(|| {
+        crate::common::target_dir()
+            .join("reconstruct")
+            .join("default-quick")
+    });
+    let data_dir = match args.data {
+        Some(d) => d,
+        None => crate::common::default_benchmark()?,
+    };
+    let data = train::data::load_dataset(&data_dir)
+        .with_context(|| format!("loading the scene {}", data_dir.display()))?;
+    let body = crate::reconstruct::scene_body(&data)?;
+    let checkpoint = run.join("checkpoint.safetensors");
+    // The run's seed (its `config.json`) samples the data's random parts as the run did.
+    let seed = std::fs::read_to_string(run.join("config.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|c| c["seed"].as_u64())
+        .unwrap_or(0);
+    let mut ctx = TrainingData::new(&data, body, seed)?;
+    let mut trainer = Trainer::load_checkpoint(&checkpoint, &ctx)
+        .with_context(|| format!("loading {}", checkpoint.display()))?;
+    let config = trainer.config().clone();
+    crate::reconstruct::prepare_training_data(&mut ctx, &data, &config)?;
+    let (from, gaussians) = (trainer.step, trainer.model.set.len());
+    trainer.step(&ctx)?; // warm-up: first touches of the buffers
+    let steal = crate::steal::Meter::start();
+    let mut reports = Vec::with_capacity(args.steps);
+    for _ in 0..args.steps {
+        reports.push(trainer.step(&ctx)?);
+    }
+    let mut line = serde_json::json!({
+        "checkpoint": checkpoint.display().to_string(),
+        "checkpoint_step": from,
+        "gaussians": gaussians,
+        "steps": args.steps,
+        "threads": rayon::current_num_threads(),
+        "steal_pct": steal.percent(),
+    });
+    if let Some(obj) = line.as_object_mut() {
+        for (stage, seconds) in crate::reconstruct::mean_times(&reports) {
+            obj.insert(format!("{stage}_ms"), serde_json::json!(seconds * 1e3));
+        }
+    }
+    println!("{line}");
+    Ok(())
+}
