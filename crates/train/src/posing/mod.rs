@@ -25,6 +25,8 @@
 //! the skinning field at the canonical means, and that pass is reused, forward and backward
 //! (`DeformCache::skinning_at`: bit for bit what a second evaluation would give).
 
+mod views;
+
 use crate::blend::{blend, blend_backward, BlendInputs, Blended, SemanticMode};
 use crate::colour::{ColourInputs, ColourNet};
 use crate::reposing::ReposeCotangents;
@@ -36,6 +38,7 @@ use smpl_deform::deform_net::{
     NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
 };
 use smpl_deform::math::{Affine, Mat3};
+use views::{canonical_view_directions, view_directions_backward};
 
 /// The four networks of the model.
 #[derive(Clone, Debug)]
@@ -362,27 +365,8 @@ pub fn pose_frame_gated<T: Real>(
         }
     };
     let c = frame.camera_centre;
-    let nb = frame.bones.len();
     let na = active.len();
-    let mut human_world_dirs = Vec::with_capacity(na);
-    let mut human_rotations = Vec::with_capacity(na);
-    let human_dirs: Vec<[T; 3]> = (0..na)
-        .map(|i| {
-            let v = [0, 1, 2].map(|a| posed.positions[i][a] - c[a]);
-            let mut r = [T::zero(); 9];
-            for (b, bone) in frame.bones.iter().enumerate() {
-                let w = direction_weights[i * nb + b];
-                for row in 0..3 {
-                    for col in 0..3 {
-                        r[row * 3 + col] = r[row * 3 + col] + w * bone[row * 4 + col];
-                    }
-                }
-            }
-            human_world_dirs.push(v);
-            human_rotations.push(r);
-            [0, 1, 2].map(|col| (0..3).fold(T::zero(), |acc, row| acc + r[row * 3 + col] * v[row]))
-        })
-        .collect();
+    let views = canonical_view_directions(frame, &posed.positions, &direction_weights);
     let scene_dirs: Vec<[T; 3]> = g
         .means
         .iter()
@@ -390,7 +374,7 @@ pub fn pose_frame_gated<T: Real>(
         .collect();
     let (human_rgb, human_colour) = nets.human_colour.forward(&ColourInputs {
         features: &a_features,
-        directions: &human_dirs,
+        directions: &views.directions,
         extra: &posed.features,
         latent: frame.latent,
     })?;
@@ -436,8 +420,8 @@ pub fn pose_frame_gated<T: Real>(
             inputs,
             direction_weights,
             direction_skinning,
-            human_world_dirs,
-            human_rotations,
+            human_world_dirs: views.world,
+            human_rotations: views.rotations,
         },
     ))
 }
@@ -481,57 +465,21 @@ pub fn pose_frame_backward_with<T: Real>(
         r.check(n, na)?;
     }
     let mut d_semantic = vec![T::zero(); n * k];
-    // Static path of every Gaussian (inactive ones are exactly static; active ones get the blend's
-    // (1 − p) share below, so start from the direct cotangents and correct).
-    let mut d_means: Vec<[T; 3]> = cot.means.to_vec();
-    let mut d_cov_static: Vec<[[T; 3]; 3]> = cot.covariances.to_vec();
-    let mut d_scene_rgb: Vec<T> = cot.colours.to_vec();
-    let mut d_p: Vec<T> = cot.human_probability.to_vec();
-    let ActiveBlendGrads {
-        x_def: mut d_x_def,
-        mats: d_mats,
-        log_scales: mut d_s_def,
-        human_rgb: mut d_human_rgb,
-    } = blend_backward_active(
-        mode,
-        g.semantic_logits,
-        active,
-        &cache.inputs,
-        &cache.posed_mats,
-        &cache.posed_log_scales,
-        cot,
-        StaticCotangents {
-            means: &mut d_means,
-            covariances: &mut d_cov_static,
-            scene_rgb: &mut d_scene_rgb,
-            probability: &mut d_p,
-        },
-    );
-    if let Some(r) = reposings {
-        let add = |a: &mut [T], b: &[T]| a.iter_mut().zip(b).for_each(|(x, &y)| *x = *x + y);
-        add(d_means.as_flattened_mut(), r.means.as_flattened());
-        add(
-            d_cov_static.as_flattened_mut().as_flattened_mut(),
-            r.covariances.as_flattened().as_flattened(),
-        );
-        add(&mut d_scene_rgb, &r.scene_colours);
-        add(&mut d_p, &r.human_probability);
-        add(&mut d_human_rgb, &r.human_colours);
-        add(d_s_def.as_flattened_mut(), r.log_scales.as_flattened());
-    }
-    let mut d_log_scales = Vec::with_capacity(n);
-    let mut d_quats = Vec::with_capacity(n);
-    for i in 0..n {
-        mode.probability_backward(
-            &g.semantic_logits[i * k..(i + 1) * k],
-            d_p[i],
-            &mut d_semantic[i * k..(i + 1) * k],
-        );
-        let (ds_static, dq_static) =
-            covariance_3d_backward(g.log_scales[i], g.quats[i], &d_cov_static[i]);
-        d_log_scales.push(ds_static);
-        d_quats.push(dq_static);
-    }
+    let BlendCotangents {
+        mut d_means,
+        d_cov_static,
+        d_scene_rgb,
+        d_p,
+        active:
+            ActiveBlendGrads {
+                x_def: mut d_x_def,
+                mats: d_mats,
+                log_scales: d_s_def,
+                human_rgb: d_human_rgb,
+            },
+    } = blend_cotangents(mode, g, cache, cot, reposings);
+    let (mut d_log_scales, mut d_quats) =
+        static_backward(mode, g, &d_p, &d_cov_static, &mut d_semantic);
     let human = nets
         .human_colour
         .backward(&cache.human_colour, &d_human_rgb)?;
@@ -544,30 +492,8 @@ pub fn pose_frame_backward_with<T: Real>(
             dm[a] = dm[a] + dd[a];
         }
     }
-    // Human direction d = Rᵀ v with v = x_def − c and R = Σ_b w_b R_b:
-    // dv = R dd, dR[row][col] = v[row]·dd[col], dw_b = ⟨dR, R_b⟩, dR_b += w_b dR.
-    let nb = frame.bones.len();
-    let mut d_direction_weights = vec![T::zero(); na * nb];
-    let mut d_bone_rotations = vec![[T::zero(); 9]; nb];
-    for a in 0..na {
-        let dd = human.directions[a];
-        let v = cache.human_world_dirs[a];
-        let r = &cache.human_rotations[a];
-        for ax in 0..3 {
-            let dv = (0..3).fold(T::zero(), |acc, col| acc + r[ax * 3 + col] * dd[col]);
-            d_x_def[a][ax] = d_x_def[a][ax] + dv;
-        }
-        let d_r: [T; 9] = std::array::from_fn(|e| v[e / 3] * dd[e % 3]);
-        for (b, bone) in frame.bones.iter().enumerate() {
-            let w = cache.direction_weights[a * nb + b];
-            let mut dw = T::zero();
-            for e in 0..9 {
-                dw = dw + d_r[e] * bone[(e / 3) * 4 + e % 3];
-                d_bone_rotations[b][e] = d_bone_rotations[b][e] + w * d_r[e];
-            }
-            d_direction_weights[a * nb + b] = dw;
-        }
-    }
+    let (d_direction_weights, d_bone_rotations) =
+        view_directions_backward(frame, cache, &human.directions, &mut d_x_def);
     let mut d_nonrigid = vec![T::zero(); nets.nonrigid.mlp.num_params()];
     let mut d_skinning = vec![T::zero(); nets.skinning.mlp.num_params()];
     let direction_skinning = match &cache.direction_skinning {
@@ -591,27 +517,22 @@ pub fn pose_frame_backward_with<T: Real>(
         &mut d_nonrigid,
         &mut d_skinning,
     )?;
+    // The human branch's share of each active Gaussian's canonical parameters.
     let fd = nets.scene_colour.config.feature_dim;
     let mut features = scene.features;
     for (a, &i) in active.iter().enumerate() {
-        for ax in 0..3 {
-            d_means[i][ax] = d_means[i][ax] + deform.positions[a][ax] + d_means_from_weights[a][ax];
-            d_log_scales[i][ax] = d_log_scales[i][ax] + deform.log_scales[a][ax];
-        }
-        for ax in 0..4 {
-            d_quats[i][ax] = d_quats[i][ax] + deform.quats[a][ax];
-        }
+        let (dp, dw) = (deform.positions[a], d_means_from_weights[a]);
+        d_means[i] = std::array::from_fn(|ax| d_means[i][ax] + dp[ax] + dw[ax]);
+        let ds = deform.log_scales[a];
+        d_log_scales[i] = std::array::from_fn(|ax| d_log_scales[i][ax] + ds[ax]);
+        let dq = deform.quats[a];
+        d_quats[i] = std::array::from_fn(|ax| d_quats[i][ax] + dq[ax]);
         for f in 0..fd {
             features[i * fd + f] = features[i * fd + f] + human.features[a * fd + f];
         }
     }
     let pose_code = deform.pose_code;
-    let mut d_bones = deform.bones;
-    for (db, dr) in d_bones.iter_mut().zip(&d_bone_rotations) {
-        for e in 0..9 {
-            db[(e / 3) * 4 + e % 3] = db[(e / 3) * 4 + e % 3] + dr[e];
-        }
-    }
+    let d_bones = with_rotations(deform.bones, &d_bone_rotations);
     Ok(ModelGradients {
         means: d_means,
         log_scales: d_log_scales,
@@ -626,4 +547,109 @@ pub fn pose_frame_backward_with<T: Real>(
         bones: d_bones,
         pose_code,
     })
+}
+
+/// The cotangents of the blend's two branches: the static path of every Gaussian (means,
+/// covariances, scene colours, the human probability) and the human branch of the active ones,
+/// with the frame's re-posings' cotangents added when given.
+struct BlendCotangents<T> {
+    d_means: Vec<[T; 3]>,
+    d_cov_static: Vec<[[T; 3]; 3]>,
+    d_scene_rgb: Vec<T>,
+    d_p: Vec<T>,
+    active: ActiveBlendGrads<T>,
+}
+
+/// [`BlendCotangents`] of the frame's cotangents `cot` (and `reposings`').
+fn blend_cotangents<T: Real>(
+    mode: SemanticMode,
+    g: &GaussianParams<'_, T>,
+    cache: &FrameCache<T>,
+    cot: &FrameCotangents<'_, T>,
+    reposings: Option<&ReposeCotangents<T>>,
+) -> BlendCotangents<T> {
+    // Static path of every Gaussian (inactive ones are exactly static; active ones get the blend's
+    // (1 − p) share below, so start from the direct cotangents and correct).
+    let mut d_means: Vec<[T; 3]> = cot.means.to_vec();
+    let mut d_cov_static: Vec<[[T; 3]; 3]> = cot.covariances.to_vec();
+    let mut d_scene_rgb: Vec<T> = cot.colours.to_vec();
+    let mut d_p: Vec<T> = cot.human_probability.to_vec();
+    let mut active = blend_backward_active(
+        mode,
+        g.semantic_logits,
+        &cache.active,
+        &cache.inputs,
+        &cache.posed_mats,
+        &cache.posed_log_scales,
+        cot,
+        StaticCotangents {
+            means: &mut d_means,
+            covariances: &mut d_cov_static,
+            scene_rgb: &mut d_scene_rgb,
+            probability: &mut d_p,
+        },
+    );
+    if let Some(r) = reposings {
+        let add = |a: &mut [T], b: &[T]| a.iter_mut().zip(b).for_each(|(x, &y)| *x = *x + y);
+        add(d_means.as_flattened_mut(), r.means.as_flattened());
+        let covariances = r.covariances.as_flattened().as_flattened();
+        add(
+            d_cov_static.as_flattened_mut().as_flattened_mut(),
+            covariances,
+        );
+        add(&mut d_scene_rgb, &r.scene_colours);
+        add(&mut d_p, &r.human_probability);
+        add(&mut active.human_rgb, &r.human_colours);
+        add(
+            active.log_scales.as_flattened_mut(),
+            r.log_scales.as_flattened(),
+        );
+    }
+    BlendCotangents {
+        d_means,
+        d_cov_static,
+        d_scene_rgb,
+        d_p,
+        active,
+    }
+}
+
+/// Bone gradients `d_bones` with each bone's rotation gradient (row-major 3×3) added to its
+/// rotation block.
+fn with_rotations<T: Real>(mut d_bones: Vec<Affine<T>>, d_rotations: &[[T; 9]]) -> Vec<Affine<T>> {
+    for (db, dr) in d_bones.iter_mut().zip(d_rotations) {
+        for e in 0..9 {
+            db[(e / 3) * 4 + e % 3] = db[(e / 3) * 4 + e % 3] + dr[e];
+        }
+    }
+    d_bones
+}
+
+/// The semantic logits' and static covariances' share of the backward of every Gaussian: the
+/// human probability's cotangent `d_p` into `d_semantic`, and ∂L/∂(log-scales, quaternions) of
+/// the static covariances' cotangents.
+#[allow(clippy::type_complexity)]
+fn static_backward<T: Real>(
+    mode: SemanticMode,
+    g: &GaussianParams<'_, T>,
+    d_p: &[T],
+    d_cov_static: &[[[T; 3]; 3]],
+    d_semantic: &mut [T],
+) -> (Vec<[T; 3]>, Vec<[T; 4]>) {
+    let n = g.means.len();
+    let k = mode.logits_per_gaussian();
+    let mut d_log_scales = Vec::with_capacity(n);
+    let mut d_quats = Vec::with_capacity(n);
+    for i in 0..n {
+        mode.probability_backward(
+            &g.semantic_logits[i * k..(i + 1) * k],
+            d_p[i],
+            &mut d_semantic[i * k..(i + 1) * k],
+        );
+        let (ds_static, dq_static) =
+            covariance_3d_backward(g.log_scales[i], g.quats[i], &d_cov_static[i]);
+        d_log_scales.push(ds_static);
+        d_quats.push(dq_static);
+    }
+    (d_log_scales, d_quats)
 }
