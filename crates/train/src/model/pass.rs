@@ -1,0 +1,152 @@
+//! The backward of one rendered pass ([`FramePass`]): through the rasterizer to the posed
+//! Gaussians, then through the posing to the model's parameters; and what a pass reports.
+
+use super::*;
+
+impl FramePass<'_> {
+    fn pixels(&self) -> usize {
+        self.camera.width as usize * self.camera.height as usize
+    }
+
+    /// The rendered linear RGB, planar (3, H, W).
+    pub fn rgb(&self) -> &[f32] {
+        &self.out.image[..3 * self.pixels()]
+    }
+
+    /// The rendered human probability, (H, W).
+    pub fn human(&self) -> &[f32] {
+        let hw = self.pixels();
+        &self.out.image[3 * hw..4 * hw]
+    }
+
+    /// Rasterizer backward of the image cotangent `d_image` ((C, H, W), C = [`RENDER_CHANNELS`]) plus,
+    /// when given, a cotangent `d_geometric` of the RGB planes of which only the geometric share is
+    /// kept: its gradients w.r.t. the means, covariances and screen-space means. The backward is
+    /// linear in the cotangent, so this is exactly the gradient of all losses with `d_geometric`'s
+    /// colour, opacity and semantic terms removed (the flow loss's `geometry` ablation).
+    pub fn render_backward(
+        &self,
+        d_image: &[f32],
+        d_geometric: Option<&[f32]>,
+    ) -> Result<PosedGradients, TrainError> {
+        let g = self.rasterizer_backward(d_image, d_geometric)?;
+        let per = g.channels.chunks_exact(RENDER_CHANNELS);
+        let colours = per.clone().flat_map(|c| c[..3].iter().copied()).collect();
+        let human_probability = per.map(|c| c[3]).collect();
+        Ok(PosedGradients {
+            means: g.means,
+            covariances: g.covariances,
+            colours,
+            human_probability,
+            opacity_logits: g.opacity_logits,
+            means_2d: g.means_2d,
+        })
+    }
+
+    fn rasterizer_backward(
+        &self,
+        d_image: &[f32],
+        d_geometric: Option<&[f32]>,
+    ) -> Result<Gradients<f32>, TrainError> {
+        let splats = splats(self.model, &self.posed, &self.channels);
+        let settings = self.model.render_settings();
+        let backward = |image: &[f32]| {
+            render_cov_backward(
+                self.camera,
+                &splats,
+                &settings,
+                &self.out,
+                &Cotangents {
+                    image,
+                    alpha: None,
+                    depth: None,
+                },
+            )
+        };
+        let Some(d_geometric) = d_geometric else {
+            return Ok(backward(d_image)?);
+        };
+        let mut padded = vec![0.0f32; d_image.len()];
+        padded[..d_geometric.len()].copy_from_slice(d_geometric);
+        let geometric = backward(&padded)?;
+        if d_image.iter().all(|&v| v == 0.0) {
+            // Only the geometric cotangent reaches this frame: one backward.
+            return Ok(Gradients {
+                opacity_logits: vec![0.0; geometric.opacity_logits.len()],
+                channels: vec![0.0; geometric.channels.len()],
+                background: vec![0.0; geometric.background.len()],
+                ..geometric
+            });
+        }
+        let mut grads = backward(d_image)?;
+        let add = |a: &mut [f32], b: &[f32]| a.iter_mut().zip(b).for_each(|(x, &y)| *x += y);
+        add(
+            grads.means.as_flattened_mut(),
+            geometric.means.as_flattened(),
+        );
+        add(
+            grads.means_2d.as_flattened_mut(),
+            geometric.means_2d.as_flattened(),
+        );
+        for (a, b) in grads.covariances.iter_mut().zip(&geometric.covariances) {
+            add(a.as_flattened_mut(), b.as_flattened());
+        }
+        Ok(grads)
+    }
+
+    /// Backward through the posing (networks, blend, deformation) of the rasterizer-input gradients
+    /// `posed`: gradients of every learnable quantity of the model and of this frame's latent.
+    /// A re-posed pass ([`Model::forward_reposed`]) is differentiated with its frame's passes by
+    /// [`Model::reposed_backward`] and is refused here.
+    pub fn model_backward(
+        &self,
+        posed: &PosedGradients,
+    ) -> Result<ModelGradients<f32>, TrainError> {
+        let model = self.model;
+        let PassCache::Frame(cache) = &self.cache else {
+            return Err(TrainError::Config(
+                "a re-posed pass is differentiated with its frame's passes (Model::reposed_backward)"
+                    .into(),
+            ));
+        };
+        pose_frame_backward_with(
+            &model.nets,
+            model.config.semantic,
+            &model.params(),
+            &frame_inputs(self.camera, self.pose, self.latent),
+            cache,
+            &posed.cotangents(),
+            None,
+        )
+    }
+
+    /// The full backward of an image cotangent `d_image` ((C, H, W)): the model's gradients and the
+    /// rasterizer-input gradients (for the opacities and density statistics).
+    pub fn backward(
+        &self,
+        d_image: &[f32],
+    ) -> Result<(ModelGradients<f32>, PosedGradients), TrainError> {
+        let posed = self.render_backward(d_image, None)?;
+        Ok((self.model_backward(&posed)?, posed))
+    }
+
+    /// Indices of the Gaussians whose human branch was evaluated (human probability ≥ the gate).
+    pub fn active(&self) -> &[usize] {
+        match &self.cache {
+            PassCache::Frame(cache) => cache.active(),
+            PassCache::Reposed(cache) => cache.active(),
+        }
+    }
+}
+
+impl PosedGradients {
+    /// The posing backward's view of these gradients.
+    pub(super) fn cotangents(&self) -> FrameCotangents<'_, f32> {
+        FrameCotangents {
+            means: &self.means,
+            covariances: &self.covariances,
+            colours: &self.colours,
+            human_probability: &self.human_probability,
+        }
+    }
+}
