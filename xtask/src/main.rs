@@ -7,12 +7,7 @@ use clap::{Parser, Subcommand};
 mod ablate;
 mod allocator;
 mod animate;
-mod bench_deform;
-mod bench_events;
-mod bench_flow;
-mod bench_lpips;
-mod bench_raster;
-mod bench_step;
+mod bench;
 mod body;
 mod body_convert;
 mod common;
@@ -102,24 +97,7 @@ enum Command {
     Fuzz(fuzz::Args),
     /// Benchmarks, printed as JSON lines.
     #[command(subcommand)]
-    Bench(BenchCommand),
-}
-
-/// `cargo xtask bench <what>`.
-#[derive(Subcommand, Debug)]
-enum BenchCommand {
-    /// Event voxelising and reading throughput of every format the `events` crate writes.
-    Events(bench_events::Args),
-    /// SPyNet forward and forward + input-gradient times.
-    Flow(bench_flow::Args),
-    /// LPIPS (shipped AlexNet weights): one image's features, a distance, a distance with its gradient.
-    Lpips(bench_lpips::Args),
-    /// Posing N human Gaussians (non-rigid net + skinning field + LBS), forward and backward times.
-    Deform(bench_deform::Args),
-    /// Rasterizer forward and forward + backward times on seeded random scenes.
-    Raster(bench_raster::Args),
-    /// The training step's stage breakdown from a saved checkpoint (a few unsaved steps).
-    Step(bench_step::Args),
+    Bench(bench::Command),
 }
 
 fn main() -> Result<()> {
@@ -140,12 +118,7 @@ fn main() -> Result<()> {
         Command::TrainFlow(args) => train_flow::run(args),
         Command::Events(args) => events_cmd::run(args),
         Command::DeblurEdi(args) => deblur_edi::run(args),
-        Command::Bench(BenchCommand::Events(args)) => bench_events::run(args),
-        Command::Bench(BenchCommand::Flow(args)) => bench_flow::run(args),
-        Command::Bench(BenchCommand::Lpips(args)) => bench_lpips::run(args),
-        Command::Bench(BenchCommand::Deform(args)) => bench_deform::run(args),
-        Command::Bench(BenchCommand::Raster(args)) => bench_raster::run(args),
-        Command::Bench(BenchCommand::Step(args)) => bench_step::run(args),
+        Command::Bench(command) => bench::run(command),
         Command::Render(args) => render::run(args),
         Command::Fuzz(args) => fuzz::run(args),
         Command::Import(command) => import::run(command),

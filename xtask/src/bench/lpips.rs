@@ -41,34 +41,22 @@ pub fn run(args: Args) -> Result<()> {
         let mut rng = ChaCha8Rng::seed_from_u64(0x1234_5678);
         let a: Vec<f32> = (0..n).map(|_| rng.gen()).collect();
         let b: Vec<f32> = (0..n).map(|_| rng.gen()).collect();
-        for &t in &threads {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(t)
-                .build()
-                .context("building thread pool")?;
-            let steal = crate::steal::Meter::start();
-            let times = pool.install(|| -> Result<[Vec<f64>; 3]> {
-                let mut times: [Vec<f64>; 3] = Default::default();
-                for _ in 0..repeats {
-                    times[0].push(ms(|| Ok(net.features(&a, size, size)?))?);
-                    times[1].push(ms(|| Ok(net.distance(&a, &b, size, size)?))?);
-                    times[2].push(ms(|| {
-                        let reference = net.features(&b, size, size)?;
-                        Ok(net.distance_and_gradient(&a, size, size, &reference)?)
-                    })?);
-                }
-                Ok(times)
-            })?;
+        super::per_thread_count(&threads, |_| {
+            let mut times: [Vec<f64>; 3] = Default::default();
+            for _ in 0..repeats {
+                times[0].push(ms(|| Ok(net.features(&a, size, size)?))?);
+                times[1].push(ms(|| Ok(net.distance(&a, &b, size, size)?))?);
+                times[2].push(ms(|| {
+                    let reference = net.features(&b, size, size)?;
+                    Ok(net.distance_and_gradient(&a, size, size, &reference)?)
+                })?);
+            }
             let [features, distance, gradient] = times.map(crate::common::median);
-            println!(
-                "{}",
-                serde_json::json!({
-                    "case": name, "width": size, "height": size, "threads": t,
-                    "features_ms": features, "distance_ms": distance, "gradient_ms": gradient,
-                    "steal_pct": steal.percent(),
-                })
-            );
-        }
+            Ok(serde_json::json!({
+                "case": name, "width": size, "height": size,
+                "features_ms": features, "distance_ms": distance, "gradient_ms": gradient,
+            }))
+        })?;
     }
     Ok(())
 }

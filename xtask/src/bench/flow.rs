@@ -4,7 +4,7 @@
 //! 1 thread and for the machine's threads; plus `steal_pct`, the hypervisor's steal time during the
 //! case (null off Linux).
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -33,35 +33,23 @@ pub fn run(args: Args) -> Result<()> {
         let mut rng = ChaCha8Rng::seed_from_u64(0x1234_5678);
         let a: Vec<f32> = (0..n).map(|_| rng.gen()).collect();
         let b: Vec<f32> = (0..n).map(|_| rng.gen()).collect();
-        for &t in &threads {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(t)
-                .build()
-                .context("building thread pool")?;
-            let steal = crate::steal::Meter::start();
-            let (fwd, both) = pool.install(|| -> Result<(Vec<f64>, Vec<f64>)> {
-                let (mut fwd, mut both) = (Vec::new(), Vec::new());
-                for _ in 0..repeats {
-                    let s = Instant::now();
-                    let tape = net.forward(&a, &b, size, size)?;
-                    fwd.push(s.elapsed().as_secs_f64() * 1e3);
-                    let g = vec![1.0f32; tape.flow.len()];
-                    let s = Instant::now();
-                    let tape = net.forward(&a, &b, size, size)?;
-                    let _grads = net.backward(&tape, &g, None)?;
-                    both.push(s.elapsed().as_secs_f64() * 1e3);
-                }
-                Ok((fwd, both))
-            })?;
-            println!(
-                "{}",
-                serde_json::json!({
-                    "case": name, "width": size, "height": size, "levels": args.levels,
-                    "threads": t, "fwd_ms": crate::common::median(fwd), "fwd_bwd_ms": crate::common::median(both),
-                    "steal_pct": steal.percent(),
-                })
-            );
-        }
+        super::per_thread_count(&threads, |_| {
+            let (mut fwd, mut both) = (Vec::new(), Vec::new());
+            for _ in 0..repeats {
+                let s = Instant::now();
+                let tape = net.forward(&a, &b, size, size)?;
+                fwd.push(s.elapsed().as_secs_f64() * 1e3);
+                let g = vec![1.0f32; tape.flow.len()];
+                let s = Instant::now();
+                let tape = net.forward(&a, &b, size, size)?;
+                let _grads = net.backward(&tape, &g, None)?;
+                both.push(s.elapsed().as_secs_f64() * 1e3);
+            }
+            Ok(serde_json::json!({
+                "case": name, "width": size, "height": size, "levels": args.levels,
+                "fwd_ms": crate::common::median(fwd), "fwd_bwd_ms": crate::common::median(both),
+            }))
+        })?;
     }
     Ok(())
 }

@@ -55,27 +55,22 @@ pub fn run(args: Args) -> Result<()> {
     for (name, n, w, h, repeats) in cases {
         let scene =
             SyntheticScene::new(n, w, h, args.seed).context("building the benchmark scene")?;
-        for &t in &threads {
-            let steal = crate::steal::Meter::start();
+        // (`time_case` runs its own pool of `t` threads.)
+        super::per_thread_count(&threads, |t| {
             let r = time_case(&scene, t, if args.quick { 3 } else { repeats })
                 .with_context(|| format!("timing case {name} with {t} threads"))?;
             let round = |v: f64| (v * 100.0).round() / 100.0;
-            println!(
-                "{}",
-                serde_json::json!({
-                    "case": name,
-                    "gaussians": n,
-                    "width": w,
-                    "height": h,
-                    "threads": t,
-                    "fwd_ms": round(r.fwd_ms),
-                    "fwd_bwd_ms": round(r.fwd_bwd_ms),
-                    "fwd_bwd_half_rows_ms": round(r.fwd_bwd_half_rows_ms),
-                    "pairs": r.pairs,
-                    "steal_pct": steal.percent(),
-                })
-            );
-        }
+            Ok(serde_json::json!({
+                "case": name,
+                "gaussians": n,
+                "width": w,
+                "height": h,
+                "fwd_ms": round(r.fwd_ms),
+                "fwd_bwd_ms": round(r.fwd_bwd_ms),
+                "fwd_bwd_half_rows_ms": round(r.fwd_bwd_half_rows_ms),
+                "pairs": r.pairs,
+            }))
+        })?;
     }
     Ok(())
 }
