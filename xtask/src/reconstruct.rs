@@ -136,7 +136,7 @@ fn enable_flow(
 
 /// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).
 pub fn scene_body(data: &train::data::Dataset) -> Result<Body> {
-    Body::of_scene(data).with_context(|| {
+    data.body().with_context(|| {
         format!(
             "{}: loading the body model `{}` (scene.json body.model)",
             data.dir.display(),

@@ -133,7 +133,7 @@ fn compare_renders(
     tau: f32,
     runs: &[String],
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let body = train::body::Body::of_scene(data)?;
+    let body = data.body()?;
     let config = train::config::TrainConfig {
         flow_loss: true,
         flow_source: train::config::FlowSource::GroundTruth,

@@ -56,13 +56,6 @@ impl Body {
         Self::new(model, betas)
     }
 
-    /// The body a scene names (`scene.json`'s `body`), a relative SMPL path taken relative to the
-    /// scene directory.
-    pub fn of_scene(data: &crate::data::Dataset) -> Result<Self, TrainError> {
-        let spec = &data.scene.body;
-        Self::load(&spec.model, spec.betas.clone(), &data.dir)
-    }
-
     /// Pose feature and bone transforms of SMPL parameters (`params.betas` is replaced by the body's).
     pub fn prepare(&self, params: &SmplParams) -> Result<PreparedPose, TrainError> {
         let params = SmplParams {

@@ -3,9 +3,9 @@
 //! 3-D model sees it — the paper's "deblur first, then reconstruct" rows with the weight-free event
 //! deblurring.
 
+use super::dataset::{Dataset, TrainFrame};
 pub use super::event_counts::hot_pixels;
-use super::training::read_frame_events;
-use super::{Dataset, TrainFrame};
+use super::event_files::read_frame_events;
 use crate::TrainError;
 
 /// The events of `[from_s, to_s)` around frame `p` (its own file and its neighbours', joined in

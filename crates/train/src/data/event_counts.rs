@@ -1,8 +1,8 @@
 //! Events as the losses read them: a window's events as the log-intensity change they report
 //! (C+ per positive, C− per negative event), and the scene's hot pixels, whose events are left out.
 
-use super::training::read_frame_file;
-use super::Dataset;
+use super::dataset::Dataset;
+use super::event_files::read_frame_file;
 use crate::config::TrainConfig;
 use crate::TrainError;
 

@@ -5,117 +5,15 @@
 //! module only converts, and reports which file failed to decode if one does. [`TrainingData`] is the
 //! training split prepared for the loop (poses, skinning samples, pair supervision).
 
+mod dataset;
 pub mod edi;
 mod event_counts;
+mod event_files;
 mod training;
 
+pub use dataset::{load_dataset, Dataset, TrainFrame};
+pub use event_files::event_read_options;
 pub use training::{
-    consecutive_training_pairs, event_read_options, read_pair_flow, sharp_flow_pairs, EventPair,
-    FlowPair, PairFlow, SharpFlowPair, TrainingData, TrainingFrame,
+    consecutive_training_pairs, read_pair_flow, sharp_flow_pairs, EventPair, FlowPair, PairFlow,
+    SharpFlowPair, TrainingData, TrainingFrame,
 };
-
-use crate::TrainError;
-use rasterize_cpu::Camera;
-use scene::{Scene, Split};
-use smpl_deform::SmplParams;
-use std::path::{Path, PathBuf};
-
-/// One decoded frame.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TrainFrame {
-    /// Frame number from `scene.json`.
-    pub index: u32,
-    /// Mid-exposure time (s).
-    pub time_s: f64,
-    /// The frame's exposure (s): its own `exposure_s` in `scene.json`, else the scene's.
-    pub exposure_s: f64,
-    /// Train or test.
-    pub split: Split,
-    /// Observed (blurred) image, planar (3, H, W) linear.
-    pub image: Vec<f32>,
-    /// Sharp reference, if the scene has one.
-    pub sharp: Option<Vec<f32>>,
-    /// Human mask (H × W), if the scene has one.
-    pub mask: Option<Vec<bool>>,
-    /// SMPL parameters at mid exposure (betas from the scene's body spec).
-    pub smpl: SmplParams,
-}
-
-/// A loaded dataset.
-#[derive(Clone, Debug)]
-pub struct Dataset {
-    /// The scene directory.
-    pub dir: PathBuf,
-    /// The validated description.
-    pub scene: Scene,
-    /// The fixed camera (the scene's), checked for rendering (`Camera::validate`).
-    pub camera: Camera,
-    /// Every frame, in time order.
-    pub frames: Vec<TrainFrame>,
-}
-
-impl Dataset {
-    /// Indices of the frames of a split.
-    pub fn split(&self, split: Split) -> Vec<usize> {
-        self.scene.split_indices(split)
-    }
-
-    /// A positive finite number the scene's generator recorded under `config.<key>` (e.g. the
-    /// sensor's `event_threshold`), if it recorded one.
-    pub fn recorded_positive(&self, key: &str) -> Option<f64> {
-        self.scene
-            .generator
-            .as_ref()
-            .and_then(|g| g.pointer(&format!("/config/{key}")))
-            .and_then(serde_json::Value::as_f64)
-            .filter(|c| c.is_finite() && *c > 0.0)
-    }
-}
-
-/// Loads and validates `dir` (see `scene::load`) and decodes every frame.
-pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
-    let scene = scene::load(dir)?;
-    scene.camera.validate()?;
-    let camera = scene.camera.clone();
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let mut frames = Vec::with_capacity(scene.frames.len());
-    for (k, f) in scene.frames.iter().enumerate() {
-        let read = |rel: &str| -> Result<Vec<f32>, TrainError> {
-            let path = Scene::resolve(dir, rel);
-            let img = scene::read_rgb(&path, scene.images)?;
-            if img.width != w || img.height != h {
-                return Err(TrainError::Config(format!(
-                    "{}: image is {}x{}, the camera is {w}x{h}",
-                    path.display(),
-                    img.width,
-                    img.height
-                )));
-            }
-            Ok(img.data)
-        };
-        let mask = match &f.mask {
-            Some(rel) => Some(scene::read_mask(&Scene::resolve(dir, rel))?.2),
-            None => None,
-        };
-        frames.push(TrainFrame {
-            index: f.index,
-            time_s: f.time_s,
-            exposure_s: scene.exposure_of(k),
-            split: f.split,
-            image: read(&f.image)?,
-            sharp: f.sharp.as_deref().map(read).transpose()?,
-            mask,
-            smpl: SmplParams {
-                pose: f.pose_flat(),
-                betas: scene.body.betas.clone(),
-                transl: f.transl,
-            },
-        });
-    }
-    Ok(Dataset {
-        dir: dir.to_path_buf(),
-        scene,
-        camera,
-        frames,
-    })
-}

@@ -25,11 +25,13 @@
 //! the skinning field at the canonical means, and that pass is reused, forward and backward
 //! (`DeformCache::skinning_at`: bit for bit what a second evaluation would give).
 
+mod repose_cotangents;
 mod views;
+
+pub use repose_cotangents::ReposeCotangents;
 
 use crate::blend::{blend, blend_backward, BlendInputs, Blended, SemanticMode};
 use crate::colour::{ColourInputs, ColourNet};
-use crate::reposing::ReposeCotangents;
 use crate::TrainError;
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};
 use nn::Real;
@@ -38,7 +40,7 @@ use smpl_deform::deform_net::{
     NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
 };
 use smpl_deform::math::{Affine, Mat3};
-use views::{canonical_view_directions, view_directions_backward};
+use views::{canonical_view_directions, view_directions_backward, CanonicalViews};
 
 /// The four networks of the model.
 #[derive(Clone, Debug)]
@@ -109,9 +111,9 @@ pub struct FrameCache<T: Real> {
     /// `None` when the deformation's own skinning pass is that one (`DeformCache::skinning_at`).
     direction_weights: Vec<T>,
     direction_skinning: Option<SkinningCache<T>>,
-    /// World direction x_def − c and the blended rotation R (row-major) per Gaussian.
-    human_world_dirs: Vec<[T; 3]>,
-    human_rotations: Vec<Mat3<T>>,
+    /// The human Gaussians' canonical view directions, with the world direction x_def − c and the
+    /// blended rotation R (row-major) of each.
+    views: CanonicalViews<T>,
 }
 
 /// Cotangents of the four outputs.
@@ -366,7 +368,7 @@ pub fn pose_frame_gated<T: Real>(
     };
     let c = frame.camera_centre;
     let na = active.len();
-    let views = canonical_view_directions(frame, &posed.positions, &direction_weights);
+    let views = canonical_view_directions(frame.bones, c, &posed.positions, &direction_weights);
     let scene_dirs: Vec<[T; 3]> = g
         .means
         .iter()
@@ -420,8 +422,7 @@ pub fn pose_frame_gated<T: Real>(
             inputs,
             direction_weights,
             direction_skinning,
-            human_world_dirs: views.world,
-            human_rotations: views.rotations,
+            views,
         },
     ))
 }
@@ -492,8 +493,13 @@ pub fn pose_frame_backward_with<T: Real>(
             dm[a] = dm[a] + dd[a];
         }
     }
-    let (d_direction_weights, d_bone_rotations) =
-        view_directions_backward(frame, cache, &human.directions, &mut d_x_def);
+    let (d_direction_weights, d_bone_rotations) = view_directions_backward(
+        frame.bones,
+        &cache.views,
+        &cache.direction_weights,
+        &human.directions,
+        &mut d_x_def,
+    );
     let mut d_nonrigid = vec![T::zero(); nets.nonrigid.mlp.num_params()];
     let mut d_skinning = vec![T::zero(); nets.skinning.mlp.num_params()];
     let direction_skinning = match &cache.direction_skinning {

@@ -5,6 +5,7 @@
 
 use super::terms::AiapNeighbours;
 use super::Trainer;
+use super::CHECKPOINT_FORMAT;
 use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::data::TrainingData;
@@ -13,9 +14,6 @@ use crate::model::Model;
 use crate::optimisers::{OptimiserSteps, Optimisers};
 use crate::TrainError;
 use std::path::Path;
-
-/// Identifier stored in every checkpoint of this trainer.
-pub const CHECKPOINT_FORMAT: &str = "e-sem3dgs-trainer-v1";
 
 /// Non-tensor state of a checkpoint (JSON in the safetensors metadata).
 #[derive(serde::Serialize, serde::Deserialize)]

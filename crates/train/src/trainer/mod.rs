@@ -15,7 +15,6 @@ mod report;
 mod step;
 mod terms;
 
-pub use checkpoint::CHECKPOINT_FORMAT;
 pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
@@ -35,6 +34,9 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use terms::AiapNeighbours;
+
+/// Identifier stored in every checkpoint of this trainer.
+pub const CHECKPOINT_FORMAT: &str = "e-sem3dgs-trainer-v1";
 
 /// All state of a reconstruction: the model, its optimisers, density statistics, the frame-order
 /// RNG and the step count. Saving and loading it resumes a run bit for bit.
