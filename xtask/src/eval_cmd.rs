@@ -40,9 +40,11 @@ pub struct EvalSummary {
     pub extra: serde_json::Value,
 }
 
-/// Prints the test split's image metrics against `reference` (`sharp` or `observed`); a figure
-/// that cannot be measured (no mask for a human box, an image scored against itself) is a dash.
-fn print_metrics_table(m: &train::eval::FrameMetrics, frames: usize, reference: &str) {
+/// Prints the test split's image metrics against the sharp references (`sharp`), else against the
+/// observed frames (real data); a figure that cannot be measured (no mask for a human box) is a
+/// dash.
+fn print_metrics_table(m: &train::eval::FrameMetrics, frames: usize, sharp: bool) {
+    let reference = if sharp { "sharp" } else { "observed" };
     let cell = |v: f64, digits: usize, width: usize| {
         if v.is_finite() {
             format!("{v:>width$.digits$}")
@@ -82,7 +84,7 @@ fn print_metrics_table(m: &train::eval::FrameMetrics, frames: usize, reference: 
     // Against the observed frames, the blurred rows would score a frame against itself.
     let rows = rows
         .into_iter()
-        .filter(|r| reference == "sharp" || !r.0.contains("blurred"));
+        .filter(|r| sharp || !r.0.contains("blurred"));
     for (what, unit, full, human, digits) in rows {
         let label = format!("{what} vs {reference}{unit}");
         println!(
@@ -175,12 +177,8 @@ pub fn write_evaluation(
     }
     std::fs::write(&path, serde_json::to_string_pretty(&metrics)?)
         .with_context(|| format!("writing {}", path.display()))?;
-    let reference = if data.scene.frames.iter().any(|f| f.sharp.is_some()) {
-        "sharp"
-    } else {
-        "observed" // real data: the blurred frames themselves
-    };
-    print_metrics_table(&m, frames.len(), reference);
+    let sharp = data.scene.frames.iter().any(|f| f.sharp.is_some());
+    print_metrics_table(&m, frames.len(), sharp);
     if summary.train_seconds.is_finite() {
         println!(
             "| training                     | {:>8.0} s | {} steps |",

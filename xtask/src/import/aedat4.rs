@@ -265,11 +265,12 @@ pub fn run(args: Args) -> Result<()> {
     bar.finish_and_clear();
 
     // Events, streamed into per-frame files.
-    let split = split_events(&args.file, &args.out, t0, &mid_us, (w, h))?;
     let exposure_us: Vec<(i64, i64)> = frames
         .iter()
         .map(|f| (f.exposure_begin_us - t0, f.exposure_end_us - t0))
         .collect();
+    let last_end = exposure_us[exposure_us.len() - 1].1;
+    let split = split_events(&args.file, &args.out, t0, &mid_us, last_end, (w, h))?;
     note_exposures_outside_events(&split, &exposure_us);
 
     let s = scene::Scene {
@@ -311,7 +312,7 @@ pub fn run(args: Args) -> Result<()> {
         longest * 1e3,
         split.written,
         split.before,
-        split.after_last_exposure(exposure_us[exposure_us.len() - 1].1),
+        split.after_last_exposure,
     );
     println!("{}", crate::common::shown(&args.out).display());
     Ok(())
@@ -325,15 +326,8 @@ struct SplitEvents {
     before: u64,
     /// Times (µs from time 0) of the recording's first and last event; `None` without events.
     recorded_us: Option<(i64, i64)>,
-    /// Times (µs from time 0) of the events in the last frame's file.
-    last_file_times: Vec<i64>,
-}
-
-impl SplitEvents {
-    /// How many events of the last frame's file come after `end_us` (the last exposure's end).
-    fn after_last_exposure(&self, end_us: i64) -> usize {
-        self.last_file_times.iter().filter(|&&t| t > end_us).count()
-    }
+    /// Events after the last exposure's end (kept in the last frame's file, unused).
+    after_last_exposure: u64,
 }
 
 /// Says which exposures (µs from time 0, `[begin, end]` per frame) reach outside the recording's
@@ -356,12 +350,14 @@ fn note_exposures_outside_events(split: &SplitEvents, exposure_us: &[(i64, i64)]
 
 /// Streams the recording's events into `out/events/NNNNNN.npz` by the scene format's rule
 /// (`scene::Scene::event_file_span`): frame `k` holds `[mid_k, mid_{k+1})` (µs from `t0`), the
-/// last frame every later event; events before the first frame are counted, not written.
+/// last frame every later event; events before the first frame and after `last_end_us` (the last
+/// exposure's end) are counted.
 fn split_events(
     file: &Path,
     out: &Path,
     t0: i64,
     mid_us: &[i64],
+    last_end_us: i64,
     (w, h): (u32, u32),
 ) -> Result<SplitEvents> {
     let mut reader = events::io::aedat4::Aedat4Reader::open(file)
@@ -371,6 +367,7 @@ fn split_events(
     bucket.sensor = Some(sensor);
     let (mut k, mut written, mut before) = (0usize, 0u64, 0u64);
     let mut recorded = None;
+    let mut after_last_exposure = 0u64;
     let flush = |k: usize, b: &mut events::EventStream| -> Result<u64> {
         let p = out.join(format!("events/{k:06}.npz"));
         events::write_events(&p, b).with_context(|| format!("writing {}", p.display()))?;
@@ -391,6 +388,7 @@ fn split_events(
         for i in 0..chunk.len() {
             let t = chunk.t[i] - t0;
             recorded = Some(recorded.map_or((t, t), |(a, b): (i64, i64)| (a.min(t), b.max(t))));
+            after_last_exposure += u64::from(t > last_end_us);
             if t < mid_us[0] {
                 before += 1;
                 continue;
@@ -415,11 +413,7 @@ fn split_events(
             });
         }
     }
-    let mut last_file_times = Vec::new();
     while k < mid_us.len() {
-        if k + 1 == mid_us.len() {
-            last_file_times.clone_from(&bucket.t);
-        }
         written += flush(k, &mut bucket)?;
         k += 1;
     }
@@ -427,6 +421,6 @@ fn split_events(
         written,
         before,
         recorded_us: recorded,
-        last_file_times,
+        after_last_exposure,
     })
 }
