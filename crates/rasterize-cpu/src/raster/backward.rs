@@ -33,7 +33,14 @@ pub fn render_backward<T: Real>(
     forward: &RenderOutput<T>,
     cot: &Cotangents<'_, T>,
 ) -> Result<Gradients<T>, RasterError> {
-    backward_inputs(camera, &Inputs::from(splats), settings, forward, cot)
+    backward_inputs(
+        camera,
+        &Inputs::from(splats),
+        settings,
+        forward,
+        cot,
+        SharedTiles::None,
+    )
 }
 
 /// Analytic backward of [`render_cov`]: as [`render_backward`], with dL/dΣ in
@@ -48,15 +55,48 @@ pub fn render_cov_backward<T: Real>(
     forward: &RenderOutput<T>,
     cot: &Cotangents<'_, T>,
 ) -> Result<Gradients<T>, RasterError> {
-    backward_inputs(camera, &Inputs::from(splats), settings, forward, cot)
+    backward_inputs(
+        camera,
+        &Inputs::from(splats),
+        settings,
+        forward,
+        cot,
+        SharedTiles::None,
+    )
 }
 
-fn backward_inputs<T: Real>(
+/// Which cotangent a tile's replay reads when its forward was shared between several renders of one
+/// camera (`super::shared`): the backward is linear in the cotangent, so the renders' shared
+/// tiles are replayed once, by the render that blended them, with the sum of their cotangents.
+#[derive(Clone, Copy)]
+pub(super) enum SharedTiles<'a, T> {
+    /// Every tile reads `cot` (an ordinary backward).
+    None,
+    /// The tiles marked in `shared` read `summed` (the owner's replay), or are skipped (`None`:
+    /// another render replays them); the others read `cot`.
+    Some {
+        shared: &'a [bool],
+        summed: Option<&'a Cotangents<'a, T>>,
+    },
+}
+
+impl<'a, T> SharedTiles<'a, T> {
+    /// The cotangent tile `tile` replays with, or `None` when it is skipped.
+    fn cotangent(&self, tile: usize, cot: &'a Cotangents<'a, T>) -> Option<&'a Cotangents<'a, T>> {
+        match *self {
+            SharedTiles::Some { shared, summed } if shared[tile] => summed,
+            _ => Some(cot),
+        }
+    }
+}
+
+pub(super) fn backward_inputs<'a, T: Real>(
     camera: &Camera,
     splats: &Inputs<'_, T>,
     settings: &RenderSettings,
     forward: &RenderOutput<T>,
-    cot: &Cotangents<'_, T>,
+    cot: &'a Cotangents<'a, T>,
+    tiles: SharedTiles<'a, T>,
 ) -> Result<Gradients<T>, RasterError> {
     let c = splats.num_channels;
     let st = &forward.state;
@@ -116,6 +156,9 @@ fn backward_inputs<T: Real>(
         || BackwardScratch::new(c),
         |scratch, (tile, out)| {
             let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
+            let Some(cot) = tiles.cotangent(tile, cot) else {
+                return;
+            };
             if range.is_empty() {
                 return;
             }
@@ -207,6 +250,9 @@ fn backward_inputs<T: Real>(
             for x in 0..width {
                 let tile = (y / TILE_SIZE) * gx + x / TILE_SIZE;
                 let p = (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE;
+                let Some(cot) = tiles.cotangent(tile, cot) else {
+                    continue;
+                };
                 acc = acc
                     + cot.image[ch * hw + y * width + x] * st.tile_buf[tile * stride + BUF_T + p];
             }

@@ -65,18 +65,56 @@ fn render_inputs<T: Real>(
     splats: &Inputs<'_, T>,
     settings: &RenderSettings,
 ) -> Result<RenderOutput<T>, RasterError> {
+    let binned = bin_pass(camera, splats, settings)?;
+    let (tile_buf, used) = blend_tiles(&binned, None);
+    Ok(binned.into_output(tile_buf, used))
+}
+
+/// A request projected, binned into depth-sorted tile lists and gathered in list order: everything
+/// of the forward before blending.
+pub(super) struct Binned<T> {
+    width: usize,
+    height: usize,
+    /// Tiles per row.
+    gx: usize,
+    /// Channels C.
+    c: usize,
+    radii: Vec<u32>,
+    visible: Vec<Projected<T>>,
+    visible_ids: Vec<u32>,
+    pub(super) tile_offsets: Vec<usize>,
+    tile_list: Vec<u32>,
+    pair_splats: Vec<PairSplat<T>>,
+    pair_channels: Vec<T>,
+    background: Vec<T>,
+    n: usize,
+}
+
+/// Tiles whose blend is copied from another render of the same camera instead of recomputed.
+pub(super) struct ReusedTiles<'a, T> {
+    /// Per tile: copy it (its list holds the same Gaussians with the same inputs in both renders).
+    pub(super) reuse: &'a [bool],
+    /// The other render's tile buffers and used counts.
+    pub(super) tile_buf: &'a [T],
+    pub(super) used: &'a [u32],
+}
+
+/// Validates the request, projects every Gaussian (parallel, order-preserving), bins the visible
+/// ones into tiles and gathers each pair's data in list order.
+pub(super) fn bin_pass<T: Real>(
+    camera: &Camera,
+    splats: &Inputs<'_, T>,
+    settings: &RenderSettings,
+) -> Result<Binned<T>, RasterError> {
     pinhole::check_image_size(camera.width.into(), camera.height.into())?;
     validate(splats)?;
     let c = splats.num_channels;
-    let bg = background::<T>(settings, c)?;
+    let background = background::<T>(settings, c)?;
     let cam = CameraParams::<T>::new(camera, settings.near_plane);
     let n = splats.len();
-    let (width, height) = (camera.width as usize, camera.height as usize);
     let [gx, gy] = cam.grid;
     let (gx, gy) = (gx as usize, gy as usize);
-    let n_tiles = gx * gy;
 
-    // 1. Project (parallel, order-preserving).
     let projected: Vec<Option<Projected<T>>> = (0..n)
         .into_par_iter()
         .map(|i| splats.project(&cam, i))
@@ -92,10 +130,9 @@ fn render_inputs<T: Real>(
         }
     }
 
-    // 2. Bin into tiles: counting sort by tile (stable in input order), then sort each tile by
-    //    (depth, input index), which equals INRIA's stable radix sort on (tile, depth).
-    let (tile_offsets, tile_list) = bin_and_sort(&visible, gx, n_tiles);
-    let num_pairs = tile_list.len();
+    // Counting sort by tile (stable in input order), then each tile by (depth, input index),
+    // which equals INRIA's stable radix sort on (tile, depth).
+    let (tile_offsets, tile_list) = bin_and_sort(&visible, gx, gx * gy);
     let pair_splats: Vec<PairSplat<T>> = tile_list
         .par_iter()
         .map(|&ci| {
@@ -109,7 +146,7 @@ fn render_inputs<T: Real>(
             }
         })
         .collect();
-    let mut pair_channels = vec![T::zero(); num_pairs * c];
+    let mut pair_channels = vec![T::zero(); tile_list.len() * c];
     if c > 0 {
         pair_channels
             .par_chunks_mut(c)
@@ -119,9 +156,46 @@ fn render_inputs<T: Real>(
                 dst.copy_from_slice(&splats.channels[g * c..(g + 1) * c]);
             });
     }
+    Ok(Binned {
+        width: camera.width as usize,
+        height: camera.height as usize,
+        gx,
+        c,
+        radii,
+        visible,
+        visible_ids,
+        tile_offsets,
+        tile_list,
+        pair_splats,
+        pair_channels,
+        background,
+        n,
+    })
+}
 
-    // 3. Blend every tile.
-    let stride = (2 + c) * TILE_PIXELS;
+impl<T> Binned<T> {
+    /// The visible Gaussians' input indices and their tile rectangles `[x0, y0, x1, y1)`.
+    pub(super) fn visible_rects(&self) -> impl Iterator<Item = (u32, [u32; 4])> + '_ {
+        self.visible_ids
+            .iter()
+            .zip(&self.visible)
+            .map(|(&id, p)| (id, p.rect))
+    }
+
+    /// Tiles per row and number of tiles.
+    pub(super) fn grid(&self) -> (usize, usize) {
+        (self.gx, self.tile_offsets.len() - 1)
+    }
+}
+
+/// Blends every tile in parallel into per-tile buffers ([T_final | depth | channel sums] per
+/// pixel) and the count of list entries each used; `reused` tiles are copied instead.
+pub(super) fn blend_tiles<T: Real>(
+    b: &Binned<T>,
+    reused: Option<&ReusedTiles<'_, T>>,
+) -> (Vec<T>, Vec<u32>) {
+    let stride = (2 + b.c) * TILE_PIXELS;
+    let n_tiles = b.tile_offsets.len() - 1;
     let mut tile_buf = vec![T::zero(); n_tiles * stride];
     let mut used = vec![0u32; n_tiles];
     tile_buf
@@ -129,78 +203,90 @@ fn render_inputs<T: Real>(
         .zip(used.par_iter_mut())
         .enumerate()
         .for_each(|(tile, (buf, used))| {
-            let range = tile_offsets[tile]..tile_offsets[tile + 1];
-            let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
+            if let Some(r) = reused.filter(|r| r.reuse[tile]) {
+                buf.copy_from_slice(&r.tile_buf[tile * stride..(tile + 1) * stride]);
+                *used = r.used[tile];
+                return;
+            }
+            let range = b.tile_offsets[tile]..b.tile_offsets[tile + 1];
+            let origin = [(tile % b.gx) * TILE_SIZE, (tile / b.gx) * TILE_SIZE];
             let size = [
-                TILE_SIZE.min(width - origin[0]),
-                TILE_SIZE.min(height - origin[1]),
+                TILE_SIZE.min(b.width - origin[0]),
+                TILE_SIZE.min(b.height - origin[1]),
             ];
             forward_tile_dispatch(
-                &pair_splats,
-                &pair_channels,
+                &b.pair_splats,
+                &b.pair_channels,
                 range,
-                c,
+                b.c,
                 origin,
                 size,
                 buf,
                 used,
             );
         });
+    (tile_buf, used)
+}
 
-    // 4. Planar outputs.
-    let hw = width * height;
-    let mut image = vec![T::zero(); c * hw];
-    let mut alpha = vec![T::zero(); hw];
-    let mut depth = vec![T::zero(); hw];
-    let tile_px = |x: usize, y: usize| {
-        let tile = (y / TILE_SIZE) * gx + x / TILE_SIZE;
-        (tile * stride, (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE)
-    };
-    image
-        .par_chunks_mut(width)
-        .enumerate()
-        .for_each(|(row, out)| {
-            let (ch, y) = (row / height, row % height);
-            for (x, o) in out.iter_mut().enumerate() {
-                let (base, p) = tile_px(x, y);
-                *o = tile_buf[base + BUF_C + ch * TILE_PIXELS + p]
-                    + tile_buf[base + BUF_T + p] * bg[ch];
-            }
-        });
-    alpha
-        .par_chunks_mut(width)
-        .zip(depth.par_chunks_mut(width))
-        .enumerate()
-        .for_each(|(y, (a, d))| {
-            for x in 0..width {
-                let (base, p) = tile_px(x, y);
-                a[x] = T::one() - tile_buf[base + BUF_T + p];
-                d[x] = tile_buf[base + BUF_D + p];
-            }
-        });
-
-    Ok(RenderOutput {
-        width: camera.width,
-        height: camera.height,
-        num_channels: c,
-        image,
-        alpha,
-        depth,
-        radii,
-        num_pairs,
-        state: ForwardState {
-            visible,
-            visible_ids,
-            tile_offsets,
-            tile_list,
-            pair_splats,
-            pair_channels,
-            tile_buf,
-            used,
-            background: bg,
-            n,
-        },
-    })
+impl<T: Real> Binned<T> {
+    /// Lays the blended tiles out as planar images and keeps what the backward needs.
+    pub(super) fn into_output(self, tile_buf: Vec<T>, used: Vec<u32>) -> RenderOutput<T> {
+        let (width, height, gx, c) = (self.width, self.height, self.gx, self.c);
+        let stride = (2 + c) * TILE_PIXELS;
+        let bg = &self.background;
+        let hw = width * height;
+        let mut image = vec![T::zero(); c * hw];
+        let mut alpha = vec![T::zero(); hw];
+        let mut depth = vec![T::zero(); hw];
+        let tile_px = |x: usize, y: usize| {
+            let tile = (y / TILE_SIZE) * gx + x / TILE_SIZE;
+            (tile * stride, (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE)
+        };
+        image
+            .par_chunks_mut(width)
+            .enumerate()
+            .for_each(|(row, out)| {
+                let (ch, y) = (row / height, row % height);
+                for (x, o) in out.iter_mut().enumerate() {
+                    let (base, p) = tile_px(x, y);
+                    *o = tile_buf[base + BUF_C + ch * TILE_PIXELS + p]
+                        + tile_buf[base + BUF_T + p] * bg[ch];
+                }
+            });
+        alpha
+            .par_chunks_mut(width)
+            .zip(depth.par_chunks_mut(width))
+            .enumerate()
+            .for_each(|(y, (a, d))| {
+                for x in 0..width {
+                    let (base, p) = tile_px(x, y);
+                    a[x] = T::one() - tile_buf[base + BUF_T + p];
+                    d[x] = tile_buf[base + BUF_D + p];
+                }
+            });
+        RenderOutput {
+            width: width as u32,
+            height: height as u32,
+            num_channels: c,
+            image,
+            alpha,
+            depth,
+            radii: self.radii,
+            num_pairs: self.tile_list.len(),
+            state: ForwardState {
+                visible: self.visible,
+                visible_ids: self.visible_ids,
+                tile_offsets: self.tile_offsets,
+                tile_list: self.tile_list,
+                pair_splats: self.pair_splats,
+                pair_channels: self.pair_channels,
+                tile_buf,
+                used,
+                background: self.background,
+                n: self.n,
+            },
+        }
+    }
 }
 
 /// [`forward_tile`] of the pairs `range`: the AVX-512 kernel when the CPU has AVX-512F and `T` is

@@ -24,13 +24,16 @@
 //! types and their validation), `binning` (tile lists sorted by depth), `kernels` (the per-tile
 //! blend loops of forward and backward and the lane arithmetic they share; `avx512` holds their
 //! 16-lane twins), `forward` (projection, binning and blending into the outputs) and `backward`
-//! (replay of every tile and the fixed-order reduction per Gaussian).
+//! (replay of every tile and the fixed-order reduction per Gaussian); `shared` renders several
+//! passes of one camera that share their static Gaussians, blending and replaying the tiles only
+//! those reach once.
 
 mod backward;
 mod binning;
 mod forward;
 mod inputs;
 mod kernels;
+mod shared;
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
@@ -41,3 +44,4 @@ pub use inputs::{
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats,
     COVARIANCE_SYMMETRY_TOLERANCE, DEFAULT_NEAR_PLANE,
 };
+pub use shared::{render_cov_shared, render_cov_shared_backward, SharedRenders, TileSharing};
