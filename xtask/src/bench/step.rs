@@ -23,6 +23,10 @@ pub struct Args {
     /// Timed steps (after one warm-up step).
     #[arg(long, default_value_t = 10)]
     pub steps: usize,
+    /// Overrides the run's `share_static_tiles` (the renders of one exposure blend the tiles only
+    /// static Gaussians reach once), to time the step with and without it.
+    #[arg(long, value_parser = train::config::parse_on_off, value_name = "on|off")]
+    pub share_static_tiles: Option<bool>,
 }
 
 /// Runs the benchmark.
@@ -49,6 +53,9 @@ pub fn run(args: Args) -> Result<()> {
     let mut ctx = TrainingData::new(&data, body, seed)?;
     let mut trainer = Trainer::load_checkpoint(&checkpoint, &ctx)
         .with_context(|| format!("loading {}", checkpoint.display()))?;
+    if let Some(share) = args.share_static_tiles {
+        trainer.model.config.share_static_tiles = share;
+    }
     let config = trainer.config().clone();
     crate::reconstruct::prepare_training_data(&mut ctx, &data, &config)?;
     let (from, gaussians) = (trainer.step, trainer.model.set.len());
@@ -65,6 +72,7 @@ pub fn run(args: Args) -> Result<()> {
         "steps": args.steps,
         "threads": rayon::current_num_threads(),
         "steal_pct": steal.percent(),
+        "share_static_tiles": config.share_static_tiles,
     });
     if let Some(obj) = line.as_object_mut() {
         for (stage, seconds) in crate::reconstruct::mean_times(&reports) {

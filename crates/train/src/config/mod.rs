@@ -219,6 +219,16 @@ training_options! {
     /// sub-exposure render re-poses them by linear blend skinning alone, `train::reposing`) or
     /// `per-subframe` (every sub-exposure render evaluates the networks at its own pose).
     exposure_networks: ExposureNetworks = ExposureNetworks::Once,
+    /// With `blur_model = exposure`: the tiles that only static Gaussians (human probability
+    /// below `semantic_gate`, the same in every sub-exposure render) reach are blended once per
+    /// frame and replayed once in the backward with the renders' summed cotangent
+    /// (`rasterize_cpu::render_cov_shared`). The renders are the same bits; the gradients differ
+    /// by the rounding of summing cotangents before the backward instead of gradients after it.
+    /// `off`: every render blends every tile (the bits of runs before 2026-11-27's twenty-seventh
+    /// session). Not used with `density_gradient = per-pass` or the flow loss's `geometry`
+    /// gradient, which need each render's own gradients.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    share_static_tiles: bool = true,
     /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
     /// between the two renders is pulled towards that flow (see `train::loss::optical_flow`).

@@ -27,8 +27,8 @@ use crate::TrainError;
 mod pass;
 use gaussians::GaussianSet;
 use rasterize_cpu::{
-    render_cov, render_cov_backward, Camera, Cotangents, CovSplats, Gradients, RenderOutput,
-    RenderSettings,
+    render_cov, render_cov_backward, render_cov_shared, render_cov_shared_backward, Camera,
+    Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, TileSharing,
 };
 use smpl_deform::deform_net::{NonRigidNet, SkinningField};
 use smpl_deform::math::Affine;
@@ -91,7 +91,7 @@ pub struct PassTiming {
 }
 
 /// What a pass's posing backward needs: a pass posed by the networks, or one re-posed from another
-/// pass of the same frame ([`Model::forward_reposed`]).
+/// pass of the same frame ([`Model::forward_passes`]).
 enum PassCache {
     Frame(Box<FrameCache<f32>>),
     Reposed(ReposedCache<f32>),
@@ -111,6 +111,68 @@ pub struct FramePass<'a> {
     pub out: RenderOutput<f32>,
     /// Stage timings of the forward.
     pub timing: PassTiming,
+}
+
+/// How [`Model::forward_passes`] renders one frame's passes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PassPlan {
+    /// Evaluate the networks once, at the reference pass, and re-pose it for the others.
+    pub reposed: bool,
+    /// Blend the tiles only static Gaussians reach once for every pass.
+    pub share_static_tiles: bool,
+}
+
+/// One frame's passes, and the tiles they share when rendered together.
+pub struct ExposurePasses<'a> {
+    /// The passes, in pose order.
+    pub passes: Vec<FramePass<'a>>,
+    /// The tiles blended once, by the reference pass (`None`: every pass blended every tile).
+    pub sharing: Option<TileSharing>,
+}
+
+/// A pass posed but not yet rendered.
+struct PosedPass<'a> {
+    pose: &'a PreparedPose,
+    latent: &'a [f32],
+    cache: PassCache,
+    channels: Vec<f32>,
+    posed: PosedFrame<f32>,
+    pose_seconds: f64,
+}
+
+impl<'a> PosedPass<'a> {
+    fn rendered(
+        self,
+        model: &'a Model,
+        camera: &'a Camera,
+        out: RenderOutput<f32>,
+        render_seconds: f64,
+    ) -> FramePass<'a> {
+        FramePass {
+            model,
+            camera,
+            pose: self.pose,
+            latent: self.latent,
+            cache: self.cache,
+            channels: self.channels,
+            posed: self.posed,
+            out,
+            timing: PassTiming {
+                pose: self.pose_seconds,
+                render: render_seconds,
+            },
+        }
+    }
+}
+
+impl PassCache {
+    /// Indices of the Gaussians whose human branch was evaluated.
+    fn active(&self) -> &[usize] {
+        match self {
+            PassCache::Frame(cache) => cache.active(),
+            PassCache::Reposed(cache) => cache.active(),
+        }
+    }
 }
 
 /// ∂L/∂bones of one pass: one 3×4 per bone.
@@ -354,100 +416,142 @@ impl Model {
         pose: &'a PreparedPose,
         latent: &'a [f32],
     ) -> Result<FramePass<'a>, TrainError> {
-        let t0 = Instant::now();
-        let inputs = frame_inputs(camera, pose, latent);
-        let (posed, cache) = pose_frame_gated(
-            &self.nets,
-            self.config.semantic,
-            self.config.semantic_gate,
-            &self.params(),
-            &inputs,
-        )?;
-        self.rasterize(
-            camera,
-            pose,
-            latent,
-            PassCache::Frame(Box::new(cache)),
-            posed,
-            t0,
-        )
+        let posed = self.posed_pass(camera, pose, latent)?;
+        self.rasterize(camera, posed)
     }
 
-    /// Renders one frame at each of `poses` (its sub-exposure poses), evaluating the networks once,
-    /// at `poses[reference]`, and re-posing that pass for the others by linear blend skinning alone
-    /// (`train::reposing`). Differentiate the passes together with [`Model::reposed_backward`].
-    pub fn forward_reposed<'a>(
+    /// Renders one frame at each of `poses` (its sub-exposure poses) from one camera. With
+    /// `plan.reposed` the networks are evaluated once, at `poses[reference]`, and that pass is
+    /// re-posed for the others by linear blend skinning alone (`train::reposing`; differentiate the
+    /// passes together with [`Model::reposed_backward`]); else every pass is posed by the networks.
+    /// With `plan.share_static_tiles` the tiles only static Gaussians (human probability below the
+    /// gate, the same in every pass) reach are blended once, by the reference pass
+    /// (`rasterize_cpu::render_cov_shared`; differentiate with [`Model::shared_render_backward`]).
+    pub fn forward_passes<'a>(
         &'a self,
         camera: &'a Camera,
         poses: &[&'a PreparedPose],
         reference: usize,
         latent: &'a [f32],
-    ) -> Result<Vec<FramePass<'a>>, TrainError> {
+        plan: PassPlan,
+    ) -> Result<ExposurePasses<'a>, TrainError> {
         let Some(&reference_pose) = poses.get(reference) else {
             return Err(TrainError::Config(format!(
-                "re-posed passes: reference {reference} of {} poses",
+                "passes: reference {reference} of {} poses",
                 poses.len()
             )));
         };
-        let first = self.forward(camera, reference_pose, latent)?;
-        let PassCache::Frame(reference_cache) = &first.cache else {
-            unreachable!("Model::forward poses with the networks");
-        };
-        let mut reposed = Vec::with_capacity(poses.len());
+        let first = self.posed_pass(camera, reference_pose, latent)?;
+        let mut posed = Vec::with_capacity(poses.len());
         for (s, &pose) in poses.iter().enumerate() {
             if s == reference {
                 continue;
             }
+            if !plan.reposed {
+                posed.push(self.posed_pass(camera, pose, latent)?);
+                continue;
+            }
+            let PassCache::Frame(reference_cache) = &first.cache else {
+                unreachable!("Model::posed_pass poses with the networks");
+            };
             let t0 = Instant::now();
-            let (posed, cache) = repose_frame(&first.posed, reference_cache, &pose.bones)?;
-            reposed.push(self.rasterize(
-                camera,
+            let (frame, cache) = repose_frame(&first.posed, reference_cache, &pose.bones)?;
+            posed.push(PosedPass {
                 pose,
                 latent,
-                PassCache::Reposed(cache),
-                posed,
-                t0,
-            )?);
+                cache: PassCache::Reposed(cache),
+                channels: interleave_channels(&frame),
+                posed: frame,
+                pose_seconds: t0.elapsed().as_secs_f64(),
+            });
         }
-        reposed.insert(reference, first);
-        Ok(reposed)
-    }
-
-    /// Rasterizes a posed frame into a pass (`t0`: when its posing started, for the timings).
-    fn rasterize<'a>(
-        &'a self,
-        camera: &'a Camera,
-        pose: &'a PreparedPose,
-        latent: &'a [f32],
-        cache: PassCache,
-        posed: PosedFrame<f32>,
-        t0: Instant,
-    ) -> Result<FramePass<'a>, TrainError> {
-        let channels = interleave_channels(&posed);
-        let pose_seconds = t0.elapsed().as_secs_f64();
-        let t0 = Instant::now();
-        let out = render_cov(
-            camera,
-            &splats(self, &posed, &channels),
-            &self.render_settings(),
-        )?;
-        Ok(FramePass {
-            model: self,
-            camera,
-            pose,
-            latent,
-            cache,
-            channels,
-            posed,
-            out,
-            timing: PassTiming {
-                pose: pose_seconds,
-                render: t0.elapsed().as_secs_f64(),
-            },
+        posed.insert(reference, first);
+        if plan.share_static_tiles && posed.len() > 1 {
+            return self.rasterize_shared(camera, posed, reference);
+        }
+        let passes = posed
+            .into_iter()
+            .map(|p| self.rasterize(camera, p))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(ExposurePasses {
+            passes,
+            sharing: None,
         })
     }
 
-    /// The model's gradients of passes made by [`Model::forward_reposed`] (same `reference`), from
+    /// Poses the model in `pose` with the frame latent `latent` (networks, blend).
+    fn posed_pass<'a>(
+        &'a self,
+        camera: &Camera,
+        pose: &'a PreparedPose,
+        latent: &'a [f32],
+    ) -> Result<PosedPass<'a>, TrainError> {
+        let t0 = Instant::now();
+        let (posed, cache) = pose_frame_gated(
+            &self.nets,
+            self.config.semantic,
+            self.config.semantic_gate,
+            &self.params(),
+            &frame_inputs(camera, pose, latent),
+        )?;
+        Ok(PosedPass {
+            pose,
+            latent,
+            cache: PassCache::Frame(Box::new(cache)),
+            channels: interleave_channels(&posed),
+            posed,
+            pose_seconds: t0.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Rasterizes a posed frame into a pass.
+    fn rasterize<'a>(
+        &'a self,
+        camera: &'a Camera,
+        posed: PosedPass<'a>,
+    ) -> Result<FramePass<'a>, TrainError> {
+        let t0 = Instant::now();
+        let out = render_cov(
+            camera,
+            &splats(self, &posed.posed, &posed.channels),
+            &self.render_settings(),
+        )?;
+        Ok(posed.rendered(self, camera, out, t0.elapsed().as_secs_f64()))
+    }
+
+    /// Rasterizes the posed passes of one frame together, the tiles only the Gaussians outside
+    /// every pass's active set reach blended once, by pass `owner`.
+    fn rasterize_shared<'a>(
+        &'a self,
+        camera: &'a Camera,
+        posed: Vec<PosedPass<'a>>,
+        owner: usize,
+    ) -> Result<ExposurePasses<'a>, TrainError> {
+        let t0 = Instant::now();
+        let mut moving = vec![false; self.set.len()];
+        for pass in &posed {
+            for &i in pass.cache.active() {
+                moving[i] = true;
+            }
+        }
+        let splats: Vec<_> = posed
+            .iter()
+            .map(|p| splats(self, &p.posed, &p.channels))
+            .collect();
+        let renders = render_cov_shared(camera, &splats, &moving, owner, &self.render_settings())?;
+        let seconds = t0.elapsed().as_secs_f64() / posed.len() as f64;
+        let passes = posed
+            .into_iter()
+            .zip(renders.outputs)
+            .map(|(p, out)| p.rendered(self, camera, out, seconds))
+            .collect();
+        Ok(ExposurePasses {
+            passes,
+            sharing: Some(renders.sharing),
+        })
+    }
+
+    /// The model's gradients of passes made by [`Model::forward_passes`] with `reposed` (same `reference`), from
     /// each pass's rasterizer-input gradients `posed` (same order): one backward through the
     /// networks, into which every re-posed pass's cotangents are summed. The returned model gradients'
     /// `bones` and `pose_code` are the reference pass's; the list holds ∂L/∂bones of every pass (same

@@ -30,17 +30,7 @@ impl FramePass<'_> {
         d_geometric: Option<&[f32]>,
     ) -> Result<PosedGradients, TrainError> {
         let g = self.rasterizer_backward(d_image, d_geometric)?;
-        let per = g.channels.chunks_exact(RENDER_CHANNELS);
-        let colours = per.clone().flat_map(|c| c[..3].iter().copied()).collect();
-        let human_probability = per.map(|c| c[3]).collect();
-        Ok(PosedGradients {
-            means: g.means,
-            covariances: g.covariances,
-            colours,
-            human_probability,
-            opacity_logits: g.opacity_logits,
-            means_2d: g.means_2d,
-        })
+        Ok(PosedGradients::from_raster(g))
     }
 
     fn rasterizer_backward(
@@ -96,7 +86,7 @@ impl FramePass<'_> {
 
     /// Backward through the posing (networks, blend, deformation) of the rasterizer-input gradients
     /// `posed`: gradients of every learnable quantity of the model and of this frame's latent.
-    /// A re-posed pass ([`Model::forward_reposed`]) is differentiated with its frame's passes by
+    /// A re-posed pass ([`Model::forward_passes`]) is differentiated with its frame's passes by
     /// [`Model::reposed_backward`] and is refused here.
     pub fn model_backward(
         &self,
@@ -132,14 +122,65 @@ impl FramePass<'_> {
 
     /// Indices of the Gaussians whose human branch was evaluated (human probability ≥ the gate).
     pub fn active(&self) -> &[usize] {
-        match &self.cache {
-            PassCache::Frame(cache) => cache.active(),
-            PassCache::Reposed(cache) => cache.active(),
-        }
+        self.cache.active()
+    }
+}
+
+impl Model {
+    /// The rasterizer backward of passes rendered together ([`Model::forward_passes`] with
+    /// `share_static_tiles`; `sharing` is theirs), one image cotangent per pass: each pass's
+    /// rasterizer-input gradients, the shared tiles' share (replayed once with the passes' summed
+    /// cotangent) in the owner's.
+    pub fn shared_render_backward(
+        &self,
+        passes: &[FramePass<'_>],
+        sharing: &TileSharing,
+        d_images: &[Vec<f32>],
+    ) -> Result<Vec<PosedGradients>, TrainError> {
+        let Some(camera) = passes.first().map(|p| p.camera) else {
+            return Ok(Vec::new());
+        };
+        let splats: Vec<_> = passes
+            .iter()
+            .map(|p| splats(self, &p.posed, &p.channels))
+            .collect();
+        let outputs: Vec<_> = passes.iter().map(|p| &p.out).collect();
+        let cotangents: Vec<_> = d_images
+            .iter()
+            .map(|image| Cotangents {
+                image,
+                alpha: None,
+                depth: None,
+            })
+            .collect();
+        let grads = render_cov_shared_backward(
+            camera,
+            &splats,
+            &self.render_settings(),
+            &outputs,
+            sharing,
+            &cotangents,
+        )?;
+        Ok(grads.into_iter().map(PosedGradients::from_raster).collect())
     }
 }
 
 impl PosedGradients {
+    /// The rasterizer's gradients, the render channels split into RGB and human probability.
+    fn from_raster(g: Gradients<f32>) -> Self {
+        let per = g.channels.chunks_exact(RENDER_CHANNELS);
+        let colours = per.clone().flat_map(|c| c[..3].iter().copied()).collect();
+        let human_probability = per.map(|c| c[3]).collect();
+        PosedGradients {
+            means: g.means,
+            covariances: g.covariances,
+            colours,
+            human_probability,
+            opacity_logits: g.opacity_logits,
+            means_2d: g.means_2d,
+        }
+    }
+
     /// The posing backward's view of these gradients.
     pub(super) fn cotangents(&self) -> FrameCotangents<'_, f32> {
         FrameCotangents {

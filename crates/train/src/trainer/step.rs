@@ -14,9 +14,10 @@ use crate::eval::psnr;
 use crate::loss::image::ImageShape;
 use crate::loss::perceptual::perceptual_term;
 use crate::loss::photometric::{exposure_loss, ExposureEvents};
-use crate::model::{FramePass, Model, PosedGradients, RENDER_CHANNELS};
+use crate::model::{ExposurePasses, FramePass, Model, PassPlan, PosedGradients, RENDER_CHANNELS};
 use crate::posing::ModelGradients;
 use crate::TrainError;
+use rasterize_cpu::TileSharing;
 use smpl_deform::math::Affine;
 use std::time::Instant;
 
@@ -27,6 +28,8 @@ struct FramePasses<'a> {
     mid: usize,
     /// The other passes re-pose the mid pass's networks (`exposure_networks = once`).
     reposed: bool,
+    /// The tiles the passes share, blended once by the mid pass (`share_static_tiles`).
+    sharing: Option<TileSharing>,
 }
 
 /// Frame k's image losses: the photometric loss of the passes' mean (with the events between its
@@ -300,18 +303,32 @@ impl Trainer {
             passes,
             mid,
             reposed,
+            sharing,
         } = frame_k;
         let (mid, reposed) = (*mid, *reposed);
         let first = &passes[mid];
+        let mut pass_norms = (config.density_gradient == DensityGradient::PerPass
+            && passes.len() > 1)
+            .then(|| vec![0.0f32; first.out.radii.len()]);
+        // Every pass's rasterizer backward at once when they shared tiles and each pass's own
+        // gradients are not needed; else each pass's below.
         let t0 = Instant::now();
-        let mut posed = first.render_backward(&d_images[mid], d_geometric)?;
+        let mut shared: Vec<Option<PosedGradients>> = match sharing {
+            Some(sharing) if d_geometric.is_none() && pass_norms.is_none() => model
+                .shared_render_backward(passes, sharing, d_images)?
+                .into_iter()
+                .map(Some)
+                .collect(),
+            _ => passes.iter().map(|_| None).collect(),
+        };
+        let mut posed = match shared[mid].take() {
+            Some(posed) => posed,
+            None => first.render_backward(&d_images[mid], d_geometric)?,
+        };
         times.render_backward = t0.elapsed().as_secs_f64();
         let started = Instant::now();
         let (aiap, aiap_canonical) =
             aiap_terms(&self.aiap, model, &first.posed, config, &mut posed);
-        let mut pass_norms = (config.density_gradient == DensityGradient::PerPass
-            && passes.len() > 1)
-            .then(|| vec![0.0f32; first.out.radii.len()]);
         // Per pass, ∂L/∂bones and ∂L/∂pose code (for the pose correction).
         let mut bones = vec![Vec::new(); passes.len()];
         let mut codes = vec![Vec::new(); passes.len()];
@@ -333,9 +350,15 @@ impl Trainer {
         let mut sub_render_seconds = 0.0;
         let mut reposed_subs = Vec::new();
         for (s, pass) in passes.iter().enumerate().filter(|&(s, _)| s != mid) {
-            let t = Instant::now();
-            let sub = pass.render_backward(&d_images[s], None)?;
-            sub_render_seconds += t.elapsed().as_secs_f64();
+            let sub = match shared[s].take() {
+                Some(sub) => sub,
+                None => {
+                    let t = Instant::now();
+                    let sub = pass.render_backward(&d_images[s], None)?;
+                    sub_render_seconds += t.elapsed().as_secs_f64();
+                    sub
+                }
+            };
             if let Some(norms) = pass_norms.as_mut() {
                 add_ndc_norms(norms, &sub.means_2d, camera);
             }
@@ -427,16 +450,12 @@ fn frame_passes<'a>(
         _ => vec![&data.frames[slot].pose],
     };
     let mid = poses.len() / 2;
-    let camera = &data.camera;
-    let reposed = poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once;
-    let passes = if reposed {
-        model.forward_reposed(camera, &poses, mid, model.latent(slot))?
-    } else {
-        poses
-            .iter()
-            .map(|pose| model.forward(camera, pose, model.latent(slot)))
-            .collect::<Result<Vec<_>, _>>()?
+    let plan = PassPlan {
+        reposed: poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once,
+        share_static_tiles: config.share_static_tiles,
     };
+    let ExposurePasses { passes, sharing } =
+        model.forward_passes(&data.camera, &poses, mid, model.latent(slot), plan)?;
     for pass in &passes {
         times.pose += pass.timing.pose;
         times.render += pass.timing.render;
@@ -444,7 +463,8 @@ fn frame_passes<'a>(
     Ok(FramePasses {
         passes,
         mid,
-        reposed,
+        reposed: plan.reposed,
+        sharing,
     })
 }
 
