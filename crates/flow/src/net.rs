@@ -180,6 +180,7 @@ fn conv_shape(i: usize, h: usize, w: usize) -> Conv2dShape {
         height: h,
         width: w,
         kernel: KERNEL,
+        stride: 1,
         pad: KERNEL / 2,
     }
 }

@@ -4,8 +4,8 @@
 
 use crate::LpipsError;
 use nn::{
-    conv2d_backward_input, conv2d_forward, conv2d_strided_backward_input, conv2d_strided_forward,
-    max_pool2d_backward, max_pool2d_forward, Conv2dShape, MaxPool2dShape, Real, StridedConv2dShape,
+    conv2d_backward_input, conv2d_forward, max_pool2d_backward, max_pool2d_forward, Conv2dShape,
+    MaxPool2dShape, Real,
 };
 use rand::{Rng, SeedableRng};
 
@@ -248,8 +248,8 @@ impl<T: Real> Lpips<T> {
         T::of(total)
     }
 
-    fn stem_shape(&self, height: usize, width: usize) -> StridedConv2dShape {
-        StridedConv2dShape {
+    fn stem_shape(&self, height: usize, width: usize) -> Conv2dShape {
+        Conv2dShape {
             batch: 1,
             c_in: 3,
             c_out: self.channels[0],
@@ -270,6 +270,7 @@ impl<T: Real> Lpips<T> {
             height: size.0,
             width: size.1,
             kernel: KERNELS[i],
+            stride: 1,
             pad: PADS[i],
         }
     }
@@ -334,7 +335,7 @@ impl<T: Real> Lpips<T> {
         // Pool l reads tap l and has the size of tap l + 1.
         let mut argmax: [Vec<u32>; 2] =
             std::array::from_fn(|l| vec![0; self.channels[l] * sizes[l + 1].0 * sizes[l + 1].1]);
-        conv2d_strided_forward(
+        conv2d_forward(
             self.stem_shape(height, width),
             &x,
             &self.weights[0],
@@ -429,7 +430,7 @@ impl<T: Real> Lpips<T> {
         }
         relu_mask(&mut g, &trunk.taps[0]);
         let mut d_x = vec![T::zero(); 3 * height * width];
-        conv2d_strided_backward_input(
+        conv2d_backward_input(
             self.stem_shape(height, width),
             &g,
             &self.weights[0],

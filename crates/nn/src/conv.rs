@@ -27,7 +27,8 @@ const WEIGHT_CHUNK_PIXELS: usize = 512;
 /// Number of partial weight-gradient buffers (fixed, so the reduction order never depends on threads).
 const WEIGHT_GRAD_GROUPS: usize = 4;
 
-/// Shape of a stride-1 2-D convolution on a batch of planar images.
+/// Shape of a 2-D convolution on a batch of planar images (any stride: stride 1 by im2col + GEMM,
+/// a larger one by polyphase decomposition onto stride 1, `crate::conv_strided`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Conv2dShape {
     /// Batch size B.
@@ -42,18 +43,26 @@ pub struct Conv2dShape {
     pub width: usize,
     /// Kernel side length k (the kernel is k × k).
     pub kernel: usize,
-    /// Zero padding on each side, in pixels (`(k − 1) / 2` keeps the size).
+    /// Step between output pixels, in input pixels (≥ 1).
+    pub stride: usize,
+    /// Zero padding on each side, in pixels (`(k − 1) / 2` keeps the size at stride 1).
     pub pad: usize,
 }
 
 impl Conv2dShape {
-    /// Output height `H + 2·pad − k + 1`.
+    /// Output height `(H + 2·pad − k) / stride + 1` (integer division: PyTorch's floor; 0 when
+    /// the kernel is larger than the padded image).
     pub fn out_height(&self) -> usize {
-        (self.height + 2 * self.pad + 1).saturating_sub(self.kernel)
+        self.out_side(self.height)
     }
-    /// Output width `W + 2·pad − k + 1`.
+    /// Output width `(W + 2·pad − k) / stride + 1`.
     pub fn out_width(&self) -> usize {
-        (self.width + 2 * self.pad + 1).saturating_sub(self.kernel)
+        self.out_side(self.width)
+    }
+    fn out_side(&self, side: usize) -> usize {
+        (side + 2 * self.pad)
+            .checked_sub(self.kernel)
+            .map_or(0, |span| span / self.stride.max(1) + 1)
     }
     /// Number of input elements `B·C_in·H·W`.
     pub fn input_len(&self) -> usize {
@@ -68,14 +77,15 @@ impl Conv2dShape {
         self.c_out * self.c_in * self.kernel * self.kernel
     }
 
-    fn validate(&self) -> Result<(), NnError> {
+    pub(crate) fn validate(&self) -> Result<(), NnError> {
         if self.kernel == 0
+            || self.stride == 0
             || self.height + 2 * self.pad < self.kernel
             || self.width + 2 * self.pad < self.kernel
         {
             return Err(NnError::Shape(format!(
-                "conv2d kernel {} larger than padded image {}x{} (pad {})",
-                self.kernel, self.height, self.width, self.pad
+                "conv2d kernel {} stride {} on a {}x{} image with pad {}",
+                self.kernel, self.stride, self.height, self.width, self.pad
             )));
         }
         Ok(())
@@ -333,6 +343,9 @@ pub fn conv2d_forward<T: Real>(
     bias: Option<&[T]>,
     output: &mut [T],
 ) -> Result<(), NnError> {
+    if s.stride > 1 {
+        return crate::conv_strided::forward(s, input, weight, bias, output);
+    }
     s.validate()?;
     check_len("conv2d input", s.input_len(), input.len())?;
     check_len("conv2d weight", s.weight_len(), weight.len())?;
@@ -352,6 +365,9 @@ pub fn conv2d_backward_input<T: Real>(
     weight: &[T],
     grad_input: &mut [T],
 ) -> Result<(), NnError> {
+    if s.stride > 1 {
+        return crate::conv_strided::backward_input(s, grad_output, weight, grad_input);
+    }
     s.validate()?;
     check_len("conv2d grad_output", s.output_len(), grad_output.len())?;
     check_len("conv2d weight", s.weight_len(), weight.len())?;
@@ -382,6 +398,7 @@ pub fn conv2d_backward_input<T: Real>(
         height: s.out_height(),
         width: s.out_width(),
         kernel: k,
+        stride: 1,
         pad: k - 1 - s.pad,
     };
     conv_core(&t, grad_output, &wt, None, grad_input);
@@ -397,6 +414,9 @@ pub fn conv2d_backward_weight<T: Real>(
     grad_weight: &mut [T],
     grad_bias: Option<&mut [T]>,
 ) -> Result<(), NnError> {
+    if s.stride > 1 {
+        return crate::conv_strided::backward_weight(s, input, grad_output, grad_weight, grad_bias);
+    }
     s.validate()?;
     check_len("conv2d input", s.input_len(), input.len())?;
     check_len("conv2d grad_output", s.output_len(), grad_output.len())?;
@@ -463,9 +483,8 @@ pub fn conv2d_backward_weight<T: Real>(
     Ok(())
 }
 
-/// Slow, obviously-correct direct convolution (the oracle for tests): same contract as
-/// [`conv2d_forward`], one multiply-add per loop iteration — the strided oracle
-/// ([`crate::conv_strided::conv2d_strided_reference`]) at stride 1.
+/// Slow, obviously-correct direct convolution at any stride (the oracle for tests): same contract
+/// as [`conv2d_forward`], one multiply-add per loop iteration.
 pub fn conv2d_reference<T: Real>(
     s: Conv2dShape,
     input: &[T],
@@ -473,21 +492,5 @@ pub fn conv2d_reference<T: Real>(
     bias: Option<&[T]>,
     output: &mut [T],
 ) -> Result<(), NnError> {
-    s.validate()?;
-    crate::conv_strided::conv2d_strided_reference(
-        crate::conv_strided::StridedConv2dShape {
-            batch: s.batch,
-            c_in: s.c_in,
-            c_out: s.c_out,
-            height: s.height,
-            width: s.width,
-            kernel: s.kernel,
-            stride: 1,
-            pad: s.pad,
-        },
-        input,
-        weight,
-        bias,
-        output,
-    )
+    crate::conv_strided::reference(s, input, weight, bias, output)
 }

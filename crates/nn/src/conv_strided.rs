@@ -1,5 +1,6 @@
 //! Strided 2-D convolution (cross-correlation, as PyTorch's `Conv2d(stride = s)`), by polyphase
 //! decomposition onto the stride-1 convolution of [`crate::conv`]: no second im2col kernel.
+//! `conv2d_forward` and its backward send a [`Conv2dShape`] with stride > 1 here.
 //!
 //! With stride s, output pixel (y, x) reads the zero-padded input at (s·y + ky, s·x + kx). Writing
 //! ky = s·a + p (0 ≤ p < s) splits the input into s² phase images
@@ -15,63 +16,7 @@
 use crate::conv::{conv2d_backward_input, conv2d_backward_weight, conv2d_forward, Conv2dShape};
 use crate::{check_len, NnError, Real};
 
-/// Shape of a strided 2-D convolution on a batch of planar images.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct StridedConv2dShape {
-    /// Batch size B.
-    pub batch: usize,
-    /// Input channels.
-    pub c_in: usize,
-    /// Output channels.
-    pub c_out: usize,
-    /// Input height H in pixels.
-    pub height: usize,
-    /// Input width W in pixels.
-    pub width: usize,
-    /// Kernel side length k (the kernel is k × k).
-    pub kernel: usize,
-    /// Step between output pixels, in input pixels (≥ 1).
-    pub stride: usize,
-    /// Zero padding on each side, in pixels.
-    pub pad: usize,
-}
-
-impl StridedConv2dShape {
-    /// Output height `(H + 2·pad − k) / stride + 1` (integer division: PyTorch's floor).
-    pub fn out_height(&self) -> usize {
-        (self.height + 2 * self.pad).saturating_sub(self.kernel) / self.stride.max(1) + 1
-    }
-    /// Output width `(W + 2·pad − k) / stride + 1`.
-    pub fn out_width(&self) -> usize {
-        (self.width + 2 * self.pad).saturating_sub(self.kernel) / self.stride.max(1) + 1
-    }
-    /// Number of input elements `B·C_in·H·W`.
-    pub fn input_len(&self) -> usize {
-        self.batch * self.c_in * self.height * self.width
-    }
-    /// Number of output elements `B·C_out·H_out·W_out`.
-    pub fn output_len(&self) -> usize {
-        self.batch * self.c_out * self.out_height() * self.out_width()
-    }
-    /// Number of weights `C_out·C_in·k·k` (layout `(C_out, C_in, k, k)`, as PyTorch).
-    pub fn weight_len(&self) -> usize {
-        self.c_out * self.c_in * self.kernel * self.kernel
-    }
-
-    fn validate(&self) -> Result<(), NnError> {
-        if self.kernel == 0
-            || self.stride == 0
-            || self.height + 2 * self.pad < self.kernel
-            || self.width + 2 * self.pad < self.kernel
-        {
-            return Err(NnError::Shape(format!(
-                "strided conv2d kernel {} stride {} on a {}x{} image with pad {}",
-                self.kernel, self.stride, self.height, self.width, self.pad
-            )));
-        }
-        Ok(())
-    }
-
+impl Conv2dShape {
     /// Side of the phase kernel, ⌈k / s⌉.
     fn phase_kernel(&self) -> usize {
         self.kernel.div_ceil(self.stride)
@@ -87,6 +32,7 @@ impl StridedConv2dShape {
             height: self.out_height() + kp - 1,
             width: self.out_width() + kp - 1,
             kernel: kp,
+            stride: 1,
             pad: 0,
         }
     }
@@ -172,8 +118,8 @@ impl StridedConv2dShape {
 
 /// Forward: overwrites `output` (`(B, C_out, H_out, W_out)`) with the strided convolution of `input`
 /// (`(B, C_in, H, W)`) with `weight` (`(C_out, C_in, k, k)`) plus `bias` (`(C_out)`) if given.
-pub fn conv2d_strided_forward<T: Real>(
-    s: StridedConv2dShape,
+pub(crate) fn forward<T: Real>(
+    s: Conv2dShape,
     input: &[T],
     weight: &[T],
     bias: Option<&[T]>,
@@ -194,8 +140,8 @@ pub fn conv2d_strided_forward<T: Real>(
 
 /// Input gradient: overwrites `grad_input` (`(B, C_in, H, W)`) with `∂L/∂in` given
 /// `grad_output = ∂L/∂out`. Input pixels no output reads (past the last window) get 0.
-pub fn conv2d_strided_backward_input<T: Real>(
-    s: StridedConv2dShape,
+pub(crate) fn backward_input<T: Real>(
+    s: Conv2dShape,
     grad_output: &[T],
     weight: &[T],
     grad_input: &mut [T],
@@ -219,8 +165,8 @@ pub fn conv2d_strided_backward_input<T: Real>(
 
 /// Weight and bias gradients: **accumulates** `∂L/∂w` into `grad_weight` (`(C_out, C_in, k, k)`) and,
 /// if given, `∂L/∂bias` into `grad_bias` (`(C_out)`), given the forward `input` and `grad_output`.
-pub fn conv2d_strided_backward_weight<T: Real>(
-    s: StridedConv2dShape,
+pub(crate) fn backward_weight<T: Real>(
+    s: Conv2dShape,
     input: &[T],
     grad_output: &[T],
     grad_weight: &mut [T],
@@ -252,18 +198,18 @@ pub fn conv2d_strided_backward_weight<T: Real>(
 }
 
 /// Slow, obviously-correct direct strided convolution (the oracle for tests): same contract as
-/// [`conv2d_strided_forward`], one multiply-add per loop iteration.
-pub fn conv2d_strided_reference<T: Real>(
-    s: StridedConv2dShape,
+/// [`forward`], one multiply-add per loop iteration.
+pub(crate) fn reference<T: Real>(
+    s: Conv2dShape,
     input: &[T],
     weight: &[T],
     bias: Option<&[T]>,
     output: &mut [T],
 ) -> Result<(), NnError> {
     s.validate()?;
-    check_len("strided conv2d input", s.input_len(), input.len())?;
-    check_len("strided conv2d weight", s.weight_len(), weight.len())?;
-    check_len("strided conv2d output", s.output_len(), output.len())?;
+    check_len("conv2d input", s.input_len(), input.len())?;
+    check_len("conv2d weight", s.weight_len(), weight.len())?;
+    check_len("conv2d output", s.output_len(), output.len())?;
     let (h, w, k) = (s.height as isize, s.width as isize, s.kernel);
     let (ho, wo) = (s.out_height(), s.out_width());
     for b in 0..s.batch {

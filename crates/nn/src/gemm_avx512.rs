@@ -47,6 +47,18 @@ fn pack_b(k: usize, n: usize, b: &[f32], rsb: usize, csb: usize, npad: usize, ou
     }
 }
 
+/// Whether this CPU runs this kernel: it has AVX-512F, and the environment variable
+/// `E_SEM3DGS_PORTABLE_KERNELS` is not set (set, every product goes to `matrixmultiply`, with the
+/// same bits: for measuring one against the other on a CPU, as the rasterizer's kernels are).
+#[cfg(target_arch = "x86_64")]
+fn available() -> bool {
+    static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVAILABLE.get_or_init(|| {
+        std::arch::is_x86_feature_detected!("avx512f")
+            && std::env::var_os("E_SEM3DGS_PORTABLE_KERNELS").is_none()
+    })
+}
+
 /// Runs `C = op(A)·op(B) + β·C` (`α = 1`) on the AVX-512 path if it applies, returning whether it
 /// did. Strides are in elements; the caller has checked that every view lies inside its slice.
 #[allow(clippy::too_many_arguments)]
@@ -79,7 +91,7 @@ pub(crate) fn try_sgemm(
             && csa >= 0
             && rsb >= 0
             && csb >= 0
-            && std::arch::is_x86_feature_detected!("avx512f");
+            && available();
         if !applies {
             return false;
         }

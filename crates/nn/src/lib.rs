@@ -38,10 +38,6 @@ pub use adam::{adam_update, Adam, AdamConfig, RowAdam};
 pub use conv::{
     conv2d_backward_input, conv2d_backward_weight, conv2d_forward, conv2d_reference, Conv2dShape,
 };
-pub use conv_strided::{
-    conv2d_strided_backward_input, conv2d_strided_backward_weight, conv2d_strided_forward,
-    conv2d_strided_reference, StridedConv2dShape,
-};
 pub use dense::{dense_backward, dense_forward, DenseShape};
 pub use gemm::gemm;
 pub use pool::{

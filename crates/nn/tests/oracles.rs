@@ -39,6 +39,7 @@ fn conv2d_matches_direct_oracle_forward_and_adjoint() {
             height: h,
             width: w,
             kernel: k,
+            stride: 1,
             pad,
         };
         let x = symmetric(&mut rng, s.input_len());
@@ -85,6 +86,7 @@ fn conv2d_f32_is_identical_for_one_and_two_threads() {
         height: 40,
         width: 36,
         kernel: 7,
+        stride: 1,
         pad: 3,
     };
     let x: Vec<f32> = symmetric(&mut rng, s.input_len())
@@ -217,7 +219,7 @@ fn strided_conv2d_matches_direct_oracle_forward_and_adjoint() {
         (2, 3, 2, 10, 12, 5, 1, 2),
         (1, 2, 2, 6, 9, 4, 3, 0),
     ] {
-        let s = StridedConv2dShape {
+        let s = Conv2dShape {
             batch,
             c_in,
             c_out,
@@ -232,22 +234,22 @@ fn strided_conv2d_matches_direct_oracle_forward_and_adjoint() {
         let b = symmetric(&mut rng, c_out);
         let mut fast = vec![0.0; s.output_len()];
         let mut slow = vec![0.0; s.output_len()];
-        conv2d_strided_forward(s, &x, &wt, Some(&b), &mut fast).expect("shape");
-        conv2d_strided_reference(s, &x, &wt, Some(&b), &mut slow).expect("shape");
+        conv2d_forward(s, &x, &wt, Some(&b), &mut fast).expect("shape");
+        conv2d_reference(s, &x, &wt, Some(&b), &mut slow).expect("shape");
         assert!(max_diff(&fast, &slow) < 1e-12, "{s:?} forward");
         let g = symmetric(&mut rng, s.output_len());
         let mut nobias = vec![0.0; s.output_len()];
-        conv2d_strided_reference(s, &x, &wt, None, &mut nobias).expect("shape");
+        conv2d_reference(s, &x, &wt, None, &mut nobias).expect("shape");
         let lhs = dot(&g, &nobias);
         let mut dx = vec![f64::NAN; s.input_len()];
-        conv2d_strided_backward_input(s, &g, &wt, &mut dx).expect("shape");
+        conv2d_backward_input(s, &g, &wt, &mut dx).expect("shape");
         assert!(
             (lhs - dot(&dx, &x)).abs() < 1e-9 * (1.0 + lhs.abs()),
             "{s:?} dx"
         );
         let mut dw = vec![0.0; s.weight_len()];
         let mut db = vec![0.0; c_out];
-        conv2d_strided_backward_weight(s, &x, &g, &mut dw, Some(&mut db)).expect("shape");
+        conv2d_backward_weight(s, &x, &g, &mut dw, Some(&mut db)).expect("shape");
         assert!(
             (lhs - dot(&dw, &wt)).abs() < 1e-9 * (1.0 + lhs.abs()),
             "{s:?} dw"
@@ -262,7 +264,7 @@ fn strided_conv2d_matches_direct_oracle_forward_and_adjoint() {
 #[test]
 fn strided_conv2d_f32_is_identical_for_one_and_two_threads() {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let s = StridedConv2dShape {
+    let s = Conv2dShape {
         batch: 1,
         c_in: 3,
         c_out: 16,
@@ -283,11 +285,11 @@ fn strided_conv2d_f32_is_identical_for_one_and_two_threads() {
             .expect("pool");
         pool.install(|| {
             let mut y = vec![0.0f32; s.output_len()];
-            conv2d_strided_forward(s, &x, &w, None, &mut y).expect("shape");
+            conv2d_forward(s, &x, &w, None, &mut y).expect("shape");
             let mut dx = vec![0.0f32; s.input_len()];
-            conv2d_strided_backward_input(s, &g, &w, &mut dx).expect("shape");
+            conv2d_backward_input(s, &g, &w, &mut dx).expect("shape");
             let mut dw = vec![0.0f32; s.weight_len()];
-            conv2d_strided_backward_weight(s, &x, &g, &mut dw, None).expect("shape");
+            conv2d_backward_weight(s, &x, &g, &mut dw, None).expect("shape");
             (y, dx, dw)
         })
     };

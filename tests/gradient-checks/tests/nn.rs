@@ -126,7 +126,7 @@ proptest! {
         let (kernel, pad) = kp;
         prop_assume!(height + 2 * pad >= kernel && width + 2 * pad >= kernel);
         let mut r = rng(seed);
-        let s = Conv2dShape { batch, c_in, c_out, height, width, kernel, pad };
+        let s = Conv2dShape { batch, c_in, c_out, height, width, kernel, stride: 1, pad };
         let (x, w, b) = (symmetric(&mut r, s.input_len()), symmetric(&mut r, s.weight_len()), symmetric(&mut r, c_out));
         let g = symmetric(&mut r, s.output_len());
         let fwd = |x: &[f64], w: &[f64], b: &[f64]| {
@@ -242,19 +242,19 @@ proptest! {
         let (kernel, stride, pad) = ksp;
         prop_assume!(height + 2 * pad >= kernel && width + 2 * pad >= kernel);
         let mut r = rng(seed);
-        let s = StridedConv2dShape { batch, c_in, c_out, height, width, kernel, stride, pad };
+        let s = Conv2dShape { batch, c_in, c_out, height, width, kernel, stride, pad };
         let (x, w, b) = (symmetric(&mut r, s.input_len()), symmetric(&mut r, s.weight_len()), symmetric(&mut r, c_out));
         let g = symmetric(&mut r, s.output_len());
         let fwd = |x: &[f64], w: &[f64], b: &[f64]| {
             let mut y = vec![0.0; s.output_len()];
-            conv2d_strided_forward(s, x, w, Some(b), &mut y).expect("shape");
+            conv2d_forward(s, x, w, Some(b), &mut y).expect("shape");
             y
         };
         let mut dx = vec![f64::NAN; x.len()];
-        conv2d_strided_backward_input(s, &g, &w, &mut dx).expect("shape");
+        conv2d_backward_input(s, &g, &w, &mut dx).expect("shape");
         let mut dw = vec![0.0; w.len()];
         let mut db = vec![0.0; c_out];
-        conv2d_strided_backward_weight(s, &x, &g, &mut dw, Some(&mut db)).expect("shape");
+        conv2d_backward_weight(s, &x, &g, &mut dw, Some(&mut db)).expect("shape");
         let mut c = GradientChecker::new();
         check(&mut c, "strided conv2d dx", &x, &g, |p| fwd(p, &w, &b), &dx);
         check(&mut c, "strided conv2d dw", &w, &g, |p| fwd(&x, p, &b), &dw);
