@@ -17,7 +17,7 @@ use train::body::Body;
 use train::config::{
     BlurModel, EventPairs, FlowMeasure, FlowSource, Preset, TrainConfig, TrainOn, TrainOptions,
 };
-use train::data::TrainingData;
+use train::data::{LossNetworks, Preparation, TrainingData};
 use train::trainer::{StepReport, Trainer};
 use train::TrainError;
 
@@ -90,48 +90,6 @@ pub struct Args {
     /// Stop after this many steps of this invocation (the run can be resumed later).
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
-}
-
-/// Loads the frozen flow network of `config` and prepares the flow pairs of `ctx`.
-fn enable_flow(
-    ctx: &mut TrainingData,
-    data: &train::data::Dataset,
-    config: &TrainConfig,
-) -> Result<()> {
-    let path = config
-        .flow_network
-        .clone()
-        .unwrap_or_else(shipped_flow_network);
-    let net = flow::load_safetensors(&path).with_context(|| {
-        format!(
-            "loading the flow network {} (train one with `cargo xtask train-flow`, or pass \
-             --flow-network)",
-            path.display()
-        )
-    })?;
-    ctx.enable_flow(data, config, net)
-        .context("preparing the flow loss")?;
-    let pairs = ctx.flow_pairs.iter().filter(|p| p.is_some()).count();
-    println!(
-        "flow loss: {pairs} pairs of consecutive training frames, source {:?}, λ {}, τ {} px, \
-         gradient to {:?}, measure {:?}, network {}",
-        config.flow_source,
-        config.flow_weight,
-        config.flow_tau,
-        config.flow_gradient,
-        config.flow_measure,
-        path.display()
-    );
-    if config.flow_network.is_none()
-        && config.flow_source != FlowSource::SharpNetwork
-        && config.flow_measure == FlowMeasure::Network
-    {
-        eprintln!(
-            "note: the shipped flow weights are weak, and with targets from the generator or the \
-             events the flow loss lowers PSNR; see docs/BENCHMARKS.md, \"Flow loss\"."
-        );
-    }
-    Ok(())
 }
 
 /// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).
@@ -234,48 +192,83 @@ fn scene_defaults(
     Ok(config)
 }
 
-/// Finishes `ctx` for `config`: the frozen flow network, the LPIPS network, the images trained on,
-/// the exposure model's sub-exposure poses and the event supervision, each said in one line.
+/// Prepares on `ctx` the supervision `config` asks for (`TrainingData::prepare`, with the frozen
+/// networks loaded from their weights) and reports what was prepared.
 pub fn prepare_training_data(
     ctx: &mut TrainingData,
     data: &train::data::Dataset,
     config: &TrainConfig,
 ) -> Result<()> {
-    if config.flow_loss {
-        enable_flow(ctx, data, config)?;
+    let flow_path = config
+        .flow_network
+        .clone()
+        .unwrap_or_else(shipped_flow_network);
+    let networks = LossNetworks {
+        flow: if config.flow_loss {
+            Some(flow::load_safetensors(&flow_path).with_context(|| {
+                format!(
+                    "loading the flow network {} (train one with `cargo xtask train-flow`, or \
+                     pass --flow-network)",
+                    flow_path.display()
+                )
+            })?)
+        } else {
+            None
+        },
+        lpips: if config.lpips_weight > 0.0 {
+            let weights = shipped_lpips_weights();
+            Some(
+                lpips::load_safetensors(&weights)
+                    .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?,
+            )
+        } else {
+            None
+        },
+    };
+    let done = ctx.prepare(data, config, networks)?;
+    report_preparation(&done, config, &flow_path, ctx.frames.len());
+    Ok(())
+}
+
+/// Prints what [`prepare_training_data`] set up.
+fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path, frames: usize) {
+    if let Some(pairs) = done.flow_pairs {
+        println!(
+            "flow loss: {pairs} pairs of consecutive training frames, source {:?}, λ {}, τ {} px, \
+             gradient to {:?}, measure {:?}, network {}",
+            config.flow_source,
+            config.flow_weight,
+            config.flow_tau,
+            config.flow_gradient,
+            config.flow_measure,
+            flow_path.display()
+        );
+        if config.flow_network.is_none()
+            && config.flow_source != FlowSource::SharpNetwork
+            && config.flow_measure == FlowMeasure::Network
+        {
+            eprintln!(
+                "note: the shipped flow weights are weak, and with targets from the generator or \
+                 the events the flow loss lowers PSNR; see docs/BENCHMARKS.md, \"Flow loss\"."
+            );
+        }
     }
-    if config.lpips_weight > 0.0 {
-        let weights = shipped_lpips_weights();
-        let net = lpips::load_safetensors(&weights)
-            .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
-        ctx.enable_lpips(net)
-            .context("preparing the perceptual (LPIPS) loss")?;
+    if done.lpips {
         println!(
             "perceptual loss: LPIPS (AlexNet, v0.1) of each frame's prediction, weight {}",
             config.lpips_weight
         );
     }
     if config.train_on == TrainOn::Sharp {
-        ctx.use_sharp_images(data)
-            .context("training on the sharp references")?;
         println!("training on the sharp references (the benchmark's ceiling, not a method)");
     }
-    if config.train_on == TrainOn::Edi {
-        let deblurred = ctx
-            .use_edi_images(data, config)
-            .context("deblurring the training frames by EDI")?;
+    if let Some(deblurred) = done.edi_deblurred {
         println!(
-            "training on EDI-deblurred frames (the 2-D cascade baseline): {deblurred} of {} \
-             training frames deblurred, the others' exposures are not covered by events",
-            ctx.frames.len()
+            "training on EDI-deblurred frames (the 2-D cascade baseline): {deblurred} of {frames} \
+             training frames deblurred, the others' exposures are not covered by events"
         );
     }
-    if config.blur_model == BlurModel::Exposure {
-        ctx.enable_exposure(data, config.subframes)
-            .context("preparing the exposure model")?;
-        let (shortest, longest) = data.frames.iter().fold((f64::MAX, 0.0f64), |(a, b), f| {
-            (a.min(f.exposure_s), b.max(f.exposure_s))
-        });
+    if let Some((shortest, longest)) = done.exposure_s {
         let span = if longest - shortest > 1e-9 {
             format!("{:.1}–{:.1} ms", 1e3 * shortest, 1e3 * longest)
         } else {
@@ -286,31 +279,16 @@ pub fn prepare_training_data(
             config.subframes
         );
     }
-    if config.event_loss {
-        match config.event_pairs {
-            EventPairs::Frames => {
-                ctx.enable_events(data, config)
-                    .context("preparing the event-generation loss")?;
-                println!(
-                    "event loss: {} pairs of consecutive training frames, weight {}, C {}",
-                    ctx.event_pairs.iter().flatten().count(),
-                    config.event_weight,
-                    config.event_threshold
-                );
-            }
-            EventPairs::Exposure => {
-                ctx.enable_exposure_events(data, config)
-                    .context("preparing the event-generation loss inside exposures")?;
-                println!(
-                    "event loss: {} pairs of consecutive sub-exposure renders, weight {}, C {}",
-                    ctx.exposure_events.iter().flatten().flatten().count(),
-                    config.event_weight,
-                    config.event_threshold
-                );
-            }
-        }
+    if let Some(pairs) = done.event_pairs {
+        let between = match config.event_pairs {
+            EventPairs::Frames => "consecutive training frames",
+            EventPairs::Exposure => "consecutive sub-exposure renders",
+        };
+        println!(
+            "event loss: {pairs} pairs of {between}, weight {}, C {}",
+            config.event_weight, config.event_threshold
+        );
     }
-    Ok(())
 }
 
 /// Runs `reconstruct`.

@@ -48,6 +48,14 @@ pub enum TrainError {
     /// A configuration or input that cannot be trained on.
     #[error("{0}")]
     Config(String),
+    /// Preparing one kind of supervision failed (`TrainingData::prepare`).
+    #[error("preparing {what}: {source}")]
+    Prepare {
+        /// What was being prepared (e.g. "the flow loss").
+        what: &'static str,
+        /// Why it failed.
+        source: Box<TrainError>,
+    },
     /// A loss or gradient became NaN or infinite; the parameters of the previous step are kept.
     #[error(
         "non-finite loss or gradient at step {step}; stopping with the last finite parameters"

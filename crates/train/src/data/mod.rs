@@ -9,10 +9,12 @@ mod dataset;
 pub mod edi;
 mod event_counts;
 mod event_files;
+mod prepare;
 mod training;
 
 pub use dataset::{load_dataset, Dataset, TrainFrame};
 pub use event_files::event_read_options;
+pub use prepare::{LossNetworks, Preparation};
 pub use training::{
     consecutive_training_pairs, read_pair_flow, sharp_flow_pairs, EventPair, FlowPair, PairFlow,
     SharpFlowPair, TrainingData, TrainingFrame,

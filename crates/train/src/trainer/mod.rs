@@ -109,7 +109,9 @@ impl Trainer {
         Ok(Self::with_model(model))
     }
 
-    /// Refuses a configuration that needs data `data` was not prepared with: the exposure model
+    /// Refuses a configuration that needs data `data` was not prepared with
+    /// ([`TrainingData::prepare`] prepares all of it; this guards data prepared step by step or
+    /// for another configuration): the exposure model
     /// without sub-exposure poses ([`TrainingData::enable_exposure`]), events inside exposures
     /// without their counts ([`TrainingData::enable_exposure_events`]), the perceptual loss without
     /// its network ([`TrainingData::enable_lpips`]).
@@ -117,7 +119,7 @@ impl Trainer {
         if config.blur_model == BlurModel::Exposure && data.exposure_poses.is_empty() {
             return Err(TrainError::Config(
                 "blur_model = exposure, but the training data has no sub-exposure poses \
-                 (TrainingData::enable_exposure)"
+                 (TrainingData::prepare)"
                     .into(),
             ));
         }
@@ -127,14 +129,14 @@ impl Trainer {
         {
             return Err(TrainError::Config(
                 "event_pairs = exposure, but the training data has no events inside exposures \
-                 (TrainingData::enable_exposure_events)"
+                 (TrainingData::prepare)"
                     .into(),
             ));
         }
         if config.lpips_weight > 0.0 && data.lpips.is_none() {
             return Err(TrainError::Config(
                 "lpips_weight > 0, but the training data has no LPIPS network \
-                 (TrainingData::enable_lpips)"
+                 (TrainingData::prepare)"
                     .into(),
             ));
         }
