@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod colour;
 pub mod config;
 pub mod data;
+pub mod density;
 pub mod eval;
 pub mod export;
 pub mod exposure;

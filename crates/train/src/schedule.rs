@@ -1,8 +1,5 @@
-//! Schedules of the optimisation: the 3DGS position-rate decay, the density-control cadence, and the
-//! screen-space statistics density control reads.
-
-use gaussians::density::DensityStats;
-use rasterize_cpu::Camera;
+//! Learning-rate schedules of the optimisation: the 3DGS position-rate decay and the pose
+//! corrections' rates (density control's cadence is `crate::density`'s).
 
 /// The 3DGS position-rate schedule: log-linear from `lr0` to `lr0 · final_fraction` over `steps`.
 pub fn exponential_rate(lr0: f32, final_fraction: f32, step: usize, steps: usize) -> f32 {
@@ -19,26 +16,6 @@ pub fn correction_rate_scale(final_fraction: f32, from: usize, step: usize, step
         step.saturating_sub(from),
         steps.saturating_sub(from),
     )
-}
-
-/// True when the 1-based step count `done` falls on a density-control pass of the schedule
-/// `from..=until` every `every` steps (`every = 0` disables it).
-pub fn on_schedule(done: usize, from: usize, until: usize, every: usize) -> bool {
-    every > 0 && done >= from && done <= until && done.is_multiple_of(every)
-}
-
-/// Adds one view's screen-space statistics to `stats` in INRIA's NDC convention: pixel-space mean
-/// gradients × (W/2, H/2), and the screen radii (pixels, 0 = culled).
-pub fn accumulate_screen_stats(
-    stats: &mut DensityStats,
-    camera: &Camera,
-    means_2d: &[[f32; 2]],
-    radii: &[u32],
-) {
-    let (hw, hh) = (camera.width as f32 * 0.5, camera.height as f32 * 0.5);
-    let grad_ndc: Vec<[f32; 2]> = means_2d.iter().map(|m| [m[0] * hw, m[1] * hh]).collect();
-    let radius: Vec<f32> = radii.iter().map(|&r| r as f32).collect();
-    stats.accumulate(&grad_ndc, &radius);
 }
 
 #[cfg(test)]
@@ -71,12 +48,5 @@ mod tests {
         for step in [0, 100, 333, 1100, 5000] {
             assert_eq!(correction_rate_scale(1.0, 100, step, 1100), 1.0);
         }
-    }
-
-    #[test]
-    fn density_control_runs_on_its_schedule_only() {
-        let runs: Vec<usize> = (1..=20).filter(|&d| on_schedule(d, 5, 15, 5)).collect();
-        assert_eq!(runs, vec![5, 10, 15]);
-        assert!(!on_schedule(10, 5, 15, 0));
     }
 }

@@ -20,16 +20,15 @@ pub use terms::warm_up_skinning;
 
 use crate::config::{BlurModel, TrainConfig};
 use crate::data::TrainingData;
+use crate::density::{DensityStrategy, StepStatistics};
 use crate::init::{initialise, InitConfig};
 use crate::model::Model;
 use crate::optimisers::Optimisers;
 use crate::posing::ModelGradients;
-use crate::schedule::{
-    accumulate_screen_stats, correction_rate_scale, exponential_rate, on_schedule,
-};
+use crate::schedule::{correction_rate_scale, exponential_rate};
 use crate::TrainError;
 use gaussians::adam::GaussianLearningRates;
-use gaussians::density::{densify_and_prune, reset_opacity, DensifyConfig, DensityStats};
+use gaussians::density::DensityStats;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -58,14 +57,6 @@ fn extent_of(cube: &([f32; 3], [f32; 3])) -> f32 {
     let (lo, hi) = cube;
     let d2: f32 = (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum();
     (0.5 * d2.sqrt()).max(1e-3)
-}
-
-/// What the densify/refine stage needs of a step's first pass.
-struct RefineInputs {
-    means_2d: Vec<[f32; 2]>,
-    radii: Vec<u32>,
-    /// With `density_gradient = per-pass`: Σ_s ‖g_s‖ per Gaussian, in NDC units.
-    pass_norms: Option<Vec<f32>>,
 }
 
 impl Trainer {
@@ -267,61 +258,21 @@ impl Trainer {
         Ok(())
     }
 
-    /// Density control after a step: the step's screen-space statistics, densify and prune on the
-    /// schedule (AIAP neighbourhoods refreshed after), and the opacity reset; advances the step count.
-    fn refine(&mut self, data: &TrainingData, inputs: &RefineInputs) {
-        let config = self.model.config.clone();
-        match &inputs.pass_norms {
-            Some(norms) => {
-                let radius: Vec<f32> = inputs.radii.iter().map(|&r| r as f32).collect();
-                self.stats.accumulate_norms(norms, &radius);
-            }
-            None => accumulate_screen_stats(
-                &mut self.stats,
-                &data.camera,
-                &inputs.means_2d,
-                &inputs.radii,
-            ),
-        }
-        let done = self.step + 1;
-        if on_schedule(
-            done,
-            config.densify_from,
-            config.densify_until,
-            config.densify_every,
-        ) {
-            let densify = DensifyConfig {
-                grad_threshold: config.densify_grad_threshold,
-                scene_extent: self.model.scene_extent,
-                min_opacity: config.prune_min_opacity,
-                max_gaussians: config.max_gaussians,
-                ..DensifyConfig::default()
-            };
-            densify_and_prune(
-                &mut self.model.set,
-                &mut self.optimisers.gaussians,
-                &mut self.stats,
-                &densify,
-                config.seed ^ (done as u64).wrapping_mul(0x9e37_79b9),
-            );
+    /// Density control after a step's update (`crate::density`): the step's screen-space
+    /// statistics, densify and prune on the schedule (the AIAP neighbourhoods refreshed after),
+    /// and the opacity reset.
+    fn refine(&mut self, data: &TrainingData, step: &StepStatistics) {
+        let strategy = DensityStrategy::of(&self.model.config, self.model.scene_extent);
+        strategy.observe(&mut self.stats, &data.camera, step);
+        let changed = strategy.refine(
+            self.step + 1,
+            &mut self.stats,
+            &mut self.model.set,
+            &mut self.optimisers.gaussians,
+        );
+        if changed {
             self.aiap = AiapNeighbours::of(&self.model);
         }
-        if config.opacity_reset_every > 0
-            && done.is_multiple_of(config.opacity_reset_every)
-            && done < config.steps
-        {
-            reset_opacity(&mut self.model.set, &mut self.optimisers.gaussians, 0.01);
-        }
-        self.step = done;
-    }
-}
-
-/// `norms[i] += ‖g_i‖` with `g` the screen-space mean gradients (pixels) scaled to NDC units (× W/2,
-/// H/2, as `accumulate_screen_stats` does).
-fn add_ndc_norms(norms: &mut [f32], g: &[[f32; 2]], camera: &rasterize_cpu::Camera) {
-    let (hw, hh) = (camera.width as f32 * 0.5, camera.height as f32 * 0.5);
-    for (n, &[gx, gy]) in norms.iter_mut().zip(g) {
-        *n += ((gx * hw).powi(2) + (gy * hh).powi(2)).sqrt();
     }
 }
 

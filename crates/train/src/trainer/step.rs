@@ -7,9 +7,10 @@ use super::correction::{self, CorrectedPoses};
 use super::terms::{
     add_aiap_canonical, aiap_terms, pair_terms, skinning_term, PairSupervision, PairTerms,
 };
-use super::{add_ndc_norms, add_to, all_finite, RefineInputs, StageTimes, StepReport, Trainer};
+use super::{add_to, all_finite, StageTimes, StepReport, Trainer};
 use crate::config::{BlurModel, DensityGradient, ExposureNetworks, ExposurePairs, TrainConfig};
 use crate::data::TrainingData;
+use crate::density::{add_ndc_norms, StepStatistics};
 use crate::eval::psnr;
 use crate::loss::image::ImageShape;
 use crate::loss::perceptual::perceptual_term;
@@ -142,7 +143,7 @@ impl Trainer {
         }
         let first = &frame_k.passes[frame_k.mid];
         let active = first.active().len();
-        let refine_inputs = RefineInputs {
+        let statistics = StepStatistics {
             means_2d: back.means_2d,
             radii: first.out.radii.clone(),
             pass_norms: back.pass_norms,
@@ -160,7 +161,8 @@ impl Trainer {
         )?;
         times.adam = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
-        self.refine(data, &refine_inputs);
+        self.refine(data, &statistics);
+        self.step += 1;
         times.density = t0.elapsed().as_secs_f64();
         let human = self.model.human_count();
         Ok(StepReport {

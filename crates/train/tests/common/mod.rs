@@ -109,15 +109,12 @@ pub fn assert_same_bits(a: &[u32], b: &[u32]) {
     }
 }
 
-/// A context with sub-exposure poses and the events between them (`TrainingData::prepare` of an
-/// exposure-model configuration with the event loss).
+/// A context with sub-exposure poses and the events between them.
 pub fn exposure_context(config: &TrainConfig) -> TrainingData {
     let data = load_dataset(&fixture()).unwrap();
     let mut ctx = context();
-    let done = ctx
-        .prepare(&data, config, train::data::LossNetworks::default())
-        .unwrap();
-    assert!(done.exposure_s.is_some() && done.event_pairs.is_some_and(|n| n > 0));
+    ctx.enable_exposure(&data, config.subframes).unwrap();
+    ctx.enable_exposure_events(&data, config).unwrap();
     ctx
 }
 
