@@ -1,35 +1,24 @@
 //! `cargo xtask`: the project driver. It parses arguments, shows progress and orchestrates file I/O;
-//! every algorithm lives in a library crate where it is tested and benchmarked.
+//! every algorithm lives in a library crate where it is tested and benchmarked. `commands/` holds one
+//! module per command (named after it), `outputs/` what several commands write (the run report,
+//! its pictures, the pose report), and the rest the driver's own plumbing (paths, allocator,
+//! hypervisor steal).
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
-mod ablate;
 mod allocator;
-mod animate;
-mod bench;
-mod body;
-mod body_convert;
+mod commands;
 mod common;
-mod deblur_edi;
-mod eval_cmd;
-mod events_cmd;
-mod flow_estimate;
-mod flow_import_t7;
-mod fuzz;
-mod import;
-mod lpips_cmd;
-mod pixel_font;
-mod ply_info;
-mod pose_report;
-mod reconstruct;
-mod render;
-mod render_pose;
-mod report;
-mod run_pictures;
+mod outputs;
+mod poses_json;
 mod steal;
-mod synth;
-mod train_flow;
+mod training;
+
+use commands::{
+    ablate, bench, body, body_convert, deblur_edi, eval, events, flow, flow_import_t7, fuzz,
+    import, lpips, ply_info, reconstruct, render, render_pose, synth, train_flow,
+};
 
 /// E-Sem3DGS driver: reconstruct people and scenes from blurred video + events, on the CPU.
 #[derive(Parser, Debug)]
@@ -60,7 +49,7 @@ enum Command {
     /// image grid.
     Ablate(ablate::Args),
     /// Evaluate a saved model on a scene's test split (metrics.json + comparison strips).
-    Eval(eval_cmd::Args),
+    Eval(eval::Args),
     /// Render a saved model in new body poses (PNG, optionally posed 3DGS PLY).
     RenderPose(render_pose::Args),
     /// Print a summary of a 3DGS PLY file (counts, SH degree, extra properties, bounds).
@@ -72,10 +61,10 @@ enum Command {
     /// Generate the synthetic motion-blur benchmark (scene format v1) into a directory.
     Synth(synth::Args),
     /// Optical flow between two images with the SPyNet-style network.
-    Flow(flow_estimate::Args),
+    Flow(flow::Args),
     /// LPIPS distance (AlexNet, v0.1) between two images of the same size; the number is the last
     /// line printed.
-    Lpips(lpips_cmd::Args),
+    Lpips(lpips::Args),
     /// Convert the original SPyNet Torch7 files into a safetensors weights file.
     FlowImportT7(flow_import_t7::Args),
     /// Train SPyNet-style weights on procedural pairs (coarse to fine, EPE loss).
@@ -83,7 +72,7 @@ enum Command {
     /// Render a 3DGS PLY from a camera to PNG/EXR (optionally with gradients of Σ render·W to .npz).
     Render(render::Args),
     /// Event streams: info, convert, voxelize, simulate, flow (contrast maximisation).
-    Events(events_cmd::Args),
+    Events(events::Args),
     /// Deblur every frame of a scene on its own by the event double integral (EDI) and write the
     /// frames as PNG, scored against the sharp references when the scene has them (the 2-D
     /// baseline that `reconstruct --train-on edi` trains on).
@@ -106,17 +95,17 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Reconstruct(args) => reconstruct::run(args),
         Command::Ablate(args) => ablate::run(args),
-        Command::Eval(args) => eval_cmd::run(args),
+        Command::Eval(args) => eval::run(args),
         Command::RenderPose(args) => render_pose::run(args),
         Command::PlyInfo(args) => ply_info::run(args),
         Command::Body(args) => body::run(args),
         Command::BodyConvert(args) => body_convert::run(args),
         Command::Synth(args) => synth::run(args),
-        Command::Flow(args) => flow_estimate::run(args),
-        Command::Lpips(args) => lpips_cmd::run(args),
+        Command::Flow(args) => flow::run(args),
+        Command::Lpips(args) => lpips::run(args),
         Command::FlowImportT7(args) => flow_import_t7::run(args),
         Command::TrainFlow(args) => train_flow::run(args),
-        Command::Events(args) => events_cmd::run(args),
+        Command::Events(args) => events::run(args),
         Command::DeblurEdi(args) => deblur_edi::run(args),
         Command::Bench(command) => bench::run(command),
         Command::Render(args) => render::run(args),

@@ -6,7 +6,9 @@
 //! `pose` may also be 24 axis-angle triples, as `scene.json` writes a frame's pose.
 //!
 //! With `--motion FILE` (an AMASS or PeopleSnapshot `.npz`) it animates the person inside the
-//! reconstructed scene instead: see [`crate::animate`].
+//! reconstructed scene instead: see [`animate`].
+
+mod animate;
 
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
@@ -37,50 +39,7 @@ pub struct Args {
     pub ply: bool,
     /// Options of `--motion`.
     #[command(flatten)]
-    pub animation: crate::animate::AnimationArgs,
-}
-
-#[derive(serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PoseEntry {
-    pose: PoseValues,
-    transl: [f32; 3],
-    #[serde(default)]
-    latent_frame: Option<u32>,
-}
-
-/// A pose as 72 axis-angle values, or as the 24 triples of the scene format.
-#[derive(serde::Deserialize)]
-#[serde(untagged)]
-enum PoseValues {
-    Flat(Vec<f32>),
-    Triples(Vec<[f32; 3]>),
-}
-
-impl PoseValues {
-    fn into_flat(self) -> Vec<f32> {
-        match self {
-            PoseValues::Flat(v) => v,
-            PoseValues::Triples(t) => t.into_iter().flatten().collect(),
-        }
-    }
-}
-
-/// Reads one entry of `POSES.json`: its 72 pose values and translation, checked.
-pub(crate) fn read_entry(v: serde_json::Value) -> Result<(Vec<f32>, [f32; 3], Option<u32>)> {
-    let e: PoseEntry = serde_json::from_value(v).context(
-        "expected {\"pose\": 72 numbers or 24 [x, y, z] triples, \"transl\": [x, y, z], \
-         \"latent_frame\": N (optional)}",
-    )?;
-    let pose = e.pose.into_flat();
-    if pose.len() != 72 || pose.iter().chain(&e.transl).any(|x| !x.is_finite()) {
-        bail!(
-            "`pose` must hold 72 finite axis-angle values (or 24 triples) and `transl` 3 finite \
-             values; found {} pose values",
-            pose.len()
-        );
-    }
-    Ok((pose, e.transl, e.latent_frame))
+    pub animation: animate::AnimationArgs,
 }
 
 /// Runs `render-pose`.
@@ -92,7 +51,7 @@ pub fn run(args: Args) -> Result<()> {
             if args.ply {
                 bail!("--ply writes one PLY per pose of --poses; it does not apply to --motion");
             }
-            return crate::animate::run(&loaded, motion, &args.out, &args.animation);
+            return animate::run(&loaded, motion, &args.out, &args.animation);
         }
         (Some(p), None) => p,
         (None, None) => bail!("give --poses POSES.json or --motion FILE.npz"),
@@ -113,8 +72,8 @@ pub fn run(args: Args) -> Result<()> {
     let t = &loaded.model;
     let first = t.frame_indices.first().copied().unwrap_or(0);
     for (k, v) in list.into_iter().enumerate() {
-        let (pose, transl, latent_frame) =
-            read_entry(v).with_context(|| format!("{}: pose {k}", poses_path.display()))?;
+        let (pose, transl, latent_frame) = crate::poses_json::read_entry(v)
+            .with_context(|| format!("{}: pose {k}", poses_path.display()))?;
         let params = smpl_deform::SmplParams {
             pose,
             betas: loaded.manifest.betas.clone(),
@@ -145,27 +104,4 @@ pub fn run(args: Args) -> Result<()> {
         println!("{}", path.display());
     }
     Ok(())
-}
-
-#[cfg(test)]
-#[allow(clippy::unwrap_used)]
-mod tests {
-    use super::read_entry;
-
-    #[test]
-    fn a_pose_reads_as_72_values_or_as_the_scene_formats_24_triples() {
-        let flat: Vec<f32> = (0..72).map(|k| k as f32 * 0.01).collect();
-        let triples: Vec<[f32; 3]> = flat.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
-        let a = read_entry(serde_json::json!({"pose": flat, "transl": [0.0, 1.0, 0.0]})).unwrap();
-        let b =
-            read_entry(serde_json::json!({"pose": triples, "transl": [0.0, 1.0, 0.0]})).unwrap();
-        assert_eq!(a.0, b.0);
-        assert_eq!(a.0, flat);
-        let short =
-            read_entry(serde_json::json!({"pose": [[0.0, 0.0, 0.0]], "transl": [0.0, 0.0, 0.0]}));
-        let e = format!("{:#}", short.unwrap_err());
-        assert!(e.contains("72") && e.contains("found 3"), "{e}");
-        let wrong = read_entry(serde_json::json!({"pose": "x", "transl": [0.0, 0.0, 0.0]}));
-        assert!(format!("{:#}", wrong.unwrap_err()).contains("24 [x, y, z] triples"));
-    }
 }

@@ -29,7 +29,7 @@ pub struct Args {
     /// How every run is configured (each run then sets its own options, e.g. --semantic,
     /// --event-loss, over these).
     #[command(flatten)]
-    pub training: crate::reconstruct::TrainingArgs,
+    pub training: crate::commands::reconstruct::TrainingArgs,
     /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
     /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net, exposure,
     /// exposure-events-squared, exposure-events, edi-cascade, sharp-ceiling).
@@ -44,7 +44,7 @@ pub struct Args {
     /// The benchmark preset whose slow, medium and fast variants the blur-level study runs on
     /// (`tiny` for a smoke run of the study).
     #[arg(long, value_enum, default_value = "default", requires = "blur_levels")]
-    pub blur_levels_preset: crate::synth::PresetArg,
+    pub blur_levels_preset: crate::commands::synth::PresetArg,
 }
 
 /// One configuration of the ablation set: its name, a description and the training options it sets
@@ -301,17 +301,17 @@ pub fn run(args: Args) -> Result<()> {
             data.display()
         );
         let run_out = out.join(label);
-        let run_args = crate::reconstruct::Args {
+        let run_args = crate::commands::reconstruct::Args {
             data: Some(data.clone()),
             out: Some(run_out.clone()),
-            training: crate::reconstruct::TrainingArgs {
+            training: crate::commands::reconstruct::TrainingArgs {
                 options: args.training.options.overridden_by(&(r.options)()),
                 ..args.training.clone()
             },
             resume: false,
             stop_after: None,
         };
-        let outcome = crate::reconstruct::run(run_args).and_then(|()| {
+        let outcome = crate::commands::reconstruct::run(run_args).and_then(|()| {
             let path = run_out.join("metrics.json");
             let text = std::fs::read_to_string(&path)
                 .with_context(|| format!("reading {}", path.display()))?;
@@ -329,7 +329,7 @@ pub fn run(args: Args) -> Result<()> {
     let md = std::fs::read_to_string(out.join("ablation.md"))
         .with_context(|| format!("reading {}", out.join("ablation.md").display()))?;
     let runs: Vec<String> = results.iter().map(|(label, ..)| label.clone()).collect();
-    let report = crate::report::write_ablation_report(
+    let report = crate::outputs::report::write_ablation_report(
         &out,
         &format!("E-Sem3DGS ablation: {scene_name}, {preset_name} preset"),
         &md,
@@ -451,7 +451,7 @@ fn write_grid(out: &Path, results: &[Outcome<'_>]) -> Result<()> {
     let mut y = 0;
     for (number, img) in &rows {
         image::imageops::replace(&mut grid, img, i64::from(LABEL_W), i64::from(y));
-        crate::pixel_font::text(
+        crate::outputs::pixel_font::text(
             &mut grid,
             4,
             y + img.height() / 2 - 5,

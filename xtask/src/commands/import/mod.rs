@@ -255,7 +255,7 @@ pub(super) fn read_poses(
                 })?;
                 times.push(t);
             }
-            let (pose, transl, _) = crate::render_pose::read_entry(v)
+            let (pose, transl, _) = crate::poses_json::read_entry(v)
                 .with_context(|| format!("{}: pose {k}", path.display()))?;
             poses.push((triples(&pose), transl));
         }

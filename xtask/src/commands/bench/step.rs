@@ -42,7 +42,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let data = train::data::load_dataset(&data_dir)
         .with_context(|| format!("loading the scene {}", data_dir.display()))?;
-    let body = crate::reconstruct::scene_body(&data)?;
+    let body = crate::training::scene_body(&data)?;
     let checkpoint = run.join("checkpoint.safetensors");
     // The run's seed (its `config.json`) samples the data's random parts as the run did.
     let seed = std::fs::read_to_string(run.join("config.json"))
@@ -57,7 +57,7 @@ pub fn run(args: Args) -> Result<()> {
         trainer.model.config.share_static_tiles = share;
     }
     let config = trainer.config().clone();
-    crate::reconstruct::prepare_training_data(&mut ctx, &data, &config)?;
+    crate::training::prepare_training_data(&mut ctx, &data, &config)?;
     let (from, gaussians) = (trainer.step, trainer.model.set.len());
     trainer.step(&ctx)?; // warm-up: first touches of the buffers
     let steal = crate::steal::Meter::start();
@@ -75,7 +75,7 @@ pub fn run(args: Args) -> Result<()> {
         "share_static_tiles": config.share_static_tiles,
     });
     if let Some(obj) = line.as_object_mut() {
-        for (stage, seconds) in crate::reconstruct::mean_times(&reports) {
+        for (stage, seconds) in crate::training::mean_times(&reports) {
             obj.insert(format!("{stage}_ms"), serde_json::json!(seconds * 1e3));
         }
     }

@@ -1,28 +1,13 @@
-//! `cargo xtask eval`: score a saved model on a scene's test split (PSNR/SSIM/LPIPS full frame and in
-//! the human box against the sharp references, mask IoU, the blurred input's own figures), write
-//! `metrics.json` and one comparison strip PNG per test frame, and print a summary table. LPIPS uses
-//! the shipped weights (`data-fixtures/lpips/`).
+//! The evaluation every run ends with (`reconstruct`, `eval`): the test split scored against the
+//! sharp references (or the observed frames), `metrics.json`, one comparison strip per test frame,
+//! the report, and the summary table on the terminal.
 
 use anyhow::{Context, Result};
 use serde_json::json;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use train::body::Body;
 use train::eval::{evaluate_split, mean_metrics};
 use train::model::Model;
-
-/// Arguments of `eval`.
-#[derive(clap::Args, Debug)]
-pub struct Args {
-    /// Model directory (written by `cargo xtask reconstruct`, its `model/` folder).
-    #[arg(long)]
-    pub model: PathBuf,
-    /// Scene directory (scene format v1) with the test split; default: the default benchmark.
-    #[arg(long)]
-    pub data: Option<PathBuf>,
-    /// Output directory for metrics.json and eval/strip_*.png (default: the model's parent).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-}
 
 /// Training facts recorded next to the figures.
 pub struct EvalSummary {
@@ -199,7 +184,7 @@ pub fn write_evaluation(
         .ok()
         .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .unwrap_or_else(|| "run".into());
-    let report = crate::report::write_run_report(out, &format!("E-Sem3DGS run: {title}"))?;
+    let report = crate::outputs::report::write_run_report(out, &format!("E-Sem3DGS run: {title}"))?;
     println!(
         "metrics: {}; strips: {}; report: {}",
         path.display(),
@@ -207,36 +192,4 @@ pub fn write_evaluation(
         report.display()
     );
     Ok(())
-}
-
-/// Runs `eval`.
-pub fn run(args: Args) -> Result<()> {
-    let loaded = train::export::load_model(&args.model)
-        .with_context(|| format!("loading the model {}", args.model.display()))?;
-    let data_dir = match &args.data {
-        Some(d) => d.clone(),
-        None => crate::common::default_benchmark()?,
-    };
-    let data = train::data::load_dataset(&data_dir)
-        .with_context(|| format!("loading the scene {}", data_dir.display()))?;
-    let out = args.out.clone().unwrap_or_else(|| {
-        args.model
-            .parent()
-            .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
-    });
-    let model = &loaded.model;
-    let human = model.human_count();
-    write_evaluation(
-        model,
-        &loaded.body,
-        &data,
-        &out,
-        &EvalSummary {
-            train_seconds: f64::NAN,
-            steps: loaded.manifest.steps,
-            gaussians_human: human,
-            gaussians_scene: model.set.len() - human,
-            extra: json!({ "model": args.model.display().to_string(), "data": data_dir.display().to_string() }),
-        },
-    )
 }

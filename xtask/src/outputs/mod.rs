@@ -1,0 +1,9 @@
+//! What several commands write: the evaluation (`metrics.json`, strips), the run report (`report.html`), its pictures (strips, event and
+//! flow panels, curves), the pose report against a synthetic scene's truth, and the bitmap font
+//! the pictures are labelled with.
+
+pub mod evaluation;
+pub mod pictures;
+pub mod pixel_font;
+pub mod pose_report;
+pub mod report;

@@ -1,0 +1,140 @@
+//! The parts of a training run that `reconstruct` and `bench step` share: the body a scene
+//! names, the supervision a configuration asks for (`TrainingData::prepare` with the frozen
+//! networks loaded from their weights, and what was prepared printed), and the step-time breakdown.
+
+use crate::common::{shipped_flow_network, shipped_lpips_weights};
+use anyhow::{Context, Result};
+use std::path::Path;
+use train::body::Body;
+use train::config::{EventPairs, FlowMeasure, FlowSource, TrainConfig, TrainOn};
+use train::data::{LossNetworks, Preparation, TrainingData};
+use train::trainer::StepReport;
+
+/// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).
+pub fn scene_body(data: &train::data::Dataset) -> Result<Body> {
+    data.body().with_context(|| {
+        format!(
+            "{}: loading the body model `{}` (scene.json body.model)",
+            data.dir.display(),
+            data.scene.body.model
+        )
+    })
+}
+
+/// Prepares on `ctx` the supervision `config` asks for (`TrainingData::prepare`, with the frozen
+/// networks loaded from their weights) and reports what was prepared.
+pub fn prepare_training_data(
+    ctx: &mut TrainingData,
+    data: &train::data::Dataset,
+    config: &TrainConfig,
+) -> Result<()> {
+    let flow_path = config
+        .flow_network
+        .clone()
+        .unwrap_or_else(shipped_flow_network);
+    let networks = LossNetworks {
+        flow: if config.flow_loss {
+            Some(flow::load_safetensors(&flow_path).with_context(|| {
+                format!(
+                    "loading the flow network {} (train one with `cargo xtask train-flow`, or \
+                     pass --flow-network)",
+                    flow_path.display()
+                )
+            })?)
+        } else {
+            None
+        },
+        lpips: if config.lpips_weight > 0.0 {
+            let weights = shipped_lpips_weights();
+            Some(
+                lpips::load_safetensors(&weights)
+                    .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?,
+            )
+        } else {
+            None
+        },
+    };
+    let done = ctx.prepare(data, config, networks)?;
+    report_preparation(&done, config, &flow_path, ctx.frames.len());
+    Ok(())
+}
+
+/// Prints what [`prepare_training_data`] set up.
+fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path, frames: usize) {
+    if let Some(pairs) = done.flow_pairs {
+        println!(
+            "flow loss: {pairs} pairs of consecutive training frames, source {:?}, λ {}, τ {} px, \
+             gradient to {:?}, measure {:?}, network {}",
+            config.flow_source,
+            config.flow_weight,
+            config.flow_tau,
+            config.flow_gradient,
+            config.flow_measure,
+            flow_path.display()
+        );
+        if config.flow_network.is_none()
+            && config.flow_source != FlowSource::SharpNetwork
+            && config.flow_measure == FlowMeasure::Network
+        {
+            eprintln!(
+                "note: the shipped flow weights are weak, and with targets from the generator or \
+                 the events the flow loss lowers PSNR; see docs/BENCHMARKS.md, \"Flow loss\"."
+            );
+        }
+    }
+    if done.lpips {
+        println!(
+            "perceptual loss: LPIPS (AlexNet, v0.1) of each frame's prediction, weight {}",
+            config.lpips_weight
+        );
+    }
+    if config.train_on == TrainOn::Sharp {
+        println!("training on the sharp references (the benchmark's ceiling, not a method)");
+    }
+    if let Some(deblurred) = done.edi_deblurred {
+        println!(
+            "training on EDI-deblurred frames (the 2-D cascade baseline): {deblurred} of {frames} \
+             training frames deblurred, the others' exposures are not covered by events"
+        );
+    }
+    if let Some((shortest, longest)) = done.exposure_s {
+        let span = if longest - shortest > 1e-9 {
+            format!("{:.1}–{:.1} ms", 1e3 * shortest, 1e3 * longest)
+        } else {
+            format!("{:.1} ms", 1e3 * longest)
+        };
+        println!(
+            "exposure model: each training frame is the mean of {} renders over its {span} exposure",
+            config.subframes
+        );
+    }
+    if let Some(pairs) = done.event_pairs {
+        let between = match config.event_pairs {
+            EventPairs::Frames => "consecutive training frames",
+            EventPairs::Exposure => "consecutive sub-exposure renders",
+        };
+        println!(
+            "event loss: {pairs} pairs of {between}, weight {}, C {}",
+            config.event_weight, config.event_threshold
+        );
+    }
+}
+
+/// Mean seconds per step stage over `recent`, in the step's order, with their total.
+pub fn mean_times(recent: &[StepReport]) -> Vec<(&'static str, f64)> {
+    let n = recent.len().max(1) as f64;
+    let sum = |f: fn(&StepReport) -> f64| recent.iter().map(f).sum::<f64>() / n;
+    vec![
+        ("pose", sum(|r| r.times.pose)),
+        ("render", sum(|r| r.times.render)),
+        ("loss", sum(|r| r.times.loss)),
+        ("lpips", sum(|r| r.times.lpips)),
+        ("render_backward", sum(|r| r.times.render_backward)),
+        ("model_backward", sum(|r| r.times.model_backward)),
+        ("adam", sum(|r| r.times.adam)),
+        ("density", sum(|r| r.times.density)),
+        ("flow", sum(|r| r.times.flow)),
+        ("flow_network", sum(|r| r.times.flow_network)),
+        ("total", sum(|r| r.times.total())),
+    ]
+}
