@@ -61,6 +61,9 @@ pub struct StepReport {
     pub gaussians_scene: usize,
     /// Gaussians whose human branch was evaluated.
     pub active: usize,
+    /// Fraction of the tiles the step's sub-exposure renders shared (blended once;
+    /// `share_static_tiles`), 0 when they shared none.
+    pub shared_tiles: f64,
     /// Stage timings.
     pub times: StageTimes,
 }

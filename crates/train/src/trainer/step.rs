@@ -143,6 +143,10 @@ impl Trainer {
         }
         let first = &frame_k.passes[frame_k.mid];
         let active = first.active().len();
+        let shared_tiles = frame_k
+            .sharing
+            .as_ref()
+            .map_or(0.0, TileSharing::shared_fraction);
         let statistics = StepStatistics {
             means_2d: back.means_2d,
             radii: first.out.radii.clone(),
@@ -181,6 +185,7 @@ impl Trainer {
             gaussians_human: human,
             gaussians_scene: self.model.set.len() - human,
             active,
+            shared_tiles,
             times,
         })
     }

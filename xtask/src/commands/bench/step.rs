@@ -73,6 +73,7 @@ pub fn run(args: Args) -> Result<()> {
         "threads": rayon::current_num_threads(),
         "steal_pct": steal.percent(),
         "share_static_tiles": config.share_static_tiles,
+        "shared_tiles": reports.iter().map(|r| r.shared_tiles).sum::<f64>() / args.steps.max(1) as f64,
     });
     if let Some(obj) = line.as_object_mut() {
         for (stage, seconds) in crate::training::mean_times(&reports) {
