@@ -236,7 +236,11 @@ fn check_renders<T: Real>(
             || r.opacity_logits.get(i) != first.opacity_logits.get(i)
             || r.channels.get(i * c..(i + 1) * c) != first.channels.get(i * c..(i + 1) * c)
     };
-    for (index, r) in renders.iter().enumerate() {
+    for (index, r) in renders
+        .iter()
+        .enumerate()
+        .filter(|&(index, _)| index != owner)
+    {
         let changed = (0..n)
             .into_par_iter()
             .find_first(|&i| !moving[i] && differs(r, i));
