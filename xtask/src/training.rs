@@ -5,9 +5,9 @@
 use crate::common::{shipped_flow_network, shipped_lpips_weights};
 use anyhow::{Context, Result};
 use std::path::Path;
-use train::body::Body;
 use train::config::{EventPairs, FlowMeasure, FlowSource, TrainConfig, TrainOn};
 use train::data::{LossNetworks, Preparation, TrainingData};
+use train::pose::body::Body;
 use train::trainer::StepReport;
 
 /// Loads the body model named by a scene (relative SMPL paths are taken relative to the scene).

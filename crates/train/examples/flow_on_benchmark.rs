@@ -210,7 +210,7 @@ fn compare_renders(
         let loss = mean_loss(&|slot| {
             let frame = &ctx.frames[slot];
             Ok(model
-                .render(&ctx.camera, &frame.pose, model.latent(slot))?
+                .render(&ctx.camera, &frame.pose.prepared, model.latent(slot))?
                 .rgb)
         })?;
         print(run, loss);

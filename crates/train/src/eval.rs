@@ -294,7 +294,7 @@ pub struct EvaluatedFrame {
 /// correction interpolated from their neighbouring training frames ([`crate::model::Model::corrected_params`]).
 pub fn evaluate_split(
     model: &crate::model::Model,
-    body: &crate::body::Body,
+    body: &crate::pose::body::Body,
     data: &crate::data::Dataset,
     split: scene::Split,
     lpips: Option<&Lpips<f32>>,

@@ -11,11 +11,11 @@
 //! - `poses_corrected.json` (with pose correction) — [`CorrectedPoses`]: every frame's corrected
 //!   SMPL parameters in `scene.json`'s layout.
 
-use crate::body::{resolve_reference, Body};
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::model::Model;
-use crate::posing::PosedFrame;
+use crate::pose::body::{resolve_reference, Body};
+use crate::pose::posing::PosedFrame;
 use crate::TrainError;
 use gaussians::covariance::decompose_covariance;
 use gaussians::GaussianSet;

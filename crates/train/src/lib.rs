@@ -3,7 +3,6 @@
 //! knows the method; everything it builds on is generic.
 
 pub mod blend;
-pub mod body;
 pub mod checkpoint;
 pub mod colour;
 pub mod config;
@@ -11,14 +10,11 @@ pub mod data;
 pub mod density;
 pub mod eval;
 pub mod export;
-pub mod exposure;
 pub mod init;
 pub mod loss;
 pub mod model;
 pub mod optimisers;
-pub mod pose_correction;
-pub mod posing;
-pub mod reposing;
+pub mod pose;
 pub mod schedule;
 pub mod trainer;
 

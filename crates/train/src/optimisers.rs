@@ -6,7 +6,7 @@
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::model::{Model, NETWORK_GROUPS};
-use crate::pose_correction::{root_indices, CORRECTION_VALUES, POSE_VALUES};
+use crate::pose::correction::{root_indices, CORRECTION_VALUES, POSE_VALUES};
 use crate::TrainError;
 use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
 use gaussians::GaussianSet;

@@ -1,13 +1,13 @@
 //! Poses inside an exposure against the benchmark generator's true sub-frame poses: the default
 //! benchmark's motion sampled at its frame times (what `scene.json` records), interpolated by
-//! `train::exposure::PoseTrack` at the 16 sub-frame times of every exposure the generator rendered,
+//! `train::pose::exposure::PoseTrack` at the 16 sub-frame times of every exposure the generator rendered,
 //! and compared joint by joint with the generator's own pose at those times.
 #![allow(clippy::unwrap_used)]
 
 use glam::{DQuat, DVec3};
 use smpl_deform::{BodyModel, SmplParams};
 use synth::body::DressedBody;
-use train::exposure::{subframe_times, PoseTrack};
+use train::pose::exposure::{subframe_times, PoseTrack};
 
 /// (mean, max) joint-rotation error in degrees over the 24 joints of two poses, and the
 /// translation error in cm.

@@ -15,10 +15,10 @@
 use rand::{Rng, SeedableRng};
 use smpl_deform::BodyModel;
 use std::path::PathBuf;
-use train::body::Body;
 use train::config::{Preset, TrainConfig};
 use train::data::{load_dataset, TrainingData};
 use train::model::{mean_rgb, Model, RENDER_CHANNELS};
+use train::pose::body::Body;
 use train::trainer::Trainer;
 
 fn model_and_data() -> (Model, TrainingData) {
@@ -64,7 +64,7 @@ fn model_and_data_with(
 fn loss(model: &Model, data: &TrainingData, weights: &[f32]) -> f64 {
     let frame = &data.frames[0];
     let pass = model
-        .forward(&data.camera, &frame.pose, model.latent(0))
+        .forward(&data.camera, &frame.pose.prepared, model.latent(0))
         .unwrap();
     pass.out
         .image
@@ -117,7 +117,7 @@ fn frame_pass_gradients_match_central_differences_of_the_render() {
         .collect();
     let frame = &data.frames[0];
     let pass = model
-        .forward(&data.camera, &frame.pose, model.latent(0))
+        .forward(&data.camera, &frame.pose.prepared, model.latent(0))
         .unwrap();
     let (grads, posed) = pass.backward(&weights).unwrap();
     drop(pass);
@@ -152,7 +152,11 @@ fn frame_pass_gradients_match_central_differences_of_the_render() {
 fn exposure_loss(model: &Model, data: &TrainingData, weights: &[f32]) -> f64 {
     let passes: Vec<_> = data.exposure_poses[1]
         .iter()
-        .map(|pose| model.forward(&data.camera, pose, model.latent(1)).unwrap())
+        .map(|pose| {
+            model
+                .forward(&data.camera, &pose.prepared, model.latent(1))
+                .unwrap()
+        })
         .collect();
     mean_rgb(&passes)
         .iter()
@@ -181,7 +185,9 @@ fn the_sub_exposure_mean_backward_matches_central_differences() {
         vec![0.0f32; model.set.features.len()],
     );
     for pose in &data.exposure_poses[1] {
-        let pass = model.forward(&data.camera, pose, model.latent(1)).unwrap();
+        let pass = model
+            .forward(&data.camera, &pose.prepared, model.latent(1))
+            .unwrap();
         let (g, _) = pass.backward(&d_image).unwrap();
         latent.iter_mut().zip(&g.latent).for_each(|(a, &b)| *a += b);
         features

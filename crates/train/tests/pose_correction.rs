@@ -8,7 +8,7 @@
 
 use train::config::{BlurModel, TrainConfig};
 use train::data::{load_dataset, TrainingData};
-use train::pose_correction::{KnotSpan, CORRECTION_VALUES, POSE_VALUES};
+use train::pose::correction::{KnotSpan, CORRECTION_VALUES, POSE_VALUES};
 use train::trainer::Trainer;
 
 mod common;
@@ -199,7 +199,7 @@ fn without_the_root_only_the_body_joints_are_corrected() {
     t.run(&ctx, 8, |_, _| Ok(())).unwrap();
     let c = &t.model.pose_corrections;
     for slot in c.chunks(CORRECTION_VALUES) {
-        for k in train::pose_correction::root_indices() {
+        for k in train::pose::correction::root_indices() {
             assert_eq!(slot[k], 0.0, "root value {k}");
         }
     }

@@ -340,12 +340,12 @@ fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread
     // The sub-exposure poses differ from each other and bracket the mid-exposure pose.
     let slot = 1;
     assert_eq!(
-        ctx.exposure_poses[slot][1].pose_code,
-        ctx.frames[slot].pose.pose_code
+        ctx.exposure_poses[slot][1].prepared.pose_code,
+        ctx.frames[slot].pose.prepared.pose_code
     );
     assert_ne!(
-        ctx.exposure_poses[slot][0].bones,
-        ctx.exposure_poses[slot][2].bones
+        ctx.exposure_poses[slot][0].prepared.bones,
+        ctx.exposure_poses[slot][2].prepared.bones
     );
     // Frame 0's exposure starts before the first event file: its first interval is unsupervised;
     // every other interval has events.

@@ -1,4 +1,4 @@
-//! End-to-end finite-difference check of the per-frame model (`train::posing`): non-rigid network →
+//! End-to-end finite-difference check of the per-frame model (`train::pose::posing`): non-rigid network →
 //! learned skinning → LBS → deformed covariance, static covariance, both colour networks, semantic
 //! blend — w.r.t. every learnable quantity (Gaussian parameters, logits, the four networks, the frame
 //! latent and the bone transforms), for the one-hot and scalar semantics, with the exact blend
@@ -11,7 +11,7 @@
 //! are smooth except at LeakyReLU kinks, which a 1e-6 probe crosses with probability ~1e-6 per unit.
 //! The non-rigid network's zero-initialised last layer is randomised so its gradients are exercised.
 //!
-//! The second check is the exposure model's shared-network composition (`train::reposing`): the
+//! The second check is the exposure model's shared-network composition (`train::pose::reposing`): the
 //! frame posed at its reference bones plus two re-posings at other bones, each output paired with its
 //! own cotangent, differentiated by one reference backward that receives the re-posings' summed
 //! cotangents — w.r.t. the same quantities and every pass's bones (same tolerance and argument).
@@ -25,11 +25,11 @@ use rand::Rng;
 use smpl_deform::deform_net::{NonRigidNet, SkinningField, NR_FEATURE_DIM};
 use train::blend::SemanticMode;
 use train::colour::{ColourNet, ColourNetConfig};
-use train::posing::{
+use train::pose::posing::{
     pose_frame_backward, pose_frame_backward_with, pose_frame_gated, FrameCotangents, FrameInputs,
     GaussianParams, ModelNets, PosedFrame,
 };
-use train::reposing::{repose_frame, repose_frame_backward, ReposeCotangents};
+use train::pose::reposing::{repose_frame, repose_frame_backward, ReposeCotangents};
 
 const TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
 const H: f64 = 1e-6;
@@ -126,8 +126,8 @@ fn case(seed: u64, scalar: bool, gate: f64) -> Case {
 fn outputs(
     c: &Case,
 ) -> (
-    train::posing::PosedFrame<f64>,
-    train::posing::FrameCache<f64>,
+    train::pose::posing::PosedFrame<f64>,
+    train::pose::posing::FrameCache<f64>,
 ) {
     let g = GaussianParams {
         means: &c.means,
@@ -380,10 +380,10 @@ fn corrected_loss(
     b: &CorrectionBody,
     all: &[f64],
     cots: &[Vec<f64>],
-    prior: train::pose_correction::CorrectionPrior<f64>,
+    prior: train::pose::correction::CorrectionPrior<f64>,
 ) -> f64 {
     use smpl_deform::frame_pose::frame_pose;
-    use train::pose_correction::{correct_pose, prior_terms, CORRECTION_VALUES};
+    use train::pose::correction::{correct_pose, prior_terms, CORRECTION_VALUES};
     let correction = &all[CORRECTION_VALUES..2 * CORRECTION_VALUES];
     let frames: Vec<_> = (0..3)
         .map(|s| {
@@ -423,7 +423,7 @@ proptest! {
     #[test]
     fn pose_correction_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>()) {
         use smpl_deform::frame_pose::{frame_pose, frame_pose_backward};
-        use train::pose_correction::{correct_pose, correct_pose_backward, prior_terms, CorrectionPrior, CORRECTION_VALUES, POSE_VALUES};
+        use train::pose::correction::{correct_pose, correct_pose_backward, prior_terms, CorrectionPrior, CORRECTION_VALUES, POSE_VALUES};
         let c = case(seed, scalar, 0.0);
         let b = correction_body(seed);
         let all: Vec<f64> = symmetric_from_seed(seed ^ 0xc0, 3 * CORRECTION_VALUES).iter().map(|v| 0.1 * v).collect();

@@ -312,7 +312,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(first) = ctx.frames.first() {
         let pose = ctx
             .body
-            .prepare(&model.corrected_params(first.index, &first.params))?;
+            .prepare(&model.corrected_params(first.index, &first.pose.params))?;
         let r = model.render(&ctx.camera, &pose, model.latent_for(first.index))?;
         let posed = train::export::posed_set(model, &r.posed);
         let path = model_dir.join(format!("posed_frame_{:06}.ply", first.index));

@@ -5,9 +5,9 @@
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::Path;
-use train::body::Body;
 use train::eval::{evaluate_split, mean_metrics};
 use train::model::Model;
+use train::pose::body::Body;
 
 /// Training facts recorded next to the figures.
 pub struct EvalSummary {

@@ -6,9 +6,9 @@ use anyhow::{Context, Result};
 use scene::Split;
 use synth::pose_metrics::{measure, view_error};
 use synth::{FramePose, PoseErrorStats, TruePoses, ViewErrorStats};
-use train::body::Body;
 use train::data::Dataset;
 use train::model::Model;
+use train::pose::body::Body;
 
 /// Pose errors of the training frames: as given, and as corrected (when the model corrects poses);
 /// and how the joints' error looks from the scene's camera, on the training and the held-out frames.

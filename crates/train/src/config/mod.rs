@@ -131,7 +131,7 @@ training_options! {
     latent_dim: usize = 16,
     /// Hidden width of the non-rigid network and of the skinning field.
     deform_hidden: usize = 64,
-    /// Gaussians with human probability below this skip the human branch (see `train::posing`).
+    /// Gaussians with human probability below this skip the human branch (see `train::pose::posing`).
     semantic_gate: f32 = 0.01,
     /// Background colour (linear RGB) composited behind the Gaussians.
     #[arg(value_parser = parse_rgb, value_name = "R,G,B")]
@@ -208,7 +208,7 @@ training_options! {
     train_on: TrainOn = TrainOn::Blurred,
     /// How a training frame's prediction is formed: `exposure` (the default: the mean, in linear
     /// intensity, of `subframes` renders at poses spread over the frame's exposure;
-    /// `train::exposure`) or `none` (one render at mid exposure, the paper). On the default benchmark's
+    /// `train::pose::exposure`) or `none` (one render at mid exposure, the paper). On the default benchmark's
     /// `quick` preset the exposure model scores 33.24 / 28.75 dB (full frame / human box) against
     /// 29.23 / 24.65 without it and 29.32 / 24.68 for the blurred input (`docs/BENCHMARKS.md`).
     blur_model: BlurModel = BlurModel::Exposure,
@@ -216,7 +216,7 @@ training_options! {
     subframes: usize = 5,
     /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,
     /// skinning weights and both colours are evaluated at the mid-exposure pose and each
-    /// sub-exposure render re-poses them by linear blend skinning alone, `train::reposing`) or
+    /// sub-exposure render re-poses them by linear blend skinning alone, `train::pose::reposing`) or
     /// `per-subframe` (every sub-exposure render evaluates the networks at its own pose).
     exposure_networks: ExposureNetworks = ExposureNetworks::Once,
     /// With `blur_model = exposure`: the tiles that only static Gaussians (human probability
@@ -317,7 +317,7 @@ training_options! {
     /// more than m thresholds (0: counts are pure lower bounds; the refractory period hides
     /// crossings, so a count is never too high, but a count at a slowly changing pixel is exact).
     event_overshoot_weight: f32 = 0.0,
-    /// Learned pose correction (`train::pose_correction`), for poses estimated by a fitter: per
+    /// Learned pose correction (`train::pose::correction`), for poses estimated by a fitter: per
     /// training frame, additive corrections of the 24 joint rotations (axis-angle, radians) and the
     /// translation (m) at mid exposure and, with `blur_model = exposure`, of their change over the
     /// exposure, regularised towards zero and towards the neighbouring frames' corrections.
@@ -359,7 +359,7 @@ training_options! {
     pose_correction_from: usize = 100,
     /// Pose corrections are learned on knots every this many training frames (and on the last),
     /// and each frame's is interpolated linearly in frame number between the knots around it
-    /// (`train::pose_correction::KnotSpan`): 1, a correction per training frame; larger, each
+    /// (`train::pose::correction::KnotSpan`): 1, a correction per training frame; larger, each
     /// learned value hears several frames' gradients and the correction is smooth in time. 3 with
     /// the default rates: +0.17 dB in the box on `realistic` (`quick`) against a correction per
     /// frame at three times the rates, and on exact poses it costs 1.78 dB instead of 3.72

@@ -45,9 +45,9 @@ pub struct Dataset {
 impl Dataset {
     /// The body the scene names (`scene.json`'s `body`), a relative SMPL path taken relative to
     /// the scene directory.
-    pub fn body(&self) -> Result<crate::body::Body, TrainError> {
+    pub fn body(&self) -> Result<crate::pose::body::Body, TrainError> {
         let spec = &self.scene.body;
-        crate::body::Body::load(&spec.model, spec.betas.clone(), &self.dir)
+        crate::pose::body::Body::load(&spec.model, spec.betas.clone(), &self.dir)
     }
 
     /// Indices of the frames of a split.

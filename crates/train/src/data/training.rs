@@ -5,9 +5,9 @@
 use super::dataset::Dataset;
 use super::event_counts::{expected_change, hot_pixels};
 use super::event_files::read_frame_events;
-use crate::body::{Body, PreparedPose};
 use crate::config::TrainConfig;
 use crate::loss::optical_flow::{network_target, prepare_target, FlowTarget};
+use crate::pose::body::{Body, GivenPose};
 use crate::TrainError;
 use flow::SpyNet;
 use rasterize_cpu::Camera;
@@ -20,10 +20,8 @@ pub struct TrainingFrame {
     pub index: u32,
     /// Observed (blurred) image, planar (3, H, W) linear RGB.
     pub image: Vec<f32>,
-    /// The frame's pose.
-    pub pose: PreparedPose,
-    /// The SMPL parameters it was prepared from (what pose correction corrects).
-    pub params: smpl_deform::SmplParams,
+    /// The frame's pose (mid exposure).
+    pub pose: GivenPose,
 }
 
 /// Flow supervision of one training frame k: the next training frame and the target flow k → k+1.
@@ -82,9 +80,7 @@ pub struct TrainingData {
     pub event_pairs: Vec<Option<EventPair>>,
     /// Per training slot, the poses at the sub-exposure times of the exposure model (empty unless
     /// [`TrainingData::enable_exposure`] was called).
-    pub exposure_poses: Vec<Vec<PreparedPose>>,
-    /// The SMPL parameters `exposure_poses` were prepared from (same layout).
-    pub exposure_params: Vec<Vec<smpl_deform::SmplParams>>,
+    pub exposure_poses: Vec<Vec<GivenPose>>,
     /// Per training slot, per pair of consecutive sub-exposure times (s, s+1), C·E per pixel for the
     /// events of [t_s, t_{s+1}) (row-major H × W), `None` where no event file covers the interval
     /// (before the first frame's time); empty unless [`TrainingData::enable_exposure_events`] was
@@ -103,8 +99,7 @@ impl TrainingData {
             frames.push(TrainingFrame {
                 index: f.index,
                 image: f.image.clone(),
-                pose: body.prepare(&f.smpl)?,
-                params: f.smpl.clone(),
+                pose: body.given(&f.smpl)?,
             });
         }
         if frames.is_empty() {
@@ -131,7 +126,6 @@ impl TrainingData {
             flow_net: None,
             event_pairs: Vec::new(),
             exposure_poses: Vec::new(),
-            exposure_params: Vec::new(),
             exposure_events: Vec::new(),
             lpips: None,
         })
@@ -187,7 +181,7 @@ impl TrainingData {
     /// Prepares the exposure model: for every training frame, the body poses at `subframes`
     /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the frame's
     /// exposure: its own `exposure_s`, else the scene's), interpolated from the SMPL parameters of
-    /// every frame of the scene ([`crate::exposure::PoseTrack`]).
+    /// every frame of the scene ([`crate::pose::exposure::PoseTrack`]).
     pub fn enable_exposure(&mut self, data: &Dataset, subframes: usize) -> Result<(), TrainError> {
         if let Some(f) = data
             .frames
@@ -203,23 +197,29 @@ impl TrainingData {
         }
         let keys: Vec<(f64, &smpl_deform::SmplParams)> =
             data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
-        let track = crate::exposure::PoseTrack::new(&keys);
+        let track = crate::pose::exposure::PoseTrack::new(&keys);
         let mut poses = Vec::with_capacity(self.frames.len());
-        let mut exposure_params = Vec::with_capacity(self.frames.len());
         for frame in data.frames.iter().filter(|f| f.split == Split::Train) {
-            let times = crate::exposure::subframe_times(frame.time_s, frame.exposure_s, subframes);
-            let params: Vec<smpl_deform::SmplParams> = times.iter().map(|&t| track.at(t)).collect();
+            let times =
+                crate::pose::exposure::subframe_times(frame.time_s, frame.exposure_s, subframes);
             poses.push(
-                params
+                times
                     .iter()
-                    .map(|p| self.body.prepare(p))
+                    .map(|&t| self.body.given(&track.at(t)))
                     .collect::<Result<Vec<_>, _>>()?,
             );
-            exposure_params.push(params);
         }
         self.exposure_poses = poses;
-        self.exposure_params = exposure_params;
         Ok(())
+    }
+
+    /// The poses training slot `slot` is rendered at: its sub-exposure poses when `exposure` and
+    /// [`TrainingData::enable_exposure`] prepared them, else its mid-exposure pose alone.
+    pub fn poses(&self, slot: usize, exposure: bool) -> &[GivenPose] {
+        match self.exposure_poses.get(slot) {
+            Some(sub) if exposure && !sub.is_empty() => sub,
+            _ => std::slice::from_ref(&self.frames[slot].pose),
+        }
     }
 
     /// Number of pixels per channel.
@@ -293,8 +293,11 @@ impl TrainingData {
             if frame.split != Split::Train {
                 continue;
             }
-            let times =
-                crate::exposure::subframe_times(frame.time_s, frame.exposure_s, config.subframes);
+            let times = crate::pose::exposure::subframe_times(
+                frame.time_s,
+                frame.exposure_s,
+                config.subframes,
+            );
             // The files this exposure reaches into, joined in time order, and the span over which
             // they are evidence (`scene::Scene::event_evidence_span`: consecutive files' spans
             // join into one interval).

@@ -4,24 +4,24 @@
 //! settings that shape its rendering (semantic mode, gate, background, near plane, all in
 //! [`TrainConfig`]).
 //!
-//! [`Model::forward`] poses the Gaussians for one frame (see [`crate::posing`]) and rasterizes them
+//! [`Model::forward`] poses the Gaussians for one frame (see [`crate::pose::posing`]) and rasterizes them
 //! with the human probability as a fourth channel; the returned [`FramePass`] keeps what its backward
 //! needs, so one training step can hold any number of passes (one today, two with the pair losses, S
 //! with an exposure model) and differentiate each. Eval, export and rendering take a `Model`, never a
 //! trainer.
 
-use crate::body::PreparedPose;
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::config::TrainConfig;
-use crate::pose_correction::{
+use crate::pose::body::PreparedPose;
+use crate::pose::correction::{
     corrected_params, interpolated_correction, knot_slots, KnotSpan, CORRECTION_VALUES,
 };
-use crate::posing::{
+use crate::pose::posing::{
     pose_frame_backward_with, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
     GaussianParams, ModelGradients, ModelNets, PosedFrame,
 };
-use crate::reposing::{repose_frame, repose_frame_backward, ReposeCotangents, ReposedCache};
+use crate::pose::reposing::{repose_frame, repose_frame_backward, ReposeCotangents, ReposedCache};
 use crate::TrainError;
 
 mod pass;
@@ -63,7 +63,7 @@ pub struct Model {
     pub latents: Vec<f32>,
     /// Frame number of each latent slot (the training frames in time order).
     pub frame_indices: Vec<u32>,
-    /// Per-training-frame pose corrections, (frames, [`CORRECTION_VALUES`]) (`train::pose_correction`);
+    /// Per-training-frame pose corrections, (frames, [`CORRECTION_VALUES`]) (`train::pose::correction`);
     /// empty when `pose_correction` is off.
     pub pose_corrections: Vec<f32>,
     /// Scene extent (m): scales the position rate and the density thresholds.
@@ -354,7 +354,7 @@ impl Model {
 
     /// The pose correction of frame `index` at mid exposure ([`CORRECTION_VALUES`] values, the
     /// change over the exposure zero; empty when pose correction is off), interpolated between the
-    /// knots around it (`train::pose_correction::interpolated_correction`).
+    /// knots around it (`train::pose::correction::interpolated_correction`).
     pub fn pose_correction_for(&self, index: u32) -> Vec<f32> {
         interpolated_correction(
             &self.correction_knot_frames(),
@@ -422,7 +422,7 @@ impl Model {
 
     /// Renders one frame at each of `poses` (its sub-exposure poses) from one camera. With
     /// `plan.reposed` the networks are evaluated once, at `poses[reference]`, and that pass is
-    /// re-posed for the others by linear blend skinning alone (`train::reposing`; differentiate the
+    /// re-posed for the others by linear blend skinning alone (`train::pose::reposing`; differentiate the
     /// passes together with [`Model::reposed_backward`]); else every pass is posed by the networks.
     /// With `plan.share_static_tiles` the tiles only static Gaussians (human probability below the
     /// gate, the same in every pass) reach are blended once, by the reference pass

@@ -1,11 +1,11 @@
-//! The step's share of learned pose correction (`crate::pose_correction`): a frame's poses prepared
+//! The step's share of learned pose correction (`crate::pose::correction`): a frame's poses prepared
 //! from its corrected SMPL parameters, and the correction's gradient from the passes' bone and
 //! pose-code gradients.
 
-use crate::body::{Body, PoseTape, PreparedPose};
 use crate::data::TrainingData;
 use crate::model::Model;
-use crate::pose_correction::{
+use crate::pose::body::{Body, PoseTape, PreparedPose};
+use crate::pose::correction::{
     correct_pose_backward, corrected_params, exposure_offset, prior_terms, root_indices,
     CorrectionPrior, KnotSpan, CORRECTION_VALUES,
 };
@@ -32,10 +32,11 @@ impl CorrectedPoses {
         exposure: bool,
     ) -> Result<Self, TrainError> {
         let (correction, span) = model.training_correction(slot);
-        let params = match data.exposure_params.get(slot) {
-            Some(sub) if exposure && !sub.is_empty() => sub.iter().collect(),
-            _ => vec![&data.frames[slot].params],
-        };
+        let params: Vec<_> = data
+            .poses(slot, exposure)
+            .iter()
+            .map(|p| &p.params)
+            .collect();
         let count = params.len();
         let offsets: Vec<f32> = (0..count).map(|s| exposure_offset(s, count)).collect();
         let mut prepared = Vec::with_capacity(count);

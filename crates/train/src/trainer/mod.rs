@@ -24,7 +24,7 @@ use crate::density::{DensityStrategy, StepStatistics};
 use crate::init::{initialise, InitConfig};
 use crate::model::Model;
 use crate::optimisers::Optimisers;
-use crate::posing::ModelGradients;
+use crate::pose::posing::ModelGradients;
 use crate::schedule::{correction_rate_scale, exponential_rate};
 use crate::TrainError;
 use gaussians::adam::GaussianLearningRates;
@@ -64,7 +64,7 @@ impl Trainer {
     pub fn new(data: &TrainingData, config: TrainConfig) -> Result<Self, TrainError> {
         config.validate()?;
         let vertices = &data.body.canonical.posed.vertices;
-        let roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.root).collect();
+        let roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.prepared.root).collect();
         let init = initialise(
             vertices,
             &data.body.model.faces,

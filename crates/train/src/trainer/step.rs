@@ -16,7 +16,7 @@ use crate::loss::image::ImageShape;
 use crate::loss::perceptual::perceptual_term;
 use crate::loss::photometric::{exposure_loss, ExposureEvents};
 use crate::model::{ExposurePasses, FramePass, Model, PassPlan, PosedGradients, RENDER_CHANNELS};
-use crate::posing::ModelGradients;
+use crate::pose::posing::ModelGradients;
 use crate::TrainError;
 use rasterize_cpu::TileSharing;
 use smpl_deform::math::Affine;
@@ -451,10 +451,13 @@ fn frame_passes<'a>(
     times: &mut StageTimes,
 ) -> Result<FramePasses<'a>, TrainError> {
     let exposure = config.blur_model == BlurModel::Exposure;
-    let poses: Vec<_> = match (corrected, data.exposure_poses.get(slot)) {
-        (Some(c), _) => c.prepared.iter().collect(),
-        (None, Some(sub)) if exposure && !sub.is_empty() => sub.iter().collect(),
-        _ => vec![&data.frames[slot].pose],
+    let poses: Vec<_> = match corrected {
+        Some(c) => c.prepared.iter().collect(),
+        None => data
+            .poses(slot, exposure)
+            .iter()
+            .map(|p| &p.prepared)
+            .collect(),
     };
     let mid = poses.len() / 2;
     let plan = PassPlan {
@@ -555,7 +558,7 @@ fn next_frame<'a>(
     times: &mut StageTimes,
 ) -> Result<NextFrame<'a>, TrainError> {
     let next = &data.frames[pair.next_slot];
-    let pose = corrected.map_or(&next.pose, |c| &c.prepared[0]);
+    let pose = corrected.map_or(&next.pose.prepared, |c| &c.prepared[0]);
     let pass = model.forward(&data.camera, pose, model.latent(pair.next_slot))?;
     let size = (data.camera.height as usize, data.camera.width as usize);
     let terms = pair_terms(pair, config, first.rgb(), pass.rgb(), size, d_first)?;

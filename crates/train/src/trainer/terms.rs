@@ -9,7 +9,7 @@ use crate::loss::event::pair_event_loss_with;
 use crate::loss::optical_flow::{pair_flow_loss, pair_warp_loss};
 use crate::loss::photometric::add_scaled;
 use crate::model::{Model, PosedGradients, RENDER_CHANNELS};
-use crate::posing::{ModelGradients, PosedFrame};
+use crate::pose::posing::{ModelGradients, PosedFrame};
 use crate::TrainError;
 use flow::SpyNet;
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};

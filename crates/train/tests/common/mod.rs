@@ -4,10 +4,10 @@
 
 use smpl_deform::BodyModel;
 use std::path::PathBuf;
-use train::body::Body;
 use train::config::{Preset, TrainConfig};
 use train::data::load_dataset;
 use train::data::TrainingData;
+use train::pose::body::Body;
 use train::trainer::Trainer;
 
 /// The tiny checked-in scene.

@@ -92,7 +92,7 @@ fn check_frames(frames: &[ApsFrame], file: &Path) -> Result<(u32, u32, FrameForm
 }
 
 /// The poses at each frame's exposure midpoint, interpolated from poses at their own times (µs,
-/// the recording's clock) by the exposure model's spline ([`train::exposure::PoseTrack`]: C¹ on
+/// the recording's clock) by the exposure model's spline ([`train::pose::exposure::PoseTrack`]: C¹ on
 /// rotations and translation). A frame outside the poses' time span is refused by name.
 fn poses_at_frames(
     list: &[Pose],
@@ -113,7 +113,7 @@ fn poses_at_frames(
         .map(|&t| t as f64 * 1e-6)
         .zip(&params)
         .collect();
-    let track = train::exposure::PoseTrack::new(&keys);
+    let track = train::pose::exposure::PoseTrack::new(&keys);
     let (first, last) = (times_us[0], times_us[times_us.len() - 1]);
     frames
         .iter()

@@ -247,7 +247,7 @@ pub(crate) struct StaticCotangents<'a, T> {
 
 /// Backward of the blend and of the deformed covariance for the `active` Gaussians of a posed frame
 /// (`inputs`, `posed_mats`, `posed_log_scales` in active order) from the outputs' cotangents `cot`;
-/// shared by a frame's own pass and its re-posings (`crate::reposing`).
+/// shared by a frame's own pass and its re-posings (`crate::pose::reposing`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn blend_backward_active<T: Real>(
     mode: SemanticMode,
@@ -447,7 +447,7 @@ pub fn pose_frame_backward<T: Real>(
 }
 
 /// [`pose_frame_backward`] with, when given, the summed cotangents `reposings` of the frame's
-/// re-posings ([`crate::reposing::repose_frame_backward`]): one network backward for the frame and
+/// re-posings ([`crate::pose::reposing::repose_frame_backward`]): one network backward for the frame and
 /// every re-posing of it. `bones` gradients are those of this pass's own bones.
 pub fn pose_frame_backward_with<T: Real>(
     nets: &ModelNets<T>,

@@ -1,4 +1,4 @@
-//! [`ReposeCotangents`]: what a frame's re-posings ([`crate::reposing`]) hand back to the frame's
+//! [`ReposeCotangents`]: what a frame's re-posings ([`crate::pose::reposing`]) hand back to the frame's
 //! one backward ([`super::pose_frame_backward_with`]). It lives here, beside its reader, so that
 //! `posing` does not import `reposing` (which builds on `posing`).
 
@@ -7,7 +7,7 @@ use nn::Real;
 use smpl_deform::deform_net::MovedCotangents;
 
 /// Cotangents of a frame pass's internal quantities coming from its re-posings (summed over them);
-/// [`pose_frame_backward_with`](crate::posing::pose_frame_backward_with) adds them to its own.
+/// [`pose_frame_backward_with`](crate::pose::posing::pose_frame_backward_with) adds them to its own.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReposeCotangents<T> {
     /// ∂L/∂ stored means through the static path, N.

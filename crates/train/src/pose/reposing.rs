@@ -2,7 +2,7 @@
 //! exposure model's cheap sub-exposure passes (`exposure_networks = once`).
 //!
 //! Within one exposure only the bones move appreciably. [`repose_frame`] takes a frame posed by
-//! [`pose_frame_gated`](crate::posing::pose_frame_gated) at its reference pose (mid exposure) and
+//! [`pose_frame_gated`](crate::pose::posing::pose_frame_gated) at its reference pose (mid exposure) and
 //! poses it with other bones: the non-rigid offsets (at the reference pose code), the skinning
 //! weights, the human colours (canonicalised view direction of the reference pose) and the scene
 //! colours are the reference's; only linear blend skinning, the deformed covariances and the blend
@@ -10,12 +10,12 @@
 //! network outputs", and its gradients are exact for that function: [`repose_frame_backward`] turns
 //! a re-posed pass's cotangents into [`ReposeCotangents`] — cotangents of the reference's internal
 //! quantities — which, summed over the re-posings, enter the reference's one backward
-//! ([`pose_frame_backward_with`](crate::posing::pose_frame_backward_with)). S sub-exposure passes
+//! ([`pose_frame_backward_with`](crate::pose::posing::pose_frame_backward_with)). S sub-exposure passes
 //! then cost one network forward and backward plus S cheap re-posings, instead of S of each.
 
 use crate::blend::{blend, BlendInputs, SemanticMode};
-pub use crate::posing::ReposeCotangents;
-use crate::posing::{
+pub use crate::pose::posing::ReposeCotangents;
+use crate::pose::posing::{
     blend_backward_active, deformed_covariance, FrameCache, FrameCotangents, GaussianParams,
     PosedFrame, StaticCotangents,
 };

@@ -19,6 +19,16 @@ pub struct PreparedPose {
     pub root: [f32; 3],
 }
 
+/// A body pose as the scene gives it (SMPL parameters, what pose correction corrects) and as the
+/// model consumes it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GivenPose {
+    /// The SMPL parameters.
+    pub params: SmplParams,
+    /// The same pose prepared by [`Body::prepare`].
+    pub prepared: PreparedPose,
+}
+
 /// What [`Body::pose_backward`] needs of a pose prepared by [`Body::prepare_differentiable`]: the
 /// pose in f64 and its forward kinematics.
 #[derive(Clone, Debug)]
@@ -67,6 +77,14 @@ impl Body {
             pose_code: pose_code(&posed.local_rotations),
             bones: self.canonical.frame_from_canonical(&posed),
             root: posed.joints.first().copied().unwrap_or(params.transl),
+        })
+    }
+
+    /// `params` with its prepared pose ([`Body::prepare`]).
+    pub fn given(&self, params: &SmplParams) -> Result<GivenPose, TrainError> {
+        Ok(GivenPose {
+            prepared: self.prepare(params)?,
+            params: params.clone(),
         })
     }
 
@@ -126,7 +144,7 @@ impl Body {
     }
 
     /// ∂L/∂pose (72) and ∂L/∂transl of a pose prepared by [`Body::prepare_differentiable`], from the
-    /// gradients of its bones and pose code ([`crate::posing::ModelGradients`]'s `bones` and
+    /// gradients of its bones and pose code ([`crate::pose::posing::ModelGradients`]'s `bones` and
     /// `pose_code`; an empty `d_pose_code` when the code was not differentiated).
     pub fn pose_backward(
         &self,
