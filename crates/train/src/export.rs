@@ -13,7 +13,7 @@
 
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
-use crate::model::Model;
+use crate::model::{Model, ModelConfig};
 use crate::pose::body::{resolve_reference, Body};
 use crate::pose::posing::PosedFrame;
 use crate::TrainError;
@@ -68,15 +68,24 @@ fn io_err(path: &Path, e: impl std::fmt::Display) -> TrainError {
     }
 }
 
-/// Writes `model`, trained for `steps` steps on the scene `data`, to `dir` (created). Files are
+/// Writes `model`, trained with `config` for `steps` steps on the scene `data`, to `dir` (created);
+/// `model.json` keeps the whole `config`. Refuses a `config` the model was not built with. Files are
 /// written atomically. A relative SMPL path of the scene is stored resolved against the scene
 /// directory (as an absolute path), so the model loads from anywhere.
 pub fn save_model(
     dir: &Path,
     model: &Model,
+    config: &TrainConfig,
     steps: usize,
     data: &crate::data::Dataset,
 ) -> Result<(), TrainError> {
+    if ModelConfig::from(config) != model.config {
+        return Err(TrainError::Config(format!(
+            "{}: the training options given do not match the model's own ({:?})",
+            dir.display(),
+            model.config
+        )));
+    }
     let body = &data.scene.body;
     let body_model = match resolve_reference(&body.model, &data.dir)? {
         BodyRef::SmplFile(p) => std::path::absolute(&p)
@@ -94,7 +103,7 @@ pub fn save_model(
     w.write(&dir.join("networks.safetensors"), MODEL_FORMAT)?;
     let manifest = ModelManifest {
         format: MODEL_FORMAT.into(),
-        config: model.config.clone(),
+        config: config.clone(),
         body_model,
         betas: body.betas.clone(),
         camera: data.scene.camera.clone(),
@@ -191,10 +200,12 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
     let body = Body::load(&manifest.body_model, manifest.betas.clone(), dir)?;
     let ply = dir.join("canonical.ply");
     let set = gaussians::ply::read_ply(&ply).map_err(|e| io_err(&ply, e))?;
-    let nets = Model::build_networks(&manifest.config, &body.canonical.posed.vertices)?;
+    manifest.config.validate()?;
+    let model_config = ModelConfig::from(&manifest.config);
+    let nets = Model::build_networks(&model_config, &body.canonical.posed.vertices)?;
     let latents = vec![0.0; manifest.frame_indices.len() * manifest.config.latent_dim];
     let mut model = Model::new(
-        manifest.config.clone(),
+        model_config,
         set,
         nets,
         latents,

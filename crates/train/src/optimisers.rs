@@ -80,8 +80,8 @@ fn group_index(group: &str) -> Result<usize, TrainError> {
 }
 
 impl Optimisers {
-    /// Fresh optimiser state (zero moments) for `model`.
-    pub fn new(model: &Model) -> Self {
+    /// Fresh optimiser state (zero moments) for `model` at the rates of `config`.
+    pub fn new(model: &Model, config: &TrainConfig) -> Self {
         let networks = NETWORK_GROUPS
             .iter()
             .zip(model.network_groups())
@@ -91,7 +91,7 @@ impl Optimisers {
                 } else {
                     params.len()
                 };
-                nn::Adam::new(len, adam_config(network_rate(&model.config, name)))
+                nn::Adam::new(len, adam_config(network_rate(config, name)))
             })
             .collect();
         Self {
@@ -101,9 +101,9 @@ impl Optimisers {
                 nn::RowAdam::new(
                     model.pose_corrections.len() / CORRECTION_VALUES,
                     CORRECTION_VALUES,
-                    adam_config(model.config.lr_pose_correction),
+                    adam_config(config.lr_pose_correction),
                 ),
-                &model.config,
+                config,
             ),
         }
     }
@@ -182,12 +182,14 @@ impl Optimisers {
         }
     }
 
-    /// The optimisers [`Optimisers::save`] wrote, for `model` (which fixes every length). A
+    /// The optimisers [`Optimisers::save`] wrote, for `model` (which fixes every length) at the rates
+    /// of `config`. A
     /// checkpoint from before the pose-correction group (one step count fewer) loads when the model
     /// has no pose corrections.
     pub fn load(
         r: &CheckpointReader,
         model: &Model,
+        config: &TrainConfig,
         steps: &OptimiserSteps,
     ) -> Result<Self, TrainError> {
         let mut gaussians = GaussianAdam::new(&model.set, AdamConfig::default());
@@ -207,14 +209,15 @@ impl Optimisers {
             .zip(model.network_groups())
             .zip(&counts)
             .map(|(((name, _), params), &count)| {
-                let config = adam_config(network_rate(&model.config, name));
+                let adam = adam_config(network_rate(config, name));
                 if params.is_empty() || *name == CORRECTION_GROUP {
-                    return Ok(nn::Adam::new(0, config));
+                    return Ok(nn::Adam::new(0, adam));
                 }
-                r.adam(&format!("{name}_adam"), config, params.len(), count)
+                r.adam(&format!("{name}_adam"), adam, params.len(), count)
             })
             .collect::<Result<_, _>>()?;
-        let corrections = Self::load_corrections(r, model, counts[group_index(CORRECTION_GROUP)?])?;
+        let corrections =
+            Self::load_corrections(r, model, config, counts[group_index(CORRECTION_GROUP)?])?;
         Ok(Self {
             gaussians,
             networks,
@@ -227,15 +230,16 @@ impl Optimisers {
     fn load_corrections(
         r: &CheckpointReader,
         model: &Model,
+        rates: &TrainConfig,
         count: u64,
     ) -> Result<nn::RowAdam<f32>, TrainError> {
-        let config = adam_config(model.config.lr_pose_correction);
+        let config = adam_config(rates.lr_pose_correction);
         let len = model.pose_corrections.len();
         let rows = len / CORRECTION_VALUES;
         if len == 0 {
             return Ok(correction_adam(
                 nn::RowAdam::new(0, CORRECTION_VALUES, config),
-                &model.config,
+                rates,
             ));
         }
         let prefix = format!("{CORRECTION_GROUP}_adam");
@@ -258,7 +262,7 @@ impl Optimisers {
         };
         Ok(correction_adam(
             nn::RowAdam::from_parts(config, CORRECTION_VALUES, m, v, steps)?,
-            &model.config,
+            rates,
         ))
     }
 }

@@ -303,7 +303,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let model_dir = out.join("model");
     let model = &trainer.model;
-    train::export::save_model(&model_dir, model, trainer.step, &data)
+    train::export::save_model(&model_dir, model, &config, trainer.step, &data)
         .with_context(|| format!("writing the model to {}", model_dir.display()))?;
     if config.pose_correction {
         train::export::write_corrected_poses(&model_dir, model, &data)

@@ -12,7 +12,6 @@
 
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
-use crate::config::TrainConfig;
 use crate::pose::body::PreparedPose;
 use crate::pose::correction::{
     corrected_params, interpolated_correction, knot_slots, KnotSpan, CORRECTION_VALUES,
@@ -24,7 +23,9 @@ use crate::pose::posing::{
 use crate::pose::reposing::{repose_frame, repose_frame_backward, ReposeCotangents, ReposedCache};
 use crate::TrainError;
 
+mod config;
 mod pass;
+pub use config::ModelConfig;
 use gaussians::GaussianSet;
 use rasterize_cpu::{
     render_cov, render_cov_backward, render_cov_shared, render_cov_shared_backward, Camera,
@@ -53,8 +54,8 @@ pub const NETWORK_GROUPS: [(&str, &str); 6] = [
 /// What a reconstruction learned.
 #[derive(Clone, Debug)]
 pub struct Model {
-    /// Hyper-parameters; the model reads its shapes and rendering settings from them.
-    pub config: TrainConfig,
+    /// What shapes the model and how it is posed and rendered.
+    pub config: ModelConfig,
     /// The Gaussians (human ones in canonical space, scene ones in world space).
     pub set: GaussianSet,
     /// The four networks.
@@ -199,14 +200,13 @@ impl Model {
     /// A model from its parts, checked against `config` (semantic logits, features, latents), with
     /// zero pose corrections when `config.pose_correction` is on.
     pub fn new(
-        config: TrainConfig,
+        config: ModelConfig,
         set: GaussianSet,
         nets: ModelNets<f32>,
         latents: Vec<f32>,
         frame_indices: Vec<u32>,
         scene_extent: f32,
     ) -> Result<Self, TrainError> {
-        config.validate()?;
         let k = config.semantic.logits_per_gaussian();
         if set.semantic_logits.len() != set.len() * k || set.feature_dim != config.feature_dim {
             return Err(TrainError::Config(format!(
@@ -247,7 +247,7 @@ impl Model {
 
     /// Freshly initialised networks of `config` for the canonical body `vertices`.
     pub fn build_networks(
-        config: &TrainConfig,
+        config: &ModelConfig,
         vertices: &[[f32; 3]],
     ) -> Result<ModelNets<f32>, TrainError> {
         let mut human = ColourNetConfig::human();

@@ -10,7 +10,7 @@ use crate::checkpoint::{rng_from_strings, rng_to_strings, CheckpointReader, Chec
 use crate::config::TrainConfig;
 use crate::data::TrainingData;
 use crate::loss::aiap::AIAP_NEIGHBOURS;
-use crate::model::Model;
+use crate::model::{Model, ModelConfig};
 use crate::optimisers::{OptimiserSteps, Optimisers};
 use crate::TrainError;
 use std::path::Path;
@@ -51,7 +51,7 @@ impl Trainer {
         let (rng_seed, rng_word_pos) = rng_to_strings(&self.rng);
         let meta = CheckpointMeta {
             format: CHECKPOINT_FORMAT.into(),
-            config: model.config.clone(),
+            config: self.config.clone(),
             step: self.step,
             scene_extent: model.scene_extent,
             sh_degree: model.set.sh_degree,
@@ -81,14 +81,23 @@ impl Trainer {
         config.validate()?;
         let k = config.semantic.logits_per_gaussian();
         let set = r.set("set", meta.sh_degree, config.feature_dim, k)?;
-        let nets = Model::build_networks(&config, &data.body.canonical.posed.vertices)?;
+        let model_config = ModelConfig::from(&config);
+        let nets = Model::build_networks(&model_config, &data.body.canonical.posed.vertices)?;
         let latents = vec![0.0; data.frames.len() * config.latent_dim];
         let frame_indices = data.frames.iter().map(|f| f.index).collect();
-        let mut model = Model::new(config, set, nets, latents, frame_indices, meta.scene_extent)?;
+        let mut model = Model::new(
+            model_config,
+            set,
+            nets,
+            latents,
+            frame_indices,
+            meta.scene_extent,
+        )?;
         model.read_networks(&r)?;
         let optimisers = Optimisers::load(
             &r,
             &model,
+            &config,
             &OptimiserSteps {
                 gaussians: meta.adam_steps,
                 networks: meta.net_adam_steps,
@@ -111,6 +120,7 @@ impl Trainer {
         };
         Ok(Self {
             model,
+            config,
             step: meta.step,
             optimisers,
             stats,

@@ -2,6 +2,7 @@
 //! from its corrected SMPL parameters, and the correction's gradient from the passes' bone and
 //! pose-code gradients.
 
+use crate::config::TrainConfig;
 use crate::data::TrainingData;
 use crate::model::Model;
 use crate::pose::body::{Body, PoseTape, PreparedPose};
@@ -94,12 +95,17 @@ impl CorrectedPoses {
     }
 }
 
-/// The prior's terms for the knots `knots` ([`prior_terms`] with the configured weights), their
+/// The prior's terms for the knots `knots` ([`prior_terms`] with the weights of `config`), their
 /// gradient added to `grad`.
-pub(super) fn add_prior(model: &Model, knots: &[usize], grad: &mut [f32]) -> f32 {
+pub(super) fn add_prior(
+    model: &Model,
+    config: &TrainConfig,
+    knots: &[usize],
+    grad: &mut [f32],
+) -> f32 {
     let prior = CorrectionPrior {
-        zero: model.config.pose_correction_zero_weight,
-        smooth: model.config.pose_correction_smooth_weight,
+        zero: config.pose_correction_zero_weight,
+        smooth: config.pose_correction_smooth_weight,
     };
     let n = CORRECTION_VALUES;
     knots

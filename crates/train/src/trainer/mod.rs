@@ -22,7 +22,7 @@ use crate::config::{BlurModel, TrainConfig};
 use crate::data::TrainingData;
 use crate::density::{DensityStrategy, StepStatistics};
 use crate::init::{initialise, InitConfig};
-use crate::model::Model;
+use crate::model::{Model, ModelConfig};
 use crate::optimisers::Optimisers;
 use crate::pose::posing::ModelGradients;
 use crate::schedule::{correction_rate_scale, exponential_rate};
@@ -43,6 +43,8 @@ pub const CHECKPOINT_FORMAT: &str = "e-sem3dgs-trainer-v1";
 pub struct Trainer {
     /// What is learned.
     pub model: Model,
+    /// The hyper-parameters (the model keeps its own part, [`ModelConfig`]).
+    config: TrainConfig,
     /// Steps taken.
     pub step: usize,
     optimisers: Optimisers,
@@ -85,19 +87,20 @@ impl Trainer {
                 ..InitConfig::default()
             },
         );
-        let mut nets = Model::build_networks(&config, vertices)?;
+        let model_config = ModelConfig::from(&config);
+        let mut nets = Model::build_networks(&model_config, vertices)?;
         warm_up_skinning(&mut nets.skinning, data, &config)?;
         let latents = vec![0.0; data.frames.len() * config.latent_dim];
         let frame_indices = data.frames.iter().map(|f| f.index).collect();
         let model = Model::new(
-            config,
+            model_config,
             init.set,
             nets,
             latents,
             frame_indices,
             extent_of(&init.cube),
         )?;
-        Ok(Self::with_model(model))
+        Ok(Self::with_model(model, config))
     }
 
     /// Refuses a configuration that needs data `data` was not prepared with
@@ -134,12 +137,13 @@ impl Trainer {
         Ok(())
     }
 
-    /// A trainer with fresh optimiser state around `model` (e.g. to fine-tune a saved model).
-    pub fn with_model(model: Model) -> Self {
+    /// A trainer with fresh optimiser state around `model`, built from `config`.
+    fn with_model(model: Model, config: TrainConfig) -> Self {
         Self {
-            optimisers: Optimisers::new(&model),
+            optimisers: Optimisers::new(&model, &config),
             stats: DensityStats::new(model.set.len()),
-            rng: ChaCha8Rng::seed_from_u64(model.config.seed ^ 0x0dde_0000),
+            rng: ChaCha8Rng::seed_from_u64(config.seed ^ 0x0dde_0000),
+            config,
             order: Vec::new(),
             aiap: AiapNeighbours::of(&model),
             model,
@@ -149,7 +153,14 @@ impl Trainer {
 
     /// The hyper-parameters.
     pub fn config(&self) -> &TrainConfig {
-        &self.model.config
+        &self.config
+    }
+
+    /// Turns the sharing of static tiles between an exposure's renders on or off
+    /// ([`TrainConfig::share_static_tiles`]; a speed option, e.g. for measuring a saved run both
+    /// ways). The model is not changed.
+    pub fn set_share_static_tiles(&mut self, share: bool) {
+        self.config.share_static_tiles = share;
     }
 
     /// Runs steps until `self.step == until`, calling `on_step` after each.
@@ -186,7 +197,7 @@ impl Trainer {
         second_latent: Option<(usize, Vec<f32>)>,
         correction_update: Option<(Vec<f32>, Vec<usize>)>,
     ) -> Result<(), TrainError> {
-        let config = &self.model.config;
+        let config = &self.config;
         let step = self.step;
         let mut set_grads = self.model.set.zeros_like();
         set_grads.means = grads.means;
@@ -262,7 +273,7 @@ impl Trainer {
     /// statistics, densify and prune on the schedule (the AIAP neighbourhoods refreshed after),
     /// and the opacity reset.
     fn refine(&mut self, data: &TrainingData, step: &StepStatistics) {
-        let strategy = DensityStrategy::of(&self.model.config, self.model.scene_extent);
+        let strategy = DensityStrategy::of(&self.config, self.model.scene_extent);
         strategy.observe(&mut self.stats, &data.camera, step);
         let changed = strategy.refine(
             self.step + 1,

@@ -74,7 +74,7 @@ impl Trainer {
     /// [`Trainer::refine`]. On a non-finite loss or gradient nothing is updated and
     /// [`TrainError::NonFinite`] is returned.
     pub fn step(&mut self, data: &TrainingData) -> Result<StepReport, TrainError> {
-        let config = self.model.config.clone();
+        let config = self.config.clone();
         Self::check_data(&config, data)?;
         let step = self.step;
         let slot = self.next_slot(data.frames.len());
@@ -270,7 +270,7 @@ impl Trainer {
         // covers), and k + 1's when rendered.
         let mut knots = corrected.map(CorrectedPoses::knots).unwrap_or_default();
         let pose_prior = match corrections.as_mut() {
-            Some(g) => correction::add_prior(model, &knots, g),
+            Some(g) => correction::add_prior(model, config, &knots, g),
             None => 0.0,
         };
         if let (Some(_), Some(c)) = (next, next_corrected) {

@@ -54,7 +54,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut trainer = Trainer::load_checkpoint(&checkpoint, &ctx)
         .with_context(|| format!("loading {}", checkpoint.display()))?;
     if let Some(share) = args.share_static_tiles {
-        trainer.model.config.share_static_tiles = share;
+        trainer.set_share_static_tiles(share);
     }
     let config = trainer.config().clone();
     crate::training::prepare_training_data(&mut ctx, &data, &config)?;

@@ -1,0 +1,47 @@
+//! What shapes a model and how it is posed and rendered: the part of the training options a model
+//! keeps for its whole life. Learning rates, loss weights and schedules stay with the trainer.
+
+use crate::blend::SemanticMode;
+use crate::config::TrainConfig;
+
+/// The model's own settings, fixed when it is built (read from [`TrainConfig`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelConfig {
+    /// Semantic parameterisation: how many logits a Gaussian carries and how they blend.
+    pub semantic: SemanticMode,
+    /// Gaussians with human probability below this skip the human branch (`pose::posing`).
+    pub semantic_gate: f32,
+    /// Per-Gaussian colour-feature length.
+    pub feature_dim: usize,
+    /// Per-frame latent length of the human colour network.
+    pub latent_dim: usize,
+    /// Hidden width of the non-rigid network and of the skinning field.
+    pub deform_hidden: usize,
+    /// Seed of the networks' initial weights.
+    pub seed: u64,
+    /// Background colour (linear RGB) composited behind the Gaussians.
+    pub background: [f32; 3],
+    /// Near clipping plane of the rasterizer (m).
+    pub near_plane: f64,
+    /// The model carries learned per-knot pose corrections.
+    pub pose_correction: bool,
+    /// Training frames per pose-correction knot.
+    pub pose_correction_knot_every: usize,
+}
+
+impl From<&TrainConfig> for ModelConfig {
+    fn from(config: &TrainConfig) -> Self {
+        Self {
+            semantic: config.semantic,
+            semantic_gate: config.semantic_gate,
+            feature_dim: config.feature_dim,
+            latent_dim: config.latent_dim,
+            deform_hidden: config.deform_hidden,
+            seed: config.seed,
+            background: config.background,
+            near_plane: config.near_plane,
+            pose_correction: config.pose_correction,
+            pose_correction_knot_every: config.pose_correction_knot_every,
+        }
+    }
+}
