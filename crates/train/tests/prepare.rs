@@ -6,6 +6,7 @@ mod common;
 use common::{context, exposure_events_config, fixture, tiny_config};
 use train::config::TrainConfig;
 use train::data::{load_dataset, LossNetworks};
+use train::trainer::Trainer;
 use train::TrainError;
 
 #[test]
@@ -71,5 +72,32 @@ fn a_missing_network_is_refused_naming_its_loss() {
             "{err}"
         );
         assert!(err.to_string().contains("network was not given"), "{err}");
+    }
+}
+
+#[test]
+fn a_step_on_data_not_prepared_for_its_configuration_is_refused() {
+    let data = load_dataset(&fixture()).unwrap();
+    let exposure = exposure_events_config(4);
+    let mut poses_only = context();
+    poses_only
+        .enable_exposure(&data, exposure.subframes)
+        .unwrap();
+    let lpips = TrainConfig {
+        lpips_weight: 0.1,
+        ..tiny_config(4)
+    };
+    for (ctx, config, missing) in [
+        (context(), exposure.clone(), "no sub-exposure poses"),
+        (poses_only, exposure, "no events inside exposures"),
+        (context(), lpips, "no LPIPS network"),
+    ] {
+        let mut trainer = Trainer::new(&ctx, config).unwrap();
+        let err = trainer.step(&ctx).unwrap_err();
+        assert!(
+            matches!(err, TrainError::Config(_)) && err.to_string().contains(missing),
+            "{err}"
+        );
+        assert_eq!(trainer.step, 0, "a refused step takes no step");
     }
 }

@@ -13,6 +13,13 @@ use flow::SpyNet;
 use rasterize_cpu::Camera;
 use scene::Split;
 
+/// The refusal of a configuration (`option`) whose supervision (`what`) the data does not hold.
+fn not_prepared(option: &str, what: &str) -> TrainError {
+    TrainError::Config(format!(
+        "{option}, but the training data has no {what} (TrainingData::prepare)"
+    ))
+}
+
 /// One training frame as the loop uses it.
 #[derive(Clone, Debug)]
 pub struct TrainingFrame {
@@ -213,13 +220,32 @@ impl TrainingData {
         Ok(())
     }
 
-    /// The poses training slot `slot` is rendered at: its sub-exposure poses when `exposure` and
-    /// [`TrainingData::enable_exposure`] prepared them, else its mid-exposure pose alone.
-    pub fn poses(&self, slot: usize, exposure: bool) -> &[GivenPose] {
-        match self.exposure_poses.get(slot) {
-            Some(sub) if exposure && !sub.is_empty() => sub,
-            _ => std::slice::from_ref(&self.frames[slot].pose),
+    /// The poses training slot `slot` is rendered at: its sub-exposure poses when `exposure`
+    /// (refused when [`TrainingData::prepare`] did not prepare them), else its mid-exposure pose.
+    pub fn poses(&self, slot: usize, exposure: bool) -> Result<&[GivenPose], TrainError> {
+        if !exposure {
+            return Ok(std::slice::from_ref(&self.frames[slot].pose));
         }
+        match self.exposure_poses.get(slot) {
+            Some(sub) if !sub.is_empty() => Ok(sub),
+            _ => Err(not_prepared("blur_model = exposure", "sub-exposure poses")),
+        }
+    }
+
+    /// C·E per pixel between consecutive sub-exposure times of slot `slot`
+    /// ([`TrainingData::exposure_events`]), refused when [`TrainingData::prepare`] did not count them.
+    pub fn exposure_event_counts(&self, slot: usize) -> Result<&[Option<Vec<f32>>], TrainError> {
+        self.exposure_events
+            .get(slot)
+            .map(Vec::as_slice)
+            .ok_or_else(|| not_prepared("event_pairs = exposure", "events inside exposures"))
+    }
+
+    /// The perceptual loss's network, refused when [`TrainingData::prepare`] did not set it.
+    pub fn lpips_network(&self) -> Result<&lpips::Lpips<f32>, TrainError> {
+        self.lpips
+            .as_ref()
+            .ok_or_else(|| not_prepared("lpips_weight > 0", "LPIPS network"))
     }
 
     /// Number of pixels per channel.

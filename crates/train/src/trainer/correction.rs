@@ -34,7 +34,7 @@ impl CorrectedPoses {
     ) -> Result<Self, TrainError> {
         let (correction, span) = model.training_correction(slot);
         let params: Vec<_> = data
-            .poses(slot, exposure)
+            .poses(slot, exposure)?
             .iter()
             .map(|p| &p.params)
             .collect();

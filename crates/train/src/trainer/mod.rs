@@ -18,7 +18,7 @@ mod terms;
 pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
-use crate::config::{BlurModel, TrainConfig};
+use crate::config::TrainConfig;
 use crate::data::TrainingData;
 use crate::density::{DensityStrategy, StepStatistics};
 use crate::init::{initialise, InitConfig};
@@ -101,40 +101,6 @@ impl Trainer {
             extent_of(&init.cube),
         )?;
         Ok(Self::with_model(model, config))
-    }
-
-    /// Refuses a configuration that needs data `data` was not prepared with
-    /// ([`TrainingData::prepare`] prepares all of it; this guards data prepared step by step or
-    /// for another configuration): the exposure model
-    /// without sub-exposure poses ([`TrainingData::enable_exposure`]), events inside exposures
-    /// without their counts ([`TrainingData::enable_exposure_events`]), the perceptual loss without
-    /// its network ([`TrainingData::enable_lpips`]).
-    pub fn check_data(config: &TrainConfig, data: &TrainingData) -> Result<(), TrainError> {
-        if config.blur_model == BlurModel::Exposure && data.exposure_poses.is_empty() {
-            return Err(TrainError::Config(
-                "blur_model = exposure, but the training data has no sub-exposure poses \
-                 (TrainingData::prepare)"
-                    .into(),
-            ));
-        }
-        if config.event_loss
-            && config.event_pairs == crate::config::EventPairs::Exposure
-            && data.exposure_events.is_empty()
-        {
-            return Err(TrainError::Config(
-                "event_pairs = exposure, but the training data has no events inside exposures \
-                 (TrainingData::prepare)"
-                    .into(),
-            ));
-        }
-        if config.lpips_weight > 0.0 && data.lpips.is_none() {
-            return Err(TrainError::Config(
-                "lpips_weight > 0, but the training data has no LPIPS network \
-                 (TrainingData::prepare)"
-                    .into(),
-            ));
-        }
-        Ok(())
     }
 
     /// A trainer with fresh optimiser state around `model`, built from `config`.

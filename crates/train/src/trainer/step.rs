@@ -8,7 +8,9 @@ use super::terms::{
     add_aiap_canonical, aiap_terms, pair_terms, skinning_term, PairSupervision, PairTerms,
 };
 use super::{add_to, all_finite, StageTimes, StepReport, Trainer};
-use crate::config::{BlurModel, DensityGradient, ExposureNetworks, ExposurePairs, TrainConfig};
+use crate::config::{
+    BlurModel, DensityGradient, EventPairs, ExposureNetworks, ExposurePairs, TrainConfig,
+};
 use crate::data::TrainingData;
 use crate::density::{add_ndc_norms, StepStatistics};
 use crate::eval::psnr;
@@ -75,7 +77,6 @@ impl Trainer {
     /// [`TrainError::NonFinite`] is returned.
     pub fn step(&mut self, data: &TrainingData) -> Result<StepReport, TrainError> {
         let config = self.config.clone();
-        Self::check_data(&config, data)?;
         let step = self.step;
         let slot = self.next_slot(data.frames.len());
         let frame = &data.frames[slot];
@@ -454,7 +455,7 @@ fn frame_passes<'a>(
     let poses: Vec<_> = match corrected {
         Some(c) => c.prepared.iter().collect(),
         None => data
-            .poses(slot, exposure)
+            .poses(slot, exposure)?
             .iter()
             .map(|p| &p.prepared)
             .collect(),
@@ -497,15 +498,18 @@ fn frame_losses(
         width,
     };
     let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
-    let events = match data.exposure_events.get(slot) {
-        Some(expected) if config.event_loss && passes.len() > 1 => Some(ExposureEvents {
-            expected,
+    let exposure_events =
+        config.event_loss && config.event_pairs == EventPairs::Exposure && passes.len() > 1;
+    let events = if exposure_events {
+        Some(ExposureEvents {
+            expected: data.exposure_event_counts(slot)?,
             weight: config.event_weight,
             penalty: config.event_penalty(),
             log_eps: config.event_log_eps,
             all_pairs: config.exposure_pairs == ExposurePairs::All,
-        }),
-        _ => None,
+        })
+    } else {
+        None
     };
     let photo = exposure_loss(
         &renders,
@@ -519,9 +523,9 @@ fn frame_losses(
     let mut d_images = photo.d_renders;
     times.loss = t0.elapsed().as_secs_f64();
     let t0 = Instant::now();
-    let lpips = match &data.lpips {
-        Some(net) if config.lpips_weight > 0.0 => perceptual_term(
-            net,
+    let lpips = if config.lpips_weight > 0.0 {
+        perceptual_term(
+            data.lpips_network()?,
             &photo.prediction,
             &frame.image,
             height,
@@ -529,8 +533,9 @@ fn frame_losses(
             config.lpips_weight,
             &mut d_images,
             data.grey,
-        )?,
-        _ => 0.0,
+        )?
+    } else {
+        0.0
     };
     times.lpips = t0.elapsed().as_secs_f64();
     Ok(FrameLosses {
