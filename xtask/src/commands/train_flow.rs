@@ -1,30 +1,21 @@
-//! `cargo xtask train-flow`: trains SPyNet-style weights on procedural FlyingChairs-style pairs and
-//! writes them; deterministic from the seed. Two phases:
-//!
-//! 1. **Pre-training** of a single level on small pairs of pure background translation (no
-//!    brightness jitter, textures resolved at that size) with a squared-error loss, from the
-//!    motion-aware initialisation ([`flow::SpyNet::random_init`]). This is the phase that leaves the
-//!    zero-flow plateau every earlier recipe stayed on (`docs/notes/benchmarks-history.md`, flow, "Leaving the plateau").
-//! 2. The pre-trained level copied into every level ([`flow::train::replicate_level`]) and each level
-//!    fine-tuned coarse to fine on the full generator at `--size` (lower levels frozen).
-//! 3. `--joint-steps`: all levels trained together on a multi-scale loss
-//!    ([`flow::train::Trainer::step_joint`]), gradients flowing through the whole pyramid; the
-//!    weights are validated every `--report-every` steps and the best ones kept.
+//! `cargo xtask train-flow`: trains SPyNet-style weights on procedural FlyingChairs-style pairs by
+//! the recipe of `flow::train::recipe` (pre-training of one level, fine-tuning level by level,
+//! joint training), deterministic from the seed, and writes them. The history of the recipe is in
+//! `docs/notes/benchmarks-history.md` (flow, "Leaving the plateau").
 //!
 //! With `--scene-pairs`, frame pairs rendered by the synthetic benchmark's generator (other seeds
 //! than the benchmark's; `data-fixtures/flow/make-scene-pairs.sh`) are mixed into the procedural
 //! pairs, their static pixels down-weighted (`--scene-static-weight`), and `--scene-validation`
 //! scenes replace the procedural validation pairs with the EPE over moving pixels — the flow loss's
-//! mask.
+//! mask. Loading them needs the scene format, which is why that part lives here.
 //!
-//! Reports the held-out EPE against the zero-flow baseline; the weights are written after every
-//! phase and level, so a stopped run leaves its latest weights behind.
+//! Reports the held-out EPE against the zero-flow baseline; the best weights are written as they
+//! come, so a stopped run leaves its latest weights behind.
 
 use anyhow::{Context, Result};
 use flow::synthetic::PairConfig;
-use flow::train::{
-    evaluate, evaluate_pairs, replicate_level, ExtraPairs, Optimizer, TrainConfig, Trainer,
-};
+use flow::train::recipe::{JointPhase, Pretraining, Recipe, RecipeObserver};
+use flow::train::{evaluate, evaluate_pairs, ExtraPairs, Optimizer};
 use std::path::{Path, PathBuf};
 
 /// Optimiser choice on the command line.
@@ -278,31 +269,56 @@ fn save(net: &flow::SpyNet<f32>, out: &Path) -> Result<()> {
     flow::save_safetensors(net, out).with_context(|| format!("writing {}", out.display()))
 }
 
-/// Appends `value` to the window `recent`, keeps its last `len` values and returns their mean.
-fn running_mean(recent: &mut Vec<f64>, value: f64, len: usize) -> f64 {
-    recent.push(value);
-    if recent.len() > len {
-        recent.remove(0);
-    }
-    recent.iter().sum::<f64>() / recent.len() as f64
+/// Shows a run of the recipe: a progress bar per phase, report lines above it, the best weights
+/// written to `out` as they come.
+struct Console<'a> {
+    out: &'a Path,
+    bar: Option<indicatif::ProgressBar>,
+    started: std::time::Instant,
+    /// Seconds from the start to the end of the pre-training (the first fine-tuning step).
+    pretrain_seconds: f64,
 }
 
-/// Runs the command.
-pub fn run(args: Args) -> Result<()> {
-    let optimizer = match args.optimizer {
-        OptimizerArg::Adam => Optimizer::Adam,
-        OptimizerArg::Sgd => Optimizer::Sgd {
-            momentum: args.momentum,
-        },
-    };
-    let held_out = PairConfig {
-        size: args.size,
-        ..PairConfig::default()
-    };
-    let pairs = PairConfig {
-        static_background: args.static_background,
-        ..held_out
-    };
+impl RecipeObserver for Console<'_> {
+    type Error = anyhow::Error;
+
+    fn phase_started(&mut self, phase: &'static str, steps: u64) -> Result<()> {
+        if phase == "train" {
+            self.pretrain_seconds = self.started.elapsed().as_secs_f64();
+        }
+        self.bar = Some(crate::common::progress_bar(steps, phase)?);
+        Ok(())
+    }
+
+    fn stepped(&mut self, status: String) {
+        if let Some(bar) = &self.bar {
+            bar.set_message(status);
+            bar.inc(1);
+        }
+    }
+
+    fn phase_finished(&mut self, phase: &'static str) {
+        match self.bar.take() {
+            Some(bar) if phase == "pretrain" => bar.finish_and_clear(),
+            Some(bar) => bar.finish(),
+            None => {}
+        }
+    }
+
+    fn report(&mut self, line: String) {
+        match &self.bar {
+            Some(bar) => bar.suspend(|| eprintln!("{line}")),
+            None => eprintln!("{line}"),
+        }
+    }
+
+    fn weights(&mut self, net: &flow::SpyNet<f32>) -> Result<()> {
+        save(net, self.out)
+    }
+}
+
+/// The recipe the arguments describe, with its scene pairs loaded.
+fn recipe_of(args: &Args) -> Result<Recipe> {
     if !(args.scene_static_weight >= 0.0 && args.scene_static_weight.is_finite()) {
         anyhow::bail!(
             "--scene-static-weight {} must be finite and non-negative",
@@ -338,201 +354,117 @@ pub fn run(args: Args) -> Result<()> {
         static_weight: 0.0,
         valid_only: true,
     };
-    let scene_validation =
-        load_all_scene_pairs(&args.scene_validation, args.size, validation_weights)?;
-    let config = |levels: usize, pairs: PairConfig, batch: usize, lr: f64| TrainConfig {
-        levels,
-        pairs,
-        batch,
-        lr,
-        optimizer,
+    Ok(Recipe {
+        levels: args.levels,
+        size: args.size,
+        pretraining: Pretraining {
+            steps: args.pretrain_steps,
+            size: args.pretrain_size,
+            max_translation: args.pretrain_max_translation,
+            batch: args.pretrain_batch,
+            lr: args.pretrain_lr,
+        },
+        level_steps: (0..args.levels)
+            .map(|l| *args.steps.get(l).or(args.steps.last()).unwrap_or(&0))
+            .collect(),
+        batch: args.batch,
+        lr: args.lr,
+        joint: JointPhase {
+            steps: args.joint_steps,
+            batch: args.joint_batch,
+            lr: args.joint_lr,
+            cosine: args.joint_cosine,
+        },
+        optimizer: match args.optimizer {
+            OptimizerArg::Adam => Optimizer::Adam,
+            OptimizerArg::Sgd => Optimizer::Sgd {
+                momentum: args.momentum,
+            },
+        },
         warmup_steps: args.warmup_steps,
         mse_steps: args.mse_steps,
         output_init_gain: args.output_init_gain,
         paired_input_init: !args.plain_init,
         seed: args.seed,
-        distinct_pairs: None,
-        decay_steps: 0,
-        extra_pairs: extra_pairs.clone(),
+        static_background: args.static_background,
+        extra_pairs,
+        report_every: args.report_every,
+        eval_seed: args.eval_seed,
+        validation_pairs: args.validation_pairs,
+        validation_set: load_all_scene_pairs(
+            &args.scene_validation,
+            args.size,
+            validation_weights,
+        )?,
+    })
+}
+
+/// The weights `--init` names, checked against `--levels`.
+fn initial_weights(args: &Args) -> Result<Option<flow::SpyNet<f32>>> {
+    let Some(p) = &args.init else {
+        return Ok(None);
     };
-    let start = std::time::Instant::now();
-    let log = |bar: &indicatif::ProgressBar, line: String| bar.suspend(|| eprintln!("{line}"));
-    let net = match &args.init {
-        Some(p) => {
-            let net =
-                flow::load_safetensors(p).with_context(|| format!("loading {}", p.display()))?;
-            if net.num_levels() != args.levels {
-                anyhow::bail!(
-                    "--init {} has {} pyramid levels but --levels is {}",
-                    p.display(),
-                    net.num_levels(),
-                    args.levels
-                );
-            }
-            net
-        }
-        None if args.pretrain_steps > 0 => {
-            let pre = PairConfig {
-                size: args.pretrain_size,
-                max_translation: args.pretrain_max_translation,
-                max_rotation: 0.0,
-                max_scale: 0.0,
-                max_foreground_layers: 0,
-                brightness_jitter: 0.0,
-                ..PairConfig::default()
-            };
-            let mut t = Trainer::new(config(1, pre, args.pretrain_batch, args.pretrain_lr));
-            let bar = crate::common::progress_bar(args.pretrain_steps as u64, "pretrain")?;
-            let mut recent = Vec::new();
-            for s in 0..args.pretrain_steps {
-                let r = t.step_report(0)?;
-                let mean = running_mean(&mut recent, r.epe, 50);
-                bar.set_message(format!("pre-training epe {mean:.3}"));
-                bar.inc(1);
-                if args.report_every > 0 && (s + 1) % args.report_every == 0 {
-                    let (e, z) = evaluate(&t.net, args.eval_seed, 20, &pre)?;
-                    let live: Vec<String> = r.live_relu.iter().map(|v| format!("{v:.2}")).collect();
-                    log(
-                        &bar,
-                        format!(
-                            "pre-training step {}: last-50 EPE {mean:.3}, held-out {e:.3} / zero {z:.3} = {:.3}, live ReLUs [{}], {:.0} s",
-                            s + 1,
-                            e / z,
-                            live.join(" "),
-                            start.elapsed().as_secs_f64()
-                        ),
-                    );
-                    save(&replicate_level(&t.net, 0, args.levels), &args.out)?;
-                }
-            }
-            bar.finish_and_clear();
-            let net = replicate_level(&t.net, 0, args.levels);
-            save(&net, &args.out)?;
-            net
-        }
-        None => flow::SpyNet::random_init(
-            args.levels,
-            args.seed,
-            args.output_init_gain,
-            !args.plain_init,
-        ),
-    };
-    let pretrain_s = start.elapsed().as_secs_f64();
-    let mut trainer = Trainer::from_net(net, config(args.levels, pairs, args.batch, args.lr));
-    let steps: Vec<usize> = (0..args.levels)
-        .map(|l| *args.steps.get(l).or(args.steps.last()).unwrap_or(&0))
-        .collect();
-    let bar = crate::common::progress_bar(steps.iter().sum::<usize>() as u64, "train")?;
-    let validation = |net: &flow::SpyNet<f32>| -> Result<f64> {
-        if scene_validation.is_empty() {
-            Ok(evaluate(net, args.eval_seed + 1, args.validation_pairs, &pairs)?.0)
-        } else {
-            Ok(evaluate_pairs(net, &scene_validation)?.0)
-        }
-    };
-    for (level, &n) in steps.iter().enumerate() {
-        let before = (n > 0 && args.validation_pairs > 0)
-            .then(|| {
-                Ok::<_, anyhow::Error>((
-                    trainer.net.levels[level].clone(),
-                    validation(&trainer.net)?,
-                ))
-            })
-            .transpose()?;
-        let mut recent = Vec::new();
-        for _ in 0..n {
-            let epe = trainer.step(level)?;
-            let mean = running_mean(&mut recent, epe, 20);
-            bar.set_message(format!("level {level} epe {mean:.3}"));
-            bar.inc(1);
-        }
-        if n > 0 {
-            let mut verdict = String::new();
-            if let Some((old, old_epe)) = before {
-                let new_epe = validation(&trainer.net)?;
-                verdict = format!(", validation EPE {old_epe:.3} -> {new_epe:.3} px");
-                if new_epe >= old_epe {
-                    trainer.net.levels[level] = old;
-                    verdict += " (fine-tuning discarded)";
-                }
-            }
-            save(&trainer.net, &args.out)?;
-            log(
-                &bar,
-                format!(
-                    "level {level}: {n} steps, last-20 mean EPE {:.3} (level pixels){verdict}, {:.0} s",
-                    recent.iter().sum::<f64>() / recent.len().max(1) as f64,
-                    start.elapsed().as_secs_f64()
-                ),
-            );
-        }
-    }
-    bar.finish();
-    if args.joint_steps > 0 {
-        let decay_steps = if args.joint_cosine {
-            args.joint_steps
-        } else {
-            0
-        };
-        let mut joint = Trainer::from_net(
-            trainer.net.clone(),
-            TrainConfig {
-                decay_steps,
-                ..config(args.levels, pairs, args.joint_batch, args.joint_lr)
-            },
+    let net = flow::load_safetensors(p).with_context(|| format!("loading {}", p.display()))?;
+    if net.num_levels() != args.levels {
+        anyhow::bail!(
+            "--init {} has {} pyramid levels but --levels is {}",
+            p.display(),
+            net.num_levels(),
+            args.levels
         );
-        let bar = crate::common::progress_bar(args.joint_steps as u64, "joint")?;
-        let mut best = validation(&joint.net)?;
-        log(
-            &bar,
-            format!("joint phase: validation EPE {best:.3} px at the start"),
-        );
-        let mut recent = Vec::new();
-        for s in 0..args.joint_steps {
-            let r = joint.step_joint()?;
-            let mean = running_mean(&mut recent, r.epe, 50);
-            bar.set_message(format!("joint epe {mean:.3}"));
-            bar.inc(1);
-            let last = s + 1 == args.joint_steps;
-            if (args.report_every > 0 && (s + 1) % args.report_every == 0) || last {
-                // Without validation pairs every report keeps the latest weights.
-                let v = validation(&joint.net)?;
-                let kept = args.validation_pairs == 0 || v < best;
-                if kept {
-                    best = v;
-                    trainer.net = joint.net.clone();
-                    save(&trainer.net, &args.out)?;
-                }
-                log(
-                    &bar,
-                    format!(
-                        "joint step {}: last-50 EPE {mean:.3}, validation {v:.3} px{}, {:.0} s",
-                        s + 1,
-                        if kept { " (best, saved)" } else { "" },
-                        start.elapsed().as_secs_f64()
-                    ),
-                );
-            }
-        }
-        bar.finish();
     }
-    let train_s = start.elapsed().as_secs_f64();
-    save(&trainer.net, &args.out)?;
-    let (epe, zero) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &held_out)?;
-    let (epe_st, zero_st) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &pairs)?;
+    Ok(Some(net))
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<()> {
+    let recipe = recipe_of(&args)?;
+    let init = initial_weights(&args)?;
+    let mut console = Console {
+        out: &args.out,
+        bar: None,
+        started: std::time::Instant::now(),
+        pretrain_seconds: 0.0,
+    };
+    let net = recipe.run(init, &mut console)?;
+    let (pretrain_s, train_s) = (
+        console.pretrain_seconds,
+        console.started.elapsed().as_secs_f64(),
+    );
+    save(&net, &args.out)?;
+    report(&args, &recipe, &net, pretrain_s, train_s)
+}
+
+/// Prints the run's settings and its held-out figures as one JSON object.
+fn report(
+    args: &Args,
+    recipe: &Recipe,
+    net: &flow::SpyNet<f32>,
+    pretrain_s: f64,
+    train_s: f64,
+) -> Result<()> {
+    let held_out = PairConfig {
+        size: args.size,
+        ..PairConfig::default()
+    };
+    let pairs = recipe.pairs();
+    let scene_validation = &recipe.validation_set;
+    let (epe, zero) = evaluate(net, args.eval_seed, args.eval_pairs, &held_out)?;
+    let (epe_st, zero_st) = evaluate(net, args.eval_seed, args.eval_pairs, &pairs)?;
     let still = PairConfig {
         brightness_jitter: 0.0,
         ..held_out
     };
-    let (epe_nj, zero_nj) = evaluate(&trainer.net, args.eval_seed, args.eval_pairs, &still)?;
+    let (epe_nj, zero_nj) = evaluate(net, args.eval_seed, args.eval_pairs, &still)?;
     // `null` in the report without `--scene-validation` (rather than a meaningless 0).
     let (epe_sv, zero_sv) = if scene_validation.is_empty() {
         (None, None)
     } else {
-        let (e, z) = evaluate_pairs(&trainer.net, &scene_validation)?;
+        let (e, z) = evaluate_pairs(net, scene_validation)?;
         (Some(e), Some(z))
     };
     let ratio_sv = epe_sv.zip(zero_sv).map(|(e, z)| e / z.max(1e-12));
+    let steps = &recipe.level_steps;
     println!(
         "{}",
         serde_json::json!({

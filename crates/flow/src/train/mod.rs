@@ -10,6 +10,8 @@
 //! composition the optimiser sees (partial forward, loss, last-level backward) is covered, not only
 //! the individual ops.
 
+pub mod recipe;
+
 use crate::synthetic::{average_epe, generate_pair, Pair, PairConfig};
 use crate::{FlowError, SpyNet};
 use nn::{avg_pool2x2_forward, pooled_size, Adam, AdamConfig, Real};
