@@ -1,4 +1,4 @@
-//! The typed contents of `scene.json` (format version 1) and the writer.
+//! The typed contents of `scene.json` (format versions 1 and 2) and the writer.
 //!
 //! Conventions (DESIGN.md §3): metres, seconds, radians; OpenCV pinhole camera (x right, y down,
 //! z forward, pixel (i, j) centred at (i + 0.5, j + 0.5)); SMPL pose as 24 axis-angle triples with
@@ -10,8 +10,12 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::error::{Result, SceneError};
 
-/// The format version this crate reads and writes.
+/// The format version of a scene filmed by one fixed camera: what this crate writes unless a frame
+/// has a camera pose of its own.
 pub const FORMAT_VERSION: u32 = 1;
+/// The format version of a scene whose frames may carry their own camera pose (a moving camera,
+/// [`Frame::world_to_camera`]); it reads every version-1 scene unchanged.
+pub const FORMAT_VERSION_MOVING_CAMERA: u32 = 2;
 /// Name of the description file inside a scene directory.
 pub const SCENE_FILE: &str = "scene.json";
 /// Number of SMPL joints (pose entries per frame).
@@ -21,9 +25,10 @@ pub const NUM_JOINTS: usize = 24;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
-    /// Always [`FORMAT_VERSION`].
+    /// [`FORMAT_VERSION`], or [`FORMAT_VERSION_MOVING_CAMERA`] when a frame has its own camera
+    /// pose ([`Scene::format_version_needed`]).
     pub format_version: u32,
-    /// The fixed camera.
+    /// The camera: its intrinsics, and its pose for every frame without one of its own.
     #[serde(with = "camera_json")]
     pub camera: Camera,
     /// The body model and its shape.
@@ -116,6 +121,25 @@ pub mod camera_json {
         ) -> Result<[[f64; 4]; 4], D::Error> {
             let [r0, r1, r2] = <[[f64; 4]; 3]>::deserialize(d)?;
             Ok([r0, r1, r2, [0.0, 0.0, 0.0, 1.0]])
+        }
+    }
+
+    /// An optional world-to-camera matrix as its top 3 rows ([`super::Frame::world_to_camera`]).
+    pub(crate) mod optional_rigid_rows {
+        use super::{Deserialize, Deserializer, Serialize, Serializer};
+
+        pub(crate) fn serialize<S: Serializer>(
+            m: &Option<[[f64; 4]; 4]>,
+            s: S,
+        ) -> Result<S::Ok, S::Error> {
+            m.map(|m| [m[0], m[1], m[2]]).serialize(s)
+        }
+
+        pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+            d: D,
+        ) -> Result<Option<[[f64; 4]; 4]>, D::Error> {
+            let rows = Option::<[[f64; 4]; 3]>::deserialize(d)?;
+            Ok(rows.map(|[r0, r1, r2]| [r0, r1, r2, [0.0, 0.0, 0.0, 1.0]]))
         }
     }
 }
@@ -270,6 +294,15 @@ pub struct Frame {
     /// (auto-exposure); absent = [`Scene::exposure_s`]. Use [`Scene::exposure_of`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exposure_s: Option<f64>,
+    /// The camera's pose at this frame's mid exposure when the camera moves (format version 2):
+    /// `p_cam = R · p_world + t`, stored as the 3 rows of `[R | t]` like the scene camera's (4×4 in
+    /// memory, last row `[0, 0, 0, 1]`); absent = the scene camera's pose. Use [`Scene::camera_of`].
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "camera_json::optional_rigid_rows"
+    )]
+    pub world_to_camera: Option<[[f64; 4]; 4]>,
     /// Train or test.
     pub split: Split,
 }
@@ -292,6 +325,34 @@ impl Scene {
         (0..self.frames.len())
             .filter(|&i| self.frames[i].split == split)
             .collect()
+    }
+
+    /// The camera of frame `k` at mid exposure: the scene camera's intrinsics with the frame's own
+    /// pose when it has one.
+    pub fn camera_of(&self, k: usize) -> Camera {
+        let mut camera = self.camera.clone();
+        if let Some(pose) = self.frames.get(k).and_then(|f| f.world_to_camera) {
+            camera.world_to_camera = pose;
+        }
+        camera
+    }
+
+    /// True when some frame has a camera pose of its own that differs from the scene camera's.
+    pub fn camera_moves(&self) -> bool {
+        self.frames.iter().any(|f| {
+            f.world_to_camera
+                .is_some_and(|pose| pose != self.camera.world_to_camera)
+        })
+    }
+
+    /// The lowest format version that can describe this scene: [`FORMAT_VERSION_MOVING_CAMERA`]
+    /// when a frame has its own camera pose, else [`FORMAT_VERSION`].
+    pub fn format_version_needed(&self) -> u32 {
+        if self.frames.iter().any(|f| f.world_to_camera.is_some()) {
+            FORMAT_VERSION_MOVING_CAMERA
+        } else {
+            FORMAT_VERSION
+        }
     }
 
     /// The exposure of frame `k` (seconds): its own `exposure_s`, else the scene's.

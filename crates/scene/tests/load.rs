@@ -6,6 +6,7 @@ use std::path::Path;
 use scene::{
     read_mask, read_rgb, write_mask, write_rgb, BodySpec, Camera, FlowKind, FlowRef, Frame,
     ImageEncoding, Rgb, Scene, SceneError, Split, Transfer, FORMAT_VERSION,
+    FORMAT_VERSION_MOVING_CAMERA,
 };
 
 const W: u32 = 6;
@@ -53,6 +54,7 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
             index: k as u32,
             time_s: k as f64 / 30.0,
             exposure_s: None,
+            world_to_camera: None,
             image,
             sharp: None,
             mask: Some(mask),
@@ -290,6 +292,53 @@ fn event_files_span_from_their_frame_to_the_next_and_the_last_to_the_end() {
     let err = s.write(tmp.path()).unwrap_err().to_string();
     assert!(
         err.contains("events_recorded_s") && err.contains("after the last"),
+        "{err}"
+    );
+}
+
+/// Format version 2: frames at their own camera poses round-trip, a version-1 scene reads as
+/// before, and a per-frame pose is refused in version 1 or when it is not a rotation.
+#[test]
+fn per_frame_camera_poses_need_version_2_and_a_rotation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut s = make_scene(tmp.path(), 3);
+    assert!(!s.camera_moves());
+    assert_eq!(s.format_version_needed(), FORMAT_VERSION);
+    assert_eq!(s.camera_of(1), s.camera);
+    let mut moved = s.camera.world_to_camera;
+    moved[0][3] += 0.05; // 5 cm to the side
+    s.frames[1].world_to_camera = Some(moved);
+    assert!(s.camera_moves());
+    assert_eq!(s.format_version_needed(), FORMAT_VERSION_MOVING_CAMERA);
+    assert_eq!(s.camera_of(1).world_to_camera, moved);
+    assert_eq!(s.camera_of(2), s.camera);
+    let err = s.write(tmp.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("frames[1].world_to_camera") && err.contains("format_version 2"),
+        "{err}"
+    );
+    s.format_version = FORMAT_VERSION_MOVING_CAMERA;
+    s.write(tmp.path()).unwrap();
+    assert_eq!(scene::load(tmp.path()).unwrap(), s);
+    let text = std::fs::read_to_string(tmp.path().join("scene.json")).unwrap();
+    assert_eq!(
+        text.matches("world_to_camera").count(),
+        2,
+        "the scene's and frame 1's"
+    );
+    // Not a rotation; and an unknown version.
+    let path = tmp.path().join("scene.json");
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["frames"][1]["world_to_camera"][0][0] = serde_json::json!(2.0);
+    v["format_version"] = serde_json::json!(3);
+    std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+    let err = scene::load(tmp.path()).unwrap_err().to_string();
+    assert!(err.contains("format_version: 3 is not supported"), "{err}");
+    v["format_version"] = serde_json::json!(2);
+    std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+    let err = scene::load(tmp.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("frames[1].world_to_camera") && err.contains("not a rotation"),
         "{err}"
     );
 }

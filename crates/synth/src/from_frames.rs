@@ -263,6 +263,7 @@ pub fn write_scene_from_frames(
                 index: j as u32,
                 time_s: time_of(j) as f64 * 1e-6,
                 exposure_s: None,
+                world_to_camera: None,
                 image: format!("images/{j:06}.png"),
                 sharp: None,
                 mask: None,

@@ -609,6 +609,7 @@ pub fn generate_with_body(
             index: k as u32,
             time_s: tk,
             exposure_s: None,
+            world_to_camera: None,
             image,
             sharp: Some(sharp_rel),
             mask: Some(mask_rel),

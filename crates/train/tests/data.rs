@@ -1,4 +1,4 @@
-//! Loading scene-format-v1 directories into training frames, and the errors for broken ones.
+//! Loading scene directories into training frames, and the errors for broken ones.
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns may panic
 
@@ -29,6 +29,7 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
             index: k as u32,
             time_s: k as f64 / 30.0,
             exposure_s: None,
+            world_to_camera: None,
             image: rel,
             sharp: None,
             mask: Some(mrel),
@@ -101,4 +102,26 @@ fn a_missing_image_is_reported_with_its_path() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("0001.png"), "{err}");
+}
+
+#[test]
+fn a_moving_camera_is_refused_naming_the_frame_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = write_scene(dir.path(), 3);
+    // Frame 2 at the scene camera's own pose: still a fixed camera.
+    s.format_version = scene::FORMAT_VERSION_MOVING_CAMERA;
+    s.frames[2].world_to_camera = Some(s.camera.world_to_camera);
+    s.write(dir.path()).unwrap();
+    assert!(train::data::load_dataset(dir.path()).is_ok());
+    let mut moved = s.camera.world_to_camera;
+    moved[1][3] = 0.02;
+    s.frames[1].world_to_camera = Some(moved);
+    s.write(dir.path()).unwrap();
+    let err = train::data::load_dataset(dir.path())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("scene.json: frames[1].world_to_camera") && err.contains("one fixed camera"),
+        "{err}"
+    );
 }

@@ -16,7 +16,7 @@ use serde_json::{Map, Value};
 mod files;
 
 use crate::error::{Problem, Result, SceneError};
-use crate::types::{Scene, FORMAT_VERSION, NUM_JOINTS, SCENE_FILE};
+use crate::types::{Scene, FORMAT_VERSION, FORMAT_VERSION_MOVING_CAMERA, NUM_JOINTS, SCENE_FILE};
 
 /// Largest accepted image side (pixels).
 pub const MAX_SIDE: u64 = 65_536;
@@ -273,14 +273,17 @@ impl Checker<'_> {
                 }
             }
         }
-        if let Some(fv) = m.get("format_version") {
-            if let Some(x) = self.uint(fv, "format_version", u64::from(u32::MAX)) {
-                if x != u64::from(FORMAT_VERSION) {
-                    self.bad(
-                        "format_version",
-                        format!("{x} is not supported (this reader knows {FORMAT_VERSION})"),
-                    );
-                }
+        let version = m
+            .get("format_version")
+            .and_then(|fv| self.uint(fv, "format_version", u64::from(u32::MAX)));
+        if let Some(x) = version {
+            if x != u64::from(FORMAT_VERSION) && x != u64::from(FORMAT_VERSION_MOVING_CAMERA) {
+                self.bad(
+                    "format_version",
+                    format!(
+                        "{x} is not supported (this reader knows {FORMAT_VERSION} and {FORMAT_VERSION_MOVING_CAMERA})"
+                    ),
+                );
             }
         }
         let size = m.get("camera").and_then(|c| self.camera(c));
@@ -347,7 +350,8 @@ impl Checker<'_> {
         }
         if let Some(frames) = m.get("frames") {
             let max_exposure = fps.filter(|f| *f > 0.0).map(|f| 1.0 / f);
-            self.frames(frames, size, bits, grey, max_exposure);
+            let moving_camera = version == Some(u64::from(FORMAT_VERSION_MOVING_CAMERA));
+            self.frames(frames, size, bits, grey, max_exposure, moving_camera);
         }
     }
 
@@ -434,6 +438,7 @@ impl Checker<'_> {
         bits: Option<u8>,
         grey: bool,
         max_exposure: Option<f64>,
+        moving_camera: bool,
     ) {
         let Some(a) = v.as_array() else {
             self.bad(
@@ -455,10 +460,28 @@ impl Checker<'_> {
                 f,
                 &p,
                 &["index", "time_s", "image", "pose", "transl", "split"],
-                &["sharp", "mask", "flow_to_next", "events", "exposure_s"],
+                &[
+                    "sharp",
+                    "mask",
+                    "flow_to_next",
+                    "events",
+                    "exposure_s",
+                    "world_to_camera",
+                ],
             ) else {
                 continue;
             };
+            if let Some(rt) = m.get("world_to_camera") {
+                let path = format!("{p}.world_to_camera");
+                if moving_camera {
+                    self.rigid(rt, &path);
+                } else {
+                    self.bad(
+                        &path,
+                        format!("a camera pose per frame needs format_version {FORMAT_VERSION_MOVING_CAMERA}"),
+                    );
+                }
+            }
             if let Some(e) = m
                 .get("exposure_s")
                 .and_then(|x| self.num(x, &format!("{p}.exposure_s")))

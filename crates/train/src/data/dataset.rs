@@ -67,10 +67,20 @@ impl Dataset {
     }
 }
 
-/// Loads and validates `dir` (see `scene::load`) and decodes every frame.
+/// Loads and validates `dir` (see `scene::load`) and decodes every frame. A scene whose camera
+/// moves (format version 2 with frames at their own camera poses) is refused: the method trains
+/// with one fixed camera.
 pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
     let scene = scene::load(dir)?;
     scene.camera.validate()?;
+    if let Some(k) = (0..scene.frames.len()).find(|&k| scene.camera_of(k) != scene.camera) {
+        return Err(TrainError::Config(format!(
+            "{}: frames[{k}].world_to_camera: the camera moves (frame {} is filmed from a pose of its own); \
+             this version reconstructs scenes filmed by one fixed camera",
+            dir.join(scene::SCENE_FILE).display(),
+            scene.frames[k].index
+        )));
+    }
     let camera = scene.camera.clone();
     let (w, h) = (scene.camera.width, scene.camera.height);
     let mut frames = Vec::with_capacity(scene.frames.len());

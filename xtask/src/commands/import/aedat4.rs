@@ -247,6 +247,7 @@ pub fn run(args: Args) -> Result<()> {
             index: k as u32,
             time_s: mid_us[k] as f64 * 1e-6,
             exposure_s: ((exposures[k] - median).abs() > 0.5e-6).then_some(exposures[k]),
+            world_to_camera: None,
             image,
             sharp: None,
             mask,
