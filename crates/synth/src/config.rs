@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::camera_motion::CameraMotion;
 use crate::error::{Result, SynthError};
 use crate::motion::Speed;
 use crate::pose_error::PoseError;
@@ -104,6 +105,10 @@ pub struct SynthConfig {
     /// settings without it keep their bytes. Never changes what is rendered.
     #[serde(default, skip_serializing_if = "PoseError::is_off")]
     pub pose_error: PoseError,
+    /// How the camera moves ([`CameraMotion`]); static by default, and then not serialised, so
+    /// settings without it keep their bytes.
+    #[serde(default, skip_serializing_if = "CameraMotion::is_static")]
+    pub camera_motion: CameraMotion,
 }
 
 impl SynthConfig {
@@ -132,6 +137,7 @@ impl SynthConfig {
             event_flow: true,
             body: "builtin:makehuman".into(),
             pose_error: PoseError::OFF,
+            camera_motion: CameraMotion::Static,
         };
         match p {
             Preset::Tiny => Self {

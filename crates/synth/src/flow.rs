@@ -4,7 +4,8 @@
 //! `P = Σ bᵢ Vᵢ(t_k)` (triangle and perspective-correct barycentrics from the G-buffer). The same
 //! material point at frame k+1 is `Σ bᵢ Vᵢ(t_{k+1})` (same triangle, same barycentrics: vertices
 //! move, topology does not), and the flow is the difference of the two projections, in pixels:
-//! `x_{k+1} = x_k + F(x_k)` (DESIGN.md §3). The flow is *valid* when the point lands inside the
+//! `x_{k+1} = x_k + F(x_k)` (DESIGN.md §3), each point projected by the camera of its frame (the
+//! same camera twice when it is static). The flow is *valid* when the point lands inside the
 //! image, in front of the camera, and is not hidden at k+1: its depth is at most the depth seen by
 //! the pixel it lands in plus a tolerance, or that pixel sees the same triangle.
 
@@ -21,7 +22,7 @@ pub const DEPTH_TOL_ABS: f32 = 0.02;
 
 /// Forward flow `(2, H, W)` planar (pixels) and validity (row-major).
 pub fn ground_truth_flow(
-    cam: &PinholeCamera,
+    (cam_k, cam_next): (&PinholeCamera, &PinholeCamera),
     tris: &[[u32; 3]],
     pos_k: &[Vec3],
     pos_next: &[Vec3],
@@ -41,13 +42,13 @@ pub fn ground_truth_flow(
             let vi = tris[t as usize].map(|v| v as usize);
             let at = |pos: &[Vec3]| pos[vi[0]] * b[0] + pos[vi[1]] * b[1] + pos[vi[2]] * b[2];
             let (c0, c1) = (
-                cam.cam_from_world(at(pos_k)),
-                cam.cam_from_world(at(pos_next)),
+                cam_k.cam_from_world(at(pos_k)),
+                cam_next.cam_from_world(at(pos_next)),
             );
             if c0.z < NEAR || c1.z < NEAR {
                 return (0.0, 0.0, false);
             }
-            let (p0, p1) = (cam.pixel_from_cam(c0), cam.pixel_from_cam(c1));
+            let (p0, p1) = (cam_k.pixel_from_cam(c0), cam_next.pixel_from_cam(c1));
             let (u, v) = (p1[0] - p0[0], p1[1] - p0[1]);
             let inside = p1[0] >= 0.0 && p1[1] >= 0.0 && p1[0] < w as f32 && p1[1] < h as f32;
             if !inside {

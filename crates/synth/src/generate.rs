@@ -24,6 +24,7 @@ use smpl_deform::{BodyModel, BodyRef};
 
 use crate::body::DressedBody;
 use crate::camera::PinholeCamera;
+use crate::camera_motion::CameraPath;
 use crate::config::SynthConfig;
 use crate::error::{Result, SynthError};
 use crate::flow::{ground_truth_flow, warp_error};
@@ -210,6 +211,8 @@ fn human_mask(gbuf: &GBuffer, mesh: &Mesh, human: &[bool]) -> Vec<bool> {
 
 /// The sharp render of a frame, kept for the flow to the next one.
 struct Sharp {
+    /// The camera at mid exposure.
+    camera: PinholeCamera,
     rgb: Vec<f32>,
     gbuf: GBuffer,
     positions: Vec<Vec3>,
@@ -292,6 +295,7 @@ pub fn generate_with_body(
     let aspect = w as f32 / h as f32;
     let hfov = 2.0 * ((0.5 * VFOV_DEG.to_radians()).tan() * aspect).atan();
     let cam = PinholeCamera::look_at(cfg.width, cfg.height, hfov, eye, target);
+    let camera_path = CameraPath::new(cfg.camera_motion, cam, (hfov, eye, target), cfg.seed);
     let light = Light {
         to_light: Vec3::new(0.4, 1.0, 0.7).normalize(),
         ambient: 0.35,
@@ -415,9 +419,11 @@ pub fn generate_with_body(
     };
 
     let all_tris = room_and_body_tris(&room.mesh, &body);
-    // The room and camera are static: rasterize and shade the room's samples once; every render
-    // below re-rasterizes only the body over them (bit-identical to a full render).
-    let room_samples = StaticSamples::new(&room.mesh, &materials, &cam, &light, ss);
+    // With a static camera the room's samples are rasterized and shaded once, and every render
+    // below re-rasterizes only the body over them (bit-identical to a full render); a moving
+    // camera sees the room anew at every render time.
+    let room_samples = (!camera_path.moves())
+        .then(|| StaticSamples::new(&room.mesh, &materials, &cam, &light, ss));
     let mut prev: Option<Sharp> = None;
     let mut scene_frames = Vec::with_capacity(frames);
     for k in 0..frames {
@@ -444,7 +450,16 @@ pub fn generate_with_body(
             let verts = body.posed_vertices(&pose, transl)?;
             let mut mesh = room.mesh.clone();
             mesh.append(&body.mesh(verts, body_base));
-            let r = render_over(&room_samples, &mesh, &materials, &cam, &light, ss);
+            let cam_t = camera_path.at(t);
+            let r = match &room_samples {
+                Some(room_samples) => {
+                    render_over(room_samples, &mesh, &materials, &cam, &light, ss)
+                }
+                None => {
+                    let room_now = StaticSamples::new(&room.mesh, &materials, &cam_t, &light, ss);
+                    render_over(&room_now, &mesh, &materials, &cam_t, &light, ss)
+                }
+            };
             let is_sub = !is_sharp || odd_middle;
             if is_sub {
                 for (a, b) in blur_sum.iter_mut().zip(&r.rgb) {
@@ -469,6 +484,7 @@ pub fn generate_with_body(
             if is_sharp {
                 let mask = human_mask(&r.gbuf, &mesh, &human);
                 sharp = Some(Sharp {
+                    camera: cam_t,
                     rgb: r.rgb,
                     gbuf: r.gbuf,
                     positions: mesh.positions,
@@ -519,7 +535,7 @@ pub fn generate_with_body(
         // Flow of the previous frame to this one.
         if let Some(p) = prev.take() {
             let (flow, valid) = ground_truth_flow(
-                &cam,
+                (&p.camera, &sharp.camera),
                 &all_tris,
                 &p.positions,
                 &sharp.positions,
@@ -609,7 +625,9 @@ pub fn generate_with_body(
             index: k as u32,
             time_s: tk,
             exposure_s: None,
-            world_to_camera: None,
+            world_to_camera: camera_path
+                .moves()
+                .then(|| sharp.camera.to_scene().world_to_camera),
             image,
             sharp: Some(sharp_rel),
             mask: Some(mask_rel),
@@ -670,7 +688,7 @@ pub fn generate_with_body(
         )?);
         generator["true_poses"] = serde_json::json!(crate::true_poses::TRUE_POSES_FILE);
     }
-    let sc = scene::Scene {
+    let mut sc = scene::Scene {
         events_raw_format: None,
         events_recorded_s: None,
         format_version: scene::FORMAT_VERSION,
@@ -685,6 +703,7 @@ pub fn generate_with_body(
         frames: scene_frames,
         generator: Some(generator),
     };
+    sc.format_version = sc.format_version_needed();
     sc.write(out)?;
 
     let nf = frames as f64;

@@ -10,6 +10,7 @@
 
 pub mod body;
 pub mod camera;
+pub mod camera_motion;
 pub mod config;
 pub mod error;
 pub mod flow;
@@ -31,6 +32,7 @@ pub mod true_poses;
 /// flow from the affine/curvature contrast maximisation of `events` (2026-11-22).
 pub const GENERATOR_VERSION: u32 = 2;
 
+pub use camera_motion::CameraMotion;
 pub use config::{Preset, SynthConfig};
 pub use error::{Result, SynthError};
 pub use generate::{generate, generate_with_body, Stats};

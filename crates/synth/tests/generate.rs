@@ -1,5 +1,5 @@
 #![allow(clippy::unwrap_used)]
-//! End-to-end generation on a small capsule body: the output loads as scene format v1, the
+//! End-to-end generation on a small capsule body: the output loads (format version 1, or 2 with a moving camera), the
 //! statistics are sane, bad knobs are refused, and bytes do not depend on the thread count.
 
 use std::collections::BTreeMap;
@@ -162,4 +162,61 @@ fn bad_knobs_are_refused_with_the_knob_name() {
     }
     // Nothing was written for refused settings.
     assert!(std::fs::read_dir(out.path()).unwrap().next().is_none());
+}
+
+/// A handheld camera: every frame carries its own camera pose (format version 2), the poses
+/// differ by centimetres, the room blurs (the blurred frames are further from the sharp ones
+/// outside the person than with a static camera), more events fire, and the bytes are still
+/// independent of the thread count.
+#[test]
+fn a_handheld_camera_writes_its_poses_and_blurs_the_room() {
+    let still = tempfile::tempdir().unwrap();
+    let held = tempfile::tempdir().unwrap();
+    let handheld = SynthConfig {
+        camera_motion: synth::CameraMotion::Handheld,
+        ..small()
+    };
+    let s_still =
+        generate_with_body(&small(), capsule_body(), still.path(), &mut |_, _| {}).unwrap();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let s_held = one
+        .install(|| generate_with_body(&handheld, capsule_body(), held.path(), &mut |_, _| {}))
+        .unwrap();
+    let scene = scene::load(held.path()).unwrap();
+    assert_eq!(scene.format_version, scene::FORMAT_VERSION_MOVING_CAMERA);
+    assert!(scene.frames.iter().all(|f| f.world_to_camera.is_some()));
+    let centre = |k: usize| {
+        let m = scene.camera_of(k).world_to_camera;
+        // −Rᵀ t
+        (0..3)
+            .map(|c| -(0..3).map(|r| m[r][c] * m[r][3]).sum::<f64>())
+            .collect::<Vec<f64>>()
+    };
+    let shift: f64 = (0..3)
+        .map(|c| (centre(0)[c] - centre(3)[c]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!((0.001..0.2).contains(&shift), "the camera moved {shift} m");
+    let still_scene = scene::load(still.path()).unwrap();
+    assert_eq!(still_scene.format_version, scene::FORMAT_VERSION);
+    assert!(!still_scene.camera_moves());
+    let outside = |s: &synth::Stats| s.psnr_blurred_vs_sharp.outside_human_box_db;
+    assert!(
+        outside(&s_held) < outside(&s_still) - 1.0,
+        "outside the person: {} dB handheld vs {} dB static",
+        outside(&s_held),
+        outside(&s_still)
+    );
+    assert!(s_held.events.count > s_still.events.count);
+    let two = tempfile::tempdir().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    pool.install(|| generate_with_body(&handheld, capsule_body(), two.path(), &mut |_, _| {}))
+        .unwrap();
+    assert_eq!(files(held.path()), files(two.path()));
 }

@@ -256,7 +256,7 @@ fn flow_of_a_translated_plane_is_its_projection_and_warps_back() {
     let r0 = render(&m0, &mats, &c, &LIGHT, 3);
     let r1 = render(&m1, &mats, &c, &LIGHT, 3);
     let (flow, valid) = ground_truth_flow(
-        &c,
+        (&c, &c),
         &m0.tris,
         &m0.positions,
         &m1.positions,

@@ -43,6 +43,18 @@ pub enum SpeedArg {
     Fast,
 }
 
+/// Camera motions of the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum CameraMotionArg {
+    /// Bolted down for the whole clip (the presets'; scene format version 1).
+    Static,
+    /// Held in a hand: a smooth drift of a few centimetres and about a degree, and an 8-12 Hz
+    /// tremor that moves the camera inside each exposure, so the room blurs too.
+    Handheld,
+    /// A slow arc around the person (6° per second).
+    Orbit,
+}
+
 /// Arguments of `synth`. Knobs not given take the preset's value.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -136,6 +148,11 @@ pub struct Args {
     /// camera ray (depth); overrides the share set by --pose-error or the preset.
     #[arg(long, value_name = "CM", allow_negative_numbers = true)]
     pub root_transl_error: Option<f32>,
+    /// How the camera moves. A moving camera is rendered from its pose at every sub-frame time
+    /// (its motion blurs the room and fires events on the room's edges), and each frame's camera
+    /// pose at mid exposure is written to scene.json (scene format version 2).
+    #[arg(long, value_enum)]
+    pub camera_motion: Option<CameraMotionArg>,
 }
 
 /// Builds the generator settings from the preset and the flags.
@@ -173,6 +190,13 @@ pub fn config(args: &Args) -> ::synth::SynthConfig {
             SpeedArg::Slow => ::synth::Speed::Slow,
             SpeedArg::Medium => ::synth::Speed::Medium,
             SpeedArg::Fast => ::synth::Speed::Fast,
+        };
+    }
+    if let Some(m) = args.camera_motion {
+        c.camera_motion = match m {
+            CameraMotionArg::Static => ::synth::CameraMotion::Static,
+            CameraMotionArg::Handheld => ::synth::CameraMotion::Handheld,
+            CameraMotionArg::Orbit => ::synth::CameraMotion::Orbit,
         };
     }
     if let Some(deg) = args.pose_error {
