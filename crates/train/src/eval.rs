@@ -303,7 +303,7 @@ pub fn evaluate_split(
     let mut out = Vec::new();
     for f in data.frames.iter().filter(|f| f.split == split) {
         let pose = body.prepare(&model.corrected_params(f.index, &f.smpl))?;
-        let r = model.render(&data.camera, &pose, model.latent_for(f.index))?;
+        let r = model.render(&f.camera, &pose, model.latent_for(f.index))?;
         // Grey frames are compared with the render's luminance, as in training.
         let grey_render = data
             .scene

@@ -87,3 +87,66 @@ fn interpolated_sub_frame_poses_match_the_generator() {
     assert!(cm < 0.1, "root {cm} cm");
     assert!(ends < 30.0, "extrapolated ends {ends}°");
 }
+
+/// A handheld camera (the generator's own path) sampled at 30 fps frame times and interpolated
+/// by `CameraTrack` at the 16 sub-frame times of each exposure: through its keys exactly, and
+/// within a small fraction of the motion in between.
+#[test]
+fn interpolated_sub_frame_cameras_follow_a_handheld_path() {
+    use synth::camera::PinholeCamera;
+    use synth::camera_motion::{CameraMotion, CameraPath};
+    use train::pose::exposure::CameraTrack;
+    let (eye, target) = (
+        glam::Vec3::new(0.5, 1.3, 2.6),
+        glam::Vec3::new(0.0, 0.9, 0.0),
+    );
+    let base = PinholeCamera::look_at(256, 256, 0.8, eye, target);
+    let path = CameraPath::new(CameraMotion::Handheld, base, (0.8, eye, target), 3);
+    let matrix = |t: f64| path.at(t).to_scene().world_to_camera;
+    let fps = 30.0;
+    let keys: Vec<(f64, [[f64; 4]; 4])> = (0..60)
+        .map(|k| (k as f64 / fps, matrix(k as f64 / fps)))
+        .collect();
+    let track = CameraTrack::new(&keys);
+    let rotation = |m: &[[f64; 4]; 4]| {
+        DQuat::from_mat3(&glam::DMat3::from_cols_array_2d(&[
+            [m[0][0], m[1][0], m[2][0]],
+            [m[0][1], m[1][1], m[2][1]],
+            [m[0][2], m[1][2], m[2][2]],
+        ]))
+        .normalize()
+    };
+    let centre =
+        |m: &[[f64; 4]; 4]| -(rotation(m).inverse() * DVec3::new(m[0][3], m[1][3], m[2][3]));
+    let error = |a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]| {
+        (
+            rotation(a).angle_between(rotation(b)).to_degrees(),
+            100.0 * (centre(a) - centre(b)).length(),
+        )
+    };
+    for (t, m) in &keys {
+        let (deg, cm) = error(&track.at(*t), m);
+        // The generator's cameras are f32: rotation rows orthonormal to ~1e-7, which the track's
+        // quaternion round trip turns into sub-micrometre centre differences.
+        assert!(deg < 1e-4 && cm < 1e-3, "key at {t} s: {deg}°, {cm} cm");
+    }
+    let (mut worst_deg, mut worst_cm, mut moved_deg) = (0.0f64, 0.0f64, 0.0f64);
+    for k in 2..57 {
+        let t = k as f64 / fps;
+        for ts in subframe_times(t, 1.0 / fps, 16) {
+            let (deg, cm) = error(&track.at(ts), &matrix(ts));
+            worst_deg = worst_deg.max(deg);
+            worst_cm = worst_cm.max(cm);
+            moved_deg = moved_deg.max(error(&matrix(ts), &matrix(t)).0);
+        }
+    }
+    assert!(
+        moved_deg > 0.02,
+        "the camera turns {moved_deg}° within an exposure"
+    );
+    assert!(
+        worst_deg < 0.25 * moved_deg,
+        "{worst_deg}° against {moved_deg}° of motion"
+    );
+    assert!(worst_cm < 0.05, "{worst_cm} cm");
+}

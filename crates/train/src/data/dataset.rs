@@ -27,6 +27,8 @@ pub struct TrainFrame {
     pub mask: Option<Vec<bool>>,
     /// SMPL parameters at mid exposure (betas from the scene's body spec).
     pub smpl: SmplParams,
+    /// The camera at mid exposure: the scene camera, at the frame's own pose when it has one.
+    pub camera: Camera,
 }
 
 /// A loaded dataset.
@@ -36,8 +38,11 @@ pub struct Dataset {
     pub dir: PathBuf,
     /// The validated description.
     pub scene: Scene,
-    /// The fixed camera (the scene's), checked for rendering (`Camera::validate`).
+    /// The scene camera: the intrinsics of every frame and the pose of every frame without one of
+    /// its own; checked for rendering (`Camera::validate`).
     pub camera: Camera,
+    /// Some frame is filmed from a pose of its own ([`TrainFrame::camera`]): the camera moves.
+    pub camera_moves: bool,
     /// Every frame, in time order.
     pub frames: Vec<TrainFrame>,
 }
@@ -67,20 +72,10 @@ impl Dataset {
     }
 }
 
-/// Loads and validates `dir` (see `scene::load`) and decodes every frame. A scene whose camera
-/// moves (format version 2 with frames at their own camera poses) is refused: the method trains
-/// with one fixed camera.
+/// Loads and validates `dir` (see `scene::load`) and decodes every frame.
 pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
     let scene = scene::load(dir)?;
     scene.camera.validate()?;
-    if let Some(k) = (0..scene.frames.len()).find(|&k| scene.camera_of(k) != scene.camera) {
-        return Err(TrainError::Config(format!(
-            "{}: frames[{k}].world_to_camera: the camera moves (frame {} is filmed from a pose of its own); \
-             this version reconstructs scenes filmed by one fixed camera",
-            dir.join(scene::SCENE_FILE).display(),
-            scene.frames[k].index
-        )));
-    }
     let camera = scene.camera.clone();
     let (w, h) = (scene.camera.width, scene.camera.height);
     let mut frames = Vec::with_capacity(scene.frames.len());
@@ -115,10 +110,12 @@ pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
                 betas: scene.body.betas.clone(),
                 transl: f.transl,
             },
+            camera: scene.camera_of(k),
         });
     }
     Ok(Dataset {
         dir: dir.to_path_buf(),
+        camera_moves: scene.camera_moves(),
         scene,
         camera,
         frames,

@@ -29,6 +29,8 @@ pub struct TrainingFrame {
     pub image: Vec<f32>,
     /// The frame's pose (mid exposure).
     pub pose: GivenPose,
+    /// The camera at mid exposure.
+    pub camera: Camera,
 }
 
 /// Flow supervision of one training frame k: the next training frame and the target flow k → k+1.
@@ -63,7 +65,8 @@ pub struct PairFlow {
 /// pair supervision.
 #[derive(Clone, Debug)]
 pub struct TrainingData {
-    /// The fixed camera.
+    /// The scene camera: every frame's intrinsics, and its pose unless the camera moves
+    /// ([`TrainingFrame::camera`]).
     pub camera: Camera,
     /// Training frames in time order (their position is the latent slot).
     pub frames: Vec<TrainingFrame>,
@@ -88,6 +91,10 @@ pub struct TrainingData {
     /// Per training slot, the poses at the sub-exposure times of the exposure model (empty unless
     /// [`TrainingData::enable_exposure`] was called).
     pub exposure_poses: Vec<Vec<GivenPose>>,
+    /// Per training slot, the cameras at the same sub-exposure times, interpolated between the
+    /// frames' cameras ([`crate::pose::exposure::CameraTrack`]); empty unless the camera moves and
+    /// [`TrainingData::enable_exposure`] was called.
+    pub exposure_cameras: Vec<Vec<Camera>>,
     /// Per training slot, per pair of consecutive sub-exposure times (s, s+1), C·E per pixel for the
     /// events of [t_s, t_{s+1}) (row-major H × W), `None` where no event file covers the interval
     /// (before the first frame's time); empty unless [`TrainingData::enable_exposure_events`] was
@@ -107,6 +114,7 @@ impl TrainingData {
                 index: f.index,
                 image: f.image.clone(),
                 pose: body.given(&f.smpl)?,
+                camera: f.camera.clone(),
             });
         }
         if frames.is_empty() {
@@ -133,6 +141,7 @@ impl TrainingData {
             flow_net: None,
             event_pairs: Vec::new(),
             exposure_poses: Vec::new(),
+            exposure_cameras: Vec::new(),
             exposure_events: Vec::new(),
             lpips: None,
         })
@@ -188,7 +197,8 @@ impl TrainingData {
     /// Prepares the exposure model: for every training frame, the body poses at `subframes`
     /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the frame's
     /// exposure: its own `exposure_s`, else the scene's), interpolated from the SMPL parameters of
-    /// every frame of the scene ([`crate::pose::exposure::PoseTrack`]).
+    /// every frame of the scene ([`crate::pose::exposure::PoseTrack`]); with a moving camera, the
+    /// cameras at the same times ([`TrainingData::exposure_cameras`]).
     pub fn enable_exposure(&mut self, data: &Dataset, subframes: usize) -> Result<(), TrainError> {
         if let Some(f) = data
             .frames
@@ -217,6 +227,28 @@ impl TrainingData {
             );
         }
         self.exposure_poses = poses;
+        if data.camera_moves {
+            let keys: Vec<(f64, [[f64; 4]; 4])> = data
+                .frames
+                .iter()
+                .map(|f| (f.time_s, f.camera.world_to_camera))
+                .collect();
+            let track = crate::pose::exposure::CameraTrack::new(&keys);
+            self.exposure_cameras = data
+                .frames
+                .iter()
+                .filter(|f| f.split == Split::Train)
+                .map(|frame| {
+                    crate::pose::exposure::subframe_times(frame.time_s, frame.exposure_s, subframes)
+                        .iter()
+                        .map(|&t| Camera {
+                            world_to_camera: track.at(t),
+                            ..data.camera.clone()
+                        })
+                        .collect()
+                })
+                .collect();
+        }
         Ok(())
     }
 
@@ -230,6 +262,16 @@ impl TrainingData {
             Some(sub) if !sub.is_empty() => Ok(sub),
             _ => Err(not_prepared("blur_model = exposure", "sub-exposure poses")),
         }
+    }
+
+    /// The cameras of the renders of [`TrainingData::poses`] (same order): the sub-exposure
+    /// cameras when `exposure` and the camera moves, else the frame's camera for every render.
+    pub fn cameras(&self, slot: usize, exposure: bool) -> Result<Vec<&Camera>, TrainError> {
+        let count = self.poses(slot, exposure)?.len();
+        Ok(match self.exposure_cameras.get(slot) {
+            Some(sub) if exposure && sub.len() == count => sub.iter().collect(),
+            _ => vec![&self.frames[slot].camera; count],
+        })
     }
 
     /// C·E per pixel between consecutive sub-exposure times of slot `slot`

@@ -420,27 +420,37 @@ impl Model {
         self.rasterize(camera, posed)
     }
 
-    /// Renders one frame at each of `poses` (its sub-exposure poses) from one camera. With
+    /// Renders one frame at each of `poses` (its sub-exposure poses), pass s from `cameras[s]` (the
+    /// same camera for every pass unless the camera moves within the exposure). With
     /// `plan.reposed` the networks are evaluated once, at `poses[reference]`, and that pass is
     /// re-posed for the others by linear blend skinning alone (`train::pose::reposing`; differentiate the
     /// passes together with [`Model::reposed_backward`]); else every pass is posed by the networks.
     /// With `plan.share_static_tiles` the tiles only static Gaussians (human probability below the
-    /// gate, the same in every pass) reach are blended once, by the reference pass
+    /// gate, the same in every pass) reach are blended once, by the reference pass, when every pass
+    /// has the same camera
     /// (`rasterize_cpu::render_cov_shared`; differentiate with [`Model::shared_render_backward`]).
     pub fn forward_passes<'a>(
         &'a self,
-        camera: &'a Camera,
+        cameras: &[&'a Camera],
         poses: &[&'a PreparedPose],
         reference: usize,
         latent: &'a [f32],
         plan: PassPlan,
     ) -> Result<ExposurePasses<'a>, TrainError> {
-        let Some(&reference_pose) = poses.get(reference) else {
+        let (Some(&reference_pose), Some(&camera)) = (poses.get(reference), cameras.get(reference))
+        else {
             return Err(TrainError::Config(format!(
                 "passes: reference {reference} of {} poses",
                 poses.len()
             )));
         };
+        if cameras.len() != poses.len() {
+            return Err(TrainError::Shape {
+                what: "cameras of an exposure's passes".into(),
+                expected: poses.len(),
+                found: cameras.len(),
+            });
+        }
         let first = self.posed_pass(camera, reference_pose, latent)?;
         let mut posed = Vec::with_capacity(poses.len());
         for (s, &pose) in poses.iter().enumerate() {
@@ -448,7 +458,7 @@ impl Model {
                 continue;
             }
             if !plan.reposed {
-                posed.push(self.posed_pass(camera, pose, latent)?);
+                posed.push(self.posed_pass(cameras[s], pose, latent)?);
                 continue;
             }
             let PassCache::Frame(reference_cache) = &first.cache else {
@@ -466,12 +476,16 @@ impl Model {
             });
         }
         posed.insert(reference, first);
-        if plan.share_static_tiles && posed.len() > 1 {
+        // Tiles are shared only between renders from one camera (a moving camera moves every
+        // Gaussian on the image).
+        let one_camera = cameras.iter().all(|&c| c == camera);
+        if plan.share_static_tiles && posed.len() > 1 && one_camera {
             return self.rasterize_shared(camera, posed, reference);
         }
         let passes = posed
             .into_iter()
-            .map(|p| self.rasterize(camera, p))
+            .zip(cameras)
+            .map(|(p, &c)| self.rasterize(c, p))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(ExposurePasses {
             passes,

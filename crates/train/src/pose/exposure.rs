@@ -27,48 +27,13 @@ pub fn subframe_times(time_s: f64, exposure_s: f64, count: usize) -> Vec<f64> {
         .collect()
 }
 
-/// A sequence of SMPL parameters at increasing times, interpolated at any time.
+/// Key times in increasing order, and the C¹ curve through values at them that both tracks use.
 #[derive(Clone, Debug)]
-pub struct PoseTrack {
+struct Keys {
     times: Vec<f64>,
-    /// Per key frame, per joint, the rotation.
-    rotations: Vec<Vec<DQuat>>,
-    translations: Vec<DVec3>,
-    betas: Vec<f32>,
 }
 
-impl PoseTrack {
-    /// The track of `(time_s, params)` key frames, in increasing time (at least one).
-    pub fn new(keys: &[(f64, &SmplParams)]) -> Self {
-        let rotations = keys
-            .iter()
-            .map(|(_, p)| {
-                p.pose
-                    .chunks_exact(3)
-                    .map(|r| {
-                        DQuat::from_scaled_axis(DVec3::new(
-                            f64::from(r[0]),
-                            f64::from(r[1]),
-                            f64::from(r[2]),
-                        ))
-                    })
-                    .collect()
-            })
-            .collect();
-        Self {
-            times: keys.iter().map(|(t, _)| *t).collect(),
-            rotations,
-            translations: keys
-                .iter()
-                .map(|(_, p)| DVec3::from(p.transl.map(f64::from)))
-                .collect(),
-            betas: keys
-                .first()
-                .map(|(_, p)| p.betas.clone())
-                .unwrap_or_default(),
-        }
-    }
-
+impl Keys {
     /// The segment `i` with `times[i] ≤ t < times[i+1]`, clamped to the first and last segment.
     fn segment(&self, t: f64) -> usize {
         let n = self.times.len();
@@ -129,11 +94,56 @@ impl PoseTrack {
             + v(i + 1) * h01
             + self.tangent(v, i + 1) * (h11 * h)
     }
+}
+
+/// A sequence of SMPL parameters at increasing times, interpolated at any time.
+#[derive(Clone, Debug)]
+pub struct PoseTrack {
+    keys: Keys,
+    /// Per key frame, per joint, the rotation.
+    rotations: Vec<Vec<DQuat>>,
+    translations: Vec<DVec3>,
+    betas: Vec<f32>,
+}
+
+impl PoseTrack {
+    /// The track of `(time_s, params)` key frames, in increasing time (at least one).
+    pub fn new(keys: &[(f64, &SmplParams)]) -> Self {
+        let rotations = keys
+            .iter()
+            .map(|(_, p)| {
+                p.pose
+                    .chunks_exact(3)
+                    .map(|r| {
+                        DQuat::from_scaled_axis(DVec3::new(
+                            f64::from(r[0]),
+                            f64::from(r[1]),
+                            f64::from(r[2]),
+                        ))
+                    })
+                    .collect()
+            })
+            .collect();
+        Self {
+            keys: Keys {
+                times: keys.iter().map(|(t, _)| *t).collect(),
+            },
+            rotations,
+            translations: keys
+                .iter()
+                .map(|(_, p)| DVec3::from(p.transl.map(f64::from)))
+                .collect(),
+            betas: keys
+                .first()
+                .map(|(_, p)| p.betas.clone())
+                .unwrap_or_default(),
+        }
+    }
 
     /// The SMPL parameters at time `t` (seconds).
     pub fn at(&self, t: f64) -> SmplParams {
-        let i = self.segment(t);
-        let transl = self.hermite(&|j| self.translations[j], i, t);
+        let i = self.keys.segment(t);
+        let transl = self.keys.hermite(&|j| self.translations[j], i, t);
         let joints = self.rotations.first().map_or(0, Vec::len);
         let mut pose = Vec::with_capacity(3 * joints);
         for joint in 0..joints {
@@ -147,7 +157,7 @@ impl PoseTrack {
                 q.to_scaled_axis()
             };
             let base = self.rotations[i][joint];
-            let q = (base * DQuat::from_scaled_axis(self.hermite(&local, i, t))).normalize();
+            let q = (base * DQuat::from_scaled_axis(self.keys.hermite(&local, i, t))).normalize();
             let r = q.to_scaled_axis();
             pose.extend([r.x as f32, r.y as f32, r.z as f32]);
         }
@@ -156,6 +166,66 @@ impl PoseTrack {
             betas: self.betas.clone(),
             transl: [transl.x as f32, transl.y as f32, transl.z as f32],
         }
+    }
+}
+
+/// A camera's pose at increasing times (the frames' mid-exposure cameras of a moving camera),
+/// interpolated at any time as [`PoseTrack`] interpolates a joint: the rotation by a cubic Hermite
+/// curve in the tangent space of the segment's start rotation, the camera centre (world metres)
+/// by a cubic Hermite curve; the translation follows as `t = −R·c`.
+#[derive(Clone, Debug)]
+pub struct CameraTrack {
+    keys: Keys,
+    /// Per key, the world-to-camera rotation.
+    rotations: Vec<DQuat>,
+    /// Per key, the camera centre in world coordinates (metres).
+    centres: Vec<DVec3>,
+}
+
+impl CameraTrack {
+    /// The track of `(time_s, world_to_camera)` keys, in increasing time (at least one), each a
+    /// rigid 4×4 matrix (rotation rows checked by the scene format).
+    pub fn new(keys: &[(f64, [[f64; 4]; 4])]) -> Self {
+        let rotation = |m: &[[f64; 4]; 4]| {
+            DQuat::from_mat3(&glam::DMat3::from_cols_array_2d(&[
+                [m[0][0], m[1][0], m[2][0]],
+                [m[0][1], m[1][1], m[2][1]],
+                [m[0][2], m[1][2], m[2][2]],
+            ]))
+            .normalize()
+        };
+        let rotations: Vec<DQuat> = keys.iter().map(|(_, m)| rotation(m)).collect();
+        let centres = keys
+            .iter()
+            .zip(&rotations)
+            .map(|((_, m), r)| -(r.inverse() * DVec3::new(m[0][3], m[1][3], m[2][3])))
+            .collect();
+        Self {
+            keys: Keys {
+                times: keys.iter().map(|(t, _)| *t).collect(),
+            },
+            rotations,
+            centres,
+        }
+    }
+
+    /// The world-to-camera matrix at time `t` (seconds).
+    pub fn at(&self, t: f64) -> [[f64; 4]; 4] {
+        let i = self.keys.segment(t);
+        let centre = self.keys.hermite(&|j| self.centres[j], i, t);
+        let base = self.rotations[i];
+        let local = |j: usize| {
+            let mut q = base.inverse() * self.rotations[j];
+            if q.w < 0.0 {
+                q = -q;
+            }
+            q.to_scaled_axis()
+        };
+        let r = (base * DQuat::from_scaled_axis(self.keys.hermite(&local, i, t))).normalize();
+        let m = glam::DMat3::from_quat(r);
+        let tr = -(r * centre);
+        let row = |k: usize| [m.col(0)[k], m.col(1)[k], m.col(2)[k], tr[k]];
+        [row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]]
     }
 }
 

@@ -67,11 +67,17 @@ impl Trainer {
         config.validate()?;
         let vertices = &data.body.canonical.posed.vertices;
         let roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.prepared.root).collect();
+        // The scene is sampled where any training frame's camera sees it.
+        let cameras: Vec<_> = if data.frames.iter().all(|f| f.camera == data.camera) {
+            vec![data.camera.clone()]
+        } else {
+            data.frames.iter().map(|f| f.camera.clone()).collect()
+        };
         let init = initialise(
             vertices,
             &data.body.model.faces,
             &data.body.model.weights,
-            std::slice::from_ref(&data.camera),
+            &cameras,
             &roots,
             &InitConfig {
                 mode: config.init,

@@ -460,13 +460,14 @@ fn frame_passes<'a>(
             .map(|p| &p.prepared)
             .collect(),
     };
+    let cameras = data.cameras(slot, exposure)?;
     let mid = poses.len() / 2;
     let plan = PassPlan {
         reposed: poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once,
         share_static_tiles: config.share_static_tiles,
     };
     let ExposurePasses { passes, sharing } =
-        model.forward_passes(&data.camera, &poses, mid, model.latent(slot), plan)?;
+        model.forward_passes(&cameras, &poses, mid, model.latent(slot), plan)?;
     for pass in &passes {
         times.pose += pass.timing.pose;
         times.render += pass.timing.render;
@@ -564,7 +565,7 @@ fn next_frame<'a>(
 ) -> Result<NextFrame<'a>, TrainError> {
     let next = &data.frames[pair.next_slot];
     let pose = corrected.map_or(&next.pose.prepared, |c| &c.prepared[0]);
-    let pass = model.forward(&data.camera, pose, model.latent(pair.next_slot))?;
+    let pass = model.forward(&next.camera, pose, model.latent(pair.next_slot))?;
     let size = (data.camera.height as usize, data.camera.width as usize);
     let terms = pair_terms(pair, config, first.rgb(), pass.rgb(), size, d_first)?;
     times.flow_network = terms.flow_network_seconds;
