@@ -227,3 +227,117 @@ fn mismatched_counts_and_settings_are_refused() {
         "{err}"
     );
 }
+
+/// `--cameras`: a moving camera's pose per frame, from a JSON list (frame order) or a COLMAP text
+/// model (matched by file name), written as scene format version 2 (each written frame takes the
+/// pose of the middle frame of its blur window); the scene trains; a list of the wrong length and
+/// intrinsics that are not `--camera`'s are refused.
+#[test]
+fn per_frame_cameras_make_a_moving_camera_scene_that_trains() {
+    let dir = tempfile::tempdir().unwrap();
+    let committed = common::import_fixtures().join("frames");
+    let poses = committed.join("poses.json");
+    let camera = scene::load(&fixture()).unwrap().camera;
+    let shifted = |k: usize| {
+        let mut c = camera.clone();
+        c.world_to_camera[0][3] += 0.002 * k as f64;
+        c
+    };
+    let camera_json = |c: &scene::Camera| {
+        let rows: Vec<[f64; 4]> = c.world_to_camera[..3].to_vec();
+        serde_json::json!({"width": c.width, "height": c.height, "fx": c.fx, "fy": c.fy,
+            "cx": c.cx, "cy": c.cy, "world_to_camera": rows})
+    };
+    let list: Vec<_> = (0..15).map(|k| camera_json(&shifted(k))).collect();
+    let list_path = dir.path().join("cameras.json");
+    std::fs::write(&list_path, serde_json::to_string(&list).unwrap()).unwrap();
+    let out = dir.path().join("moving");
+    let o = import(
+        &out,
+        &poses,
+        &["--blur", "3", "--events", "simulate", "--cameras"],
+    );
+    assert!(!o.status.success(), "--cameras needs its value");
+    let o = xtask_import_with_cameras(&out, &poses, &list_path);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = scene::load(&out).unwrap();
+    assert_eq!(s.format_version, scene::FORMAT_VERSION_MOVING_CAMERA);
+    assert_eq!(s.frames.len(), 5);
+    // (serde_json's float parsing is not correctly rounded: the JSON round trip may move a value
+    // by an ulp.)
+    for (j, f) in s.frames.iter().enumerate() {
+        let (got, want) = (
+            f.world_to_camera.unwrap(),
+            shifted(3 * j + 1).world_to_camera,
+        );
+        let err = (0..3)
+            .flat_map(|r| (0..4).map(move |c| (r, c)))
+            .map(|(r, c)| (got[r][c] - want[r][c]).abs())
+            .fold(0.0, f64::max);
+        assert!(err < 1e-12, "frame {j}: {got:?} vs {want:?}");
+    }
+    let run = dir.path().join("run");
+    let config = tiny_config(dir.path());
+    let log = reconstruct(&out, &run, &config);
+    assert!(run.join("model").is_dir(), "{log}");
+    // The same poses from a COLMAP text model (identity rotations: only where the camera is).
+    let colmap = dir.path().join("colmap");
+    std::fs::create_dir_all(&colmap).unwrap();
+    std::fs::write(
+        colmap.join("cameras.txt"),
+        format!(
+            "# one camera\n1 PINHOLE {} {} {} {} {} {}\n",
+            camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy
+        ),
+    )
+    .unwrap();
+    let mut images = String::from("# two lines per image\n");
+    let names: Vec<String> = std::fs::read_dir(fixture().join("sharp"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    let mut names = names;
+    names.sort();
+    for (k, name) in names.iter().enumerate().rev() {
+        images.push_str(&format!(
+            "{} 1 0 0 0 {} 0.5 2 1 {name}\n\n",
+            k + 1,
+            0.01 * k as f64
+        ));
+    }
+    std::fs::write(colmap.join("images.txt"), images).unwrap();
+    let from_colmap = dir.path().join("from-colmap");
+    let o = xtask_import_with_cameras(&from_colmap, &poses, &colmap);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = scene::load(&from_colmap).unwrap();
+    let pose = t.frames[2].world_to_camera.unwrap();
+    assert_eq!(pose[0][..3], [1.0, 0.0, 0.0]);
+    assert!((pose[0][3] - 0.07).abs() < 1e-12, "{pose:?}");
+    // Refusals: one camera short; intrinsics that are not --camera's.
+    std::fs::write(&list_path, serde_json::to_string(&list[..14]).unwrap()).unwrap();
+    let o = xtask_import_with_cameras(&dir.path().join("short"), &poses, &list_path);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("holds 14 cameras but there are 15 frames"),
+        "{err}"
+    );
+    let mut wide = shifted(0);
+    wide.fx *= 1.1;
+    let mut other = list.clone();
+    other[4] = camera_json(&wide);
+    std::fs::write(&list_path, serde_json::to_string(&other).unwrap()).unwrap();
+    let o = xtask_import_with_cameras(&dir.path().join("wide"), &poses, &list_path);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains(&names[4]) && err.contains("intrinsics"),
+        "{err}"
+    );
+}
+
+fn xtask_import_with_cameras(out: &Path, poses: &Path, cameras: &Path) -> Output {
+    let blur = ["--blur", "3", "--events", "simulate", "--cameras"];
+    let mut extra: Vec<&str> = blur.to_vec();
+    let cameras = cameras.to_str().unwrap();
+    extra.push(cameras);
+    import(out, poses, &extra)
+}

@@ -75,6 +75,16 @@ pub enum SceneError {
         /// Number of cameras in the file.
         count: usize,
     },
+    /// A COLMAP text model cannot be read (`scene::colmap`).
+    #[error("{path}:{line}: {message}")]
+    Colmap {
+        /// `cameras.txt` or `images.txt`.
+        path: PathBuf,
+        /// 1-based line number (0: the file as a whole).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// A caller-supplied argument is out of its domain.
     #[error("invalid argument {name}: {message}")]
     Arg {

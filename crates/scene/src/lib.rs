@@ -17,6 +17,7 @@
 //! This crate is generic: it knows nothing of the method, of training or of how a scene was made.
 
 pub mod camera_files;
+pub mod colmap;
 pub mod error;
 pub mod image_io;
 pub mod types;

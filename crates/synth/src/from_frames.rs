@@ -78,6 +78,10 @@ pub struct InputFrame {
     pub pose: Vec<[f32; 3]>,
     /// SMPL translation (metres, camera's world frame).
     pub transl: [f32; 3],
+    /// The camera's pose at this frame when the camera moves (`world_to_camera`, rigid 4×4);
+    /// `None` = the scene camera's. A written frame takes the pose of the input frame at the
+    /// middle of its blur window.
+    pub world_to_camera: Option<[[f64; 4]; 4]>,
 }
 
 /// Makes the frames at times `ts` (each in `(0, 1)`) between consecutive frames `a` and `b`
@@ -263,7 +267,7 @@ pub fn write_scene_from_frames(
                 index: j as u32,
                 time_s: time_of(j) as f64 * 1e-6,
                 exposure_s: None,
-                world_to_camera: None,
+                world_to_camera: frame.world_to_camera,
                 image: format!("images/{j:06}.png"),
                 sharp: None,
                 mask: None,
@@ -308,7 +312,7 @@ pub fn write_scene_from_frames(
     if cfg.events.is_some() {
         splitter.finish(&mut report)?;
     }
-    let scene = Scene {
+    let mut scene = Scene {
         format_version: scene::FORMAT_VERSION,
         camera,
         body,
@@ -320,6 +324,7 @@ pub fn write_scene_from_frames(
         events_recorded_s: None,
         generator: Some(generator),
     };
+    scene.format_version = scene.format_version_needed();
     scene.write(out)?;
     scene::load(out)?;
     Ok(report)

@@ -53,6 +53,7 @@ fn input(i: usize) -> InputFrame {
         mask: Some(mask),
         pose,
         transl: [i as f32, 0.0, 0.0],
+        world_to_camera: None,
     }
 }
 

@@ -1,4 +1,5 @@
-//! `cargo xtask import frames`: a PNG folder + SMPL poses + a camera → scene format v1, through
+//! `cargo xtask import frames`: a PNG folder + SMPL poses + a camera (and, for a moving camera, its
+//! pose per frame) → a scene (format version 1, or 2 with per-frame cameras), through
 //! [`synth::from_frames`] (blur windows, ESIM events, the benchmark's 7/3 split).
 
 use std::path::{Path, PathBuf};
@@ -34,6 +35,13 @@ pub struct Args {
     pub person: PersonArgs,
     #[command(flatten)]
     pub synthesis: SynthesisArgs,
+    /// A moving camera's pose per frame: a COLMAP text model (a folder with `cameras.txt` and
+    /// `images.txt`, matched to the frames by file name; intrinsics must equal `--camera`'s and
+    /// carry no distortion), or a JSON list with one camera per frame in frame order (the
+    /// project's camera objects or INRIA `cameras.json` entries). The scene is written in format
+    /// version 2 with each frame's pose; `--camera` gives the intrinsics.
+    #[arg(long)]
+    pub cameras: Option<PathBuf>,
     /// The camera's exposure per frame (seconds, ≤ 1/fps) when `--blur 1`; default 1/fps.
     #[arg(long)]
     pub exposure_s: Option<f64>,
@@ -77,6 +85,92 @@ fn read_frame(path: &Path, camera: &scene::Camera, linear: bool) -> Result<Vec<f
     Ok(rgb)
 }
 
+/// One camera per frame of `images` from `path` (see `Args::cameras`); a camera whose intrinsics
+/// are not `camera`'s is refused, naming its frame.
+fn frame_cameras(
+    path: &Path,
+    images: &[PathBuf],
+    camera: &scene::Camera,
+) -> Result<Vec<scene::Camera>> {
+    let list = if path.is_dir() {
+        let model = scene::colmap::read_text_model(path)?;
+        let mut by_name = std::collections::BTreeMap::new();
+        for image in model {
+            let stem = Path::new(&image.name)
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            by_name.insert(stem, image.camera);
+        }
+        images
+            .iter()
+            .map(|f| {
+                let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
+                let found = name.as_ref().and_then(|n| by_name.get(n));
+                let Some(c) = found else {
+                    bail!(
+                        "{}: no registered image named {} in the COLMAP model",
+                        path.display(),
+                        f.display()
+                    );
+                };
+                Ok(c.clone())
+            })
+            .collect::<Result<Vec<_>>>()?
+    } else {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let entries: Vec<serde_json::Value> = serde_json::from_str(&text)
+            .with_context(|| format!("{}: expected a JSON list of cameras", path.display()))?;
+        let list = entries
+            .iter()
+            .enumerate()
+            .map(|(k, e)| {
+                let one = if e.get("fx").is_some() {
+                    scene::camera_files::from_json_str(&e.to_string(), path)
+                } else {
+                    scene::camera_files::inria_list_from_str(&format!("[{e}]"), path)
+                        .map(|mut v| v.remove(0))
+                };
+                one.with_context(|| format!("{}: camera {k}", path.display()))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        if list.len() != images.len() {
+            bail!(
+                "{} holds {} cameras but there are {} frames: one camera per frame is needed",
+                path.display(),
+                list.len(),
+                images.len()
+            );
+        }
+        list
+    };
+    let same = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
+    for (c, image) in list.iter().zip(images) {
+        let intrinsics_agree = (c.width, c.height) == (camera.width, camera.height)
+            && same(c.fx, camera.fx)
+            && same(c.fy, camera.fy)
+            && same(c.cx, camera.cx)
+            && same(c.cy, camera.cy);
+        if !intrinsics_agree {
+            bail!(
+                "{}: the camera of {} ({}x{}, f {} {}, c {} {}) does not have --camera's intrinsics",
+                path.display(),
+                image.display(),
+                c.width,
+                c.height,
+                c.fx,
+                c.fy,
+                c.cx,
+                c.cy
+            );
+        }
+        c.validate()
+            .with_context(|| format!("{}: the camera of {}", path.display(), image.display()))?;
+    }
+    Ok(list)
+}
+
 /// Runs `import frames`.
 pub fn run(args: Args) -> Result<()> {
     let person = &args.person;
@@ -105,6 +199,11 @@ pub fn run(args: Args) -> Result<()> {
             images.len()
         );
     }
+    let frame_cameras = args
+        .cameras
+        .as_ref()
+        .map(|path| frame_cameras(path, &images, &camera))
+        .transpose()?;
     let mut cfg = args.synthesis.config(args.fps, args.exposure_s);
     if is_grey_file(&images[0])? {
         cfg.encoding.channels = 1;
@@ -164,6 +263,7 @@ pub fn run(args: Args) -> Result<()> {
                 mask,
                 pose,
                 transl,
+                world_to_camera: frame_cameras.as_ref().map(|c| c[i].world_to_camera),
             })
         },
         between.as_deref_mut(),

@@ -258,6 +258,7 @@ pub fn run(args: Args) -> Result<()> {
                     .map(|c| [c[0], c[1], c[2]])
                     .collect(),
                 transl: fit.transl,
+                world_to_camera: None,
             })
         },
         between.as_deref_mut(),
