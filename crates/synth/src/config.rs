@@ -109,6 +109,14 @@ pub struct SynthConfig {
     /// settings without it keep their bytes.
     #[serde(default, skip_serializing_if = "CameraMotion::is_static")]
     pub camera_motion: CameraMotion,
+    /// RMS rotation error (degrees) of the camera poses written to `scene.json`, as a SLAM
+    /// estimate's (`camera_error`; the truth goes to `cameras_true.json`); 0, not serialised, by
+    /// default. Never changes what is rendered.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub camera_error_deg: f64,
+    /// RMS error (cm) of the written camera centres (see `camera_error_deg`).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub camera_error_cm: f64,
 }
 
 impl SynthConfig {
@@ -138,6 +146,8 @@ impl SynthConfig {
             body: "builtin:makehuman".into(),
             pose_error: PoseError::OFF,
             camera_motion: CameraMotion::Static,
+            camera_error_deg: 0.0,
+            camera_error_cm: 0.0,
         };
         match p {
             Preset::Tiny => Self {
@@ -287,6 +297,25 @@ impl SynthConfig {
                 "must be in (0, 100000] events per second",
             );
         }
+        if !(self.camera_error_deg.is_finite() && (0.0..=30.0).contains(&self.camera_error_deg)) {
+            return knob(
+                "camera-error-deg",
+                self.camera_error_deg.to_string(),
+                "must be in [0, 30] degrees",
+            );
+        }
+        if !(self.camera_error_cm.is_finite() && (0.0..=100.0).contains(&self.camera_error_cm)) {
+            return knob(
+                "camera-error-cm",
+                self.camera_error_cm.to_string(),
+                "must be in [0, 100] cm",
+            );
+        }
         self.pose_error.validate()
+    }
+
+    /// True when the written camera poses carry an estimation error.
+    pub fn camera_error_on(&self) -> bool {
+        self.camera_error_deg > 0.0 || self.camera_error_cm > 0.0
     }
 }

@@ -688,6 +688,19 @@ pub fn generate_with_body(
         )?);
         generator["true_poses"] = serde_json::json!(crate::true_poses::TRUE_POSES_FILE);
     }
+    if cfg.camera_error_on() {
+        let truth = crate::camera_error::apply(
+            &mut scene_frames,
+            &cam.to_scene().world_to_camera,
+            (cfg.camera_error_deg, cfg.camera_error_cm),
+            cfg.seed,
+        );
+        truth.write(out)?;
+        generator["true_cameras"] = serde_json::json!(crate::camera_error::TRUE_CAMERAS_FILE);
+    } else {
+        // A truth file left by an earlier generation into `out` would not be this scene's.
+        crate::camera_error::TrueCameras::remove(out)?;
+    }
     let mut sc = scene::Scene {
         events_raw_format: None,
         events_recorded_s: None,

@@ -10,6 +10,7 @@
 
 pub mod body;
 pub mod camera;
+pub mod camera_error;
 pub mod camera_motion;
 pub mod config;
 pub mod error;

@@ -220,3 +220,50 @@ fn a_handheld_camera_writes_its_poses_and_blurs_the_room() {
         .unwrap();
     assert_eq!(files(held.path()), files(two.path()));
 }
+
+/// `camera_error_deg` / `camera_error_cm`: scene.json holds estimated camera poses with exactly
+/// the asked RMS errors against `cameras_true.json`, which holds the poses written without the
+/// error; every other file is unchanged.
+#[test]
+fn camera_errors_change_only_the_written_poses_and_keep_the_truth_aside() {
+    let exact = tempfile::tempdir().unwrap();
+    let noisy = tempfile::tempdir().unwrap();
+    let handheld = SynthConfig {
+        camera_motion: synth::CameraMotion::Handheld,
+        ..small()
+    };
+    let with_error = SynthConfig {
+        camera_error_deg: 0.5,
+        camera_error_cm: 1.0,
+        ..handheld.clone()
+    };
+    generate_with_body(&handheld, capsule_body(), exact.path(), &mut |_, _| {}).unwrap();
+    generate_with_body(&with_error, capsule_body(), noisy.path(), &mut |_, _| {}).unwrap();
+    let (a, b) = (files(exact.path()), files(noisy.path()));
+    for (name, bytes) in &a {
+        if !["scene.json", "stats.json"].contains(&name.as_str()) {
+            assert_eq!(Some(bytes), b.get(name), "{name} changed");
+        }
+    }
+    let truth = synth::camera_error::TrueCameras::read(noisy.path()).unwrap();
+    let exact_scene = scene::load(exact.path()).unwrap();
+    let noisy_scene = scene::load(noisy.path()).unwrap();
+    for (t, f) in truth.frames.iter().zip(&exact_scene.frames) {
+        let w = f.world_to_camera.unwrap();
+        assert_eq!(t.world_to_camera, [w[0], w[1], w[2]]);
+    }
+    let estimates: Vec<_> = noisy_scene
+        .frames
+        .iter()
+        .map(|f| f.world_to_camera.unwrap())
+        .collect();
+    let (deg, cm) = synth::camera_error::rms_error(&estimates, &truth);
+    assert!(
+        (deg - 0.5).abs() < 1e-6 && (cm - 1.0).abs() < 1e-6,
+        "{deg}° {cm} cm"
+    );
+    assert!(!exact
+        .path()
+        .join(synth::camera_error::TRUE_CAMERAS_FILE)
+        .exists());
+}

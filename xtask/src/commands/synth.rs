@@ -153,6 +153,14 @@ pub struct Args {
     /// pose at mid exposure is written to scene.json (scene format version 2).
     #[arg(long, value_enum)]
     pub camera_motion: Option<CameraMotionArg>,
+    /// Write camera poses with a SLAM-like error: RMS rotation error over the frames (degrees,
+    /// 0..=30), a slow drift plus 10 % jitter; the true poses go to cameras_true.json (for
+    /// evaluation; the trainer never reads it). Images, events and flows are unchanged.
+    #[arg(long, value_name = "DEG")]
+    pub camera_error_deg: Option<f64>,
+    /// RMS error of the written camera centres (cm, 0..=100); see --camera-error-deg.
+    #[arg(long, value_name = "CM")]
+    pub camera_error_cm: Option<f64>,
 }
 
 /// Builds the generator settings from the preset and the flags.
@@ -180,7 +188,9 @@ pub fn config(args: &Args) -> ::synth::SynthConfig {
         hot_pixel_fraction,
         hot_pixel_rate_hz,
         event_flow,
-        body
+        body,
+        camera_error_deg,
+        camera_error_cm
     );
     if let Some(neg) = args.event_threshold_neg {
         c.event_threshold_neg = Some(neg);
