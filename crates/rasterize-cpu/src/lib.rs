@@ -23,9 +23,9 @@ pub use error::RasterError;
 /// The pinhole camera renders are made from (the workspace's one camera type, `pinhole`'s).
 pub use pinhole::{Camera, CameraError, MAX_IMAGE_SIDE};
 pub use raster::{
-    render, render_backward, render_cov, render_cov_backward, render_cov_shared,
-    render_cov_shared_backward, Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings,
-    SharedRenders, Splats, TileSharing, DEFAULT_NEAR_PLANE,
+    camera_pose_gradient, render, render_backward, render_cov, render_cov_backward,
+    render_cov_shared, render_cov_shared_backward, Cotangents, CovSplats, Gradients, RenderOutput,
+    RenderSettings, SharedRenders, Splats, TileSharing, DEFAULT_NEAR_PLANE,
 };
 pub use sh::{render_sh, render_sh_backward, ShGradients, ShRender, ShSplats};
 

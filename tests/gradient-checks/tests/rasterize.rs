@@ -27,9 +27,9 @@ use gradient_checks::{central_differences, rng, GradientChecker, ProbeTally, Tol
 use proptest::prelude::*;
 use rand::Rng;
 use rasterize_cpu::{
-    render, render_backward, render_cov, render_cov_backward, render_cov_shared,
-    render_cov_shared_backward, render_sh, render_sh_backward, Camera, CameraError, Cotangents,
-    CovSplats, RasterError, RenderSettings, ShSplats, Splats,
+    camera_pose_gradient, render, render_backward, render_cov, render_cov_backward,
+    render_cov_shared, render_cov_shared_backward, render_sh, render_sh_backward, Camera,
+    CameraError, Cotangents, CovSplats, RasterError, RenderSettings, ShSplats, Splats,
 };
 
 const NEAR: f64 = 0.2;
@@ -884,6 +884,92 @@ proptest! {
             checker.check(&format!("gaussian {i} (kind {}) cov path mean/logit/channels vs FD", kind_of(&kinds, i)), &num, &ana, FD_TOL);
         }
         static TALLY: ProbeTally = ProbeTally::new(200);
+        let tally = TALLY.add(probes, valid);
+        prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
+        checker.finish();
+    }
+}
+
+/// `camera` moved by the twist ξ = (ω, v) on the left: exp(ξ^)·world_to_camera (ω by Rodrigues).
+fn moved_camera(camera: &Camera, xi: [f64; 6]) -> Camera {
+    let [wx, wy, wz, vx, vy, vz] = xi;
+    let angle = (wx * wx + wy * wy + wz * wz).sqrt();
+    let k = [[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]];
+    let (a, b) = if angle > 0.0 {
+        (angle.sin() / angle, (1.0 - angle.cos()) / (angle * angle))
+    } else {
+        (1.0, 0.5)
+    };
+    let k2 = |i: usize, j: usize| (0..3).map(|l| k[i][l] * k[l][j]).sum::<f64>();
+    let rot = |i: usize, j: usize| f64::from(u8::from(i == j)) + a * k[i][j] + b * k2(i, j);
+    let v = [vx, vy, vz];
+    let w = camera.world_to_camera;
+    let mut moved = camera.clone();
+    for i in 0..3 {
+        for j in 0..4 {
+            moved.world_to_camera[i][j] =
+                (0..3).map(|l| rot(i, l) * w[l][j]).sum::<f64>() + if j == 3 { v[i] } else { 0.0 };
+        }
+    }
+    moved
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// `camera_pose_gradient` (dL/dξ of the camera, from `render_cov_backward`'s world gradients)
+    /// against central differences of `render_cov` from the camera moved by ±h along each of the
+    /// six twist components (h = FD_H in radians or metres; the scene is 1-6 m away, so a probe
+    /// moves a splat by ≤ 6·h relative, as a mean probe does: the FD_TOL argument above holds).
+    /// Probes whose ± steps flip any discrete decision of the oracle are discarded.
+    #[test]
+    fn camera_pose_gradient_matches_finite_differences(
+        seed in any::<u64>(),
+        kinds in kinds_strategy(6),
+        c in 1usize..4,
+    ) {
+        let mut s = random_scene(seed, &kinds, c);
+        let covs: Vec<Mat3<f64>> =
+            (0..s.n()).map(|i| covariance_3d(s.log_scales[i], s.quats[i])).collect();
+        s.covs = Some(covs.clone());
+        let cot = random_cotangent(&s, seed);
+        let settings = s.settings();
+        let fwd = render_cov(&s.cam, &cov_splats(&s, &covs), &settings)
+            .unwrap_or_else(|e| panic!("render_cov: {e}"));
+        let g = render_cov_backward(
+            &s.cam,
+            &cov_splats(&s, &covs),
+            &settings,
+            &fwd,
+            &Cotangents { image: &cot.0, alpha: Some(&cot.1), depth: Some(&cot.2) },
+        )
+        .unwrap_or_else(|e| panic!("render_cov_backward: {e}"));
+        let ana = camera_pose_gradient(&s.cam, &s.means, &covs, &g)
+            .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
+        let base = oracle(&s, None).decisions;
+        let (mut probes, mut valid) = (0usize, 0usize);
+        let (mut num, mut kept) = (Vec::new(), Vec::new());
+        for k in 0..6 {
+            probes += 1;
+            let moved = |t: f64| {
+                let mut xi = [0.0; 6];
+                xi[k] = t;
+                let mut s2 = s.clone();
+                s2.cam = moved_camera(&s.cam, xi);
+                s2
+            };
+            if oracle(&moved(FD_H), None).decisions != base
+                || oracle(&moved(-FD_H), None).decisions != base
+            {
+                continue;
+            }
+            valid += 1;
+            num.push(central_differences(|t| cov_loss(&moved(t[0]), &cot), &[0.0], FD_H)[0]);
+            kept.push(ana[k]);
+        }
+        let mut checker = GradientChecker::new();
+        checker.check("camera twist (ω, v) vs FD", &num, &kept, FD_TOL);
+        static TALLY: ProbeTally = ProbeTally::new(30);
         let tally = TALLY.add(probes, valid);
         prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
         checker.finish();

@@ -30,6 +30,7 @@
 
 mod backward;
 mod binning;
+mod camera_pose;
 mod forward;
 mod inputs;
 mod kernels;
@@ -39,6 +40,7 @@ mod shared;
 mod avx512;
 
 pub use backward::{render_backward, render_cov_backward};
+pub use camera_pose::camera_pose_gradient;
 pub use forward::{render, render_cov};
 pub use inputs::{
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats,
