@@ -65,6 +65,11 @@ pub struct FrameMetrics {
     pub blurred_lpips_full: f64,
     /// LPIPS of the blurred input against the reference, human box.
     pub blurred_lpips_human_box: f64,
+    /// PSNR (dB) outside the human bounding box: the scene without the person (NaN if the mask
+    /// is empty or the box covers the frame).
+    pub psnr_outside_box: f64,
+    /// PSNR (dB) of the blurred input outside the human bounding box.
+    pub blurred_psnr_outside_box: f64,
 }
 
 /// Peak signal-to-noise ratio (dB) for data range 1: −10·log10(MSE). Identical images give +∞.
@@ -187,6 +192,8 @@ pub fn evaluate_frame(
         lpips_human_box: f64::NAN,
         blurred_lpips_full: f64::NAN,
         blurred_lpips_human_box: f64::NAN,
+        psnr_outside_box: f64::NAN,
+        blurred_psnr_outside_box: f64::NAN,
     };
     if let Some(net) = lpips {
         (out.lpips_full, out.blurred_lpips_full) =
@@ -207,6 +214,21 @@ pub fn evaluate_frame(
     out.ssim_human_box = f64::from(ssim(&r, &g, box_shape, None));
     out.blurred_psnr_human_box = psnr(&b, &g);
     out.blurred_ssim_human_box = f64::from(ssim(&b, &g, box_shape, None));
+    let outside = |img: &[f32]| -> Vec<f32> {
+        let plane = f.width * f.height;
+        (0..3 * plane)
+            .filter(|&i| {
+                let (x, y) = (i % plane % f.width, i % plane / f.width);
+                !(x0..x1).contains(&x) || !(y0..y1).contains(&y)
+            })
+            .map(|i| img[i])
+            .collect()
+    };
+    let reference_outside = outside(f.reference);
+    if !reference_outside.is_empty() {
+        out.psnr_outside_box = psnr(&outside(f.render), &reference_outside);
+        out.blurred_psnr_outside_box = psnr(&outside(f.blurred), &reference_outside);
+    }
     if let (Some(net), Some((x0, y0, x1, y1))) =
         (lpips, grown_box(bbox, f.width, f.height, lpips::MIN_SIZE))
     {
@@ -247,6 +269,8 @@ pub fn mean_metrics(frames: &[FrameMetrics]) -> FrameMetrics {
         lpips_human_box: mean(|m| m.lpips_human_box),
         blurred_lpips_full: mean(|m| m.blurred_lpips_full),
         blurred_lpips_human_box: mean(|m| m.blurred_lpips_human_box),
+        psnr_outside_box: mean(|m| m.psnr_outside_box),
+        blurred_psnr_outside_box: mean(|m| m.blurred_psnr_outside_box),
     }
 }
 
@@ -379,6 +403,23 @@ mod tests {
         assert!((m.blurred_ssim_human_box - 1.0).abs() < 1e-6, "{m:?}");
         assert!(m.ssim_human_box < 1.0);
         assert!(m.lpips_full.is_nan() && m.blurred_lpips_human_box.is_nan());
+        // Outside the box nothing is wrong; one value off by 0.2 there: MSE 0.04 / 531 values.
+        assert!(m.psnr_outside_box.is_infinite(), "{m:?}");
+        let mut off_outside = render.clone();
+        off_outside[0] += 0.2;
+        let m2 = evaluate_frame(
+            &EvalFrame {
+                render: &off_outside,
+                ..f
+            },
+            None,
+        )
+        .expect("no LPIPS, no error");
+        assert!(
+            (m2.psnr_outside_box - 10.0 * (531.0f64 / 0.04).log10()).abs() < 1e-3,
+            "{m2:?}"
+        );
+        assert_eq!(m2.psnr_human_box, m.psnr_human_box);
         let (sw, sh, strip) = comparison_strip(&f);
         assert_eq!((sw, sh, strip.len()), (4 * 16 + 6, 12, 3 * 12 * 70));
     }
@@ -399,6 +440,8 @@ mod tests {
             lpips_human_box: f64::NAN,
             blurred_lpips_full: 0.2,
             blurred_lpips_human_box: f64::NAN,
+            psnr_outside_box: f64::NAN,
+            blurred_psnr_outside_box: f64::NAN,
         };
         let b = FrameMetrics {
             psnr_human_box: 10.0,

@@ -129,6 +129,8 @@ pub fn write_evaluation(
         "test_lpips_human_box": m.lpips_human_box,
         "blurred_lpips_full": m.blurred_lpips_full,
         "blurred_lpips_human_box": m.blurred_lpips_human_box,
+        "test_psnr_outside_box": m.psnr_outside_box,
+        "blurred_psnr_outside_box": m.blurred_psnr_outside_box,
         "gap_to_blurred_full_db": m.psnr_full - m.blurred_psnr_full,
         "gap_to_blurred_human_box_db": m.psnr_human_box - m.blurred_psnr_human_box,
         "train_seconds": summary.train_seconds,
