@@ -13,7 +13,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Result, SynthError};
+use crate::error::Result;
 
 /// Name of the file of true camera poses inside a scene directory.
 pub const TRUE_CAMERAS_FILE: &str = "cameras_true.json";
@@ -46,33 +46,17 @@ impl TrueCameras {
 
     /// Reads `dir/cameras_true.json`.
     pub fn read(dir: &Path) -> Result<Self> {
-        let path = Self::path(dir);
-        let bytes = std::fs::read(&path).map_err(|source| SynthError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        serde_json::from_slice(&bytes).map_err(|source| SynthError::Json { path, source })
+        crate::side_file::read_json(&Self::path(dir))
     }
 
     /// Writes `dir/cameras_true.json` (pretty JSON, trailing newline).
     pub fn write(&self, dir: &Path) -> Result<()> {
-        let path = Self::path(dir);
-        let mut text = serde_json::to_string_pretty(self).map_err(|source| SynthError::Json {
-            path: path.clone(),
-            source,
-        })?;
-        text.push('\n');
-        std::fs::write(&path, text).map_err(|source| SynthError::Io { path, source })
+        crate::side_file::write_json(&Self::path(dir), self)
     }
 
     /// Removes `dir/cameras_true.json` if there is one.
     pub fn remove(dir: &Path) -> Result<()> {
-        let path = Self::path(dir);
-        match std::fs::remove_file(&path) {
-            Ok(()) => Ok(()),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-            Err(source) => Err(SynthError::Io { path, source }),
-        }
+        crate::side_file::remove(&Self::path(dir))
     }
 }
 

@@ -24,6 +24,7 @@ pub mod pose_metrics;
 mod preview;
 pub mod raster;
 pub mod room;
+mod side_file;
 pub mod texture;
 pub mod true_poses;
 

@@ -51,37 +51,19 @@ impl TruePoses {
 
     /// Writes `dir/poses_true.json` (pretty JSON, trailing newline).
     pub fn write(&self, dir: &Path) -> Result<()> {
-        let path = Self::path(dir);
-        let mut text = serde_json::to_string_pretty(self).map_err(|source| SynthError::Json {
-            path: path.clone(),
-            source,
-        })?;
-        text.push('\n');
-        std::fs::write(&path, text).map_err(|source| SynthError::Io { path, source })
+        crate::side_file::write_json(&Self::path(dir), self)
     }
 
     /// Removes `dir/poses_true.json` if there is one.
     pub fn remove(dir: &Path) -> Result<()> {
-        let path = Self::path(dir);
-        match std::fs::remove_file(&path) {
-            Ok(()) => Ok(()),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-            Err(source) => Err(SynthError::Io { path, source }),
-        }
+        crate::side_file::remove(&Self::path(dir))
     }
 
     /// Reads `dir/poses_true.json`, refusing another version, a frame without 24 joints and
     /// non-finite numbers (the message names the frame and field).
     pub fn read(dir: &Path) -> Result<Self> {
         let path = Self::path(dir);
-        let bytes = std::fs::read(&path).map_err(|source| SynthError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        let poses: Self = serde_json::from_slice(&bytes).map_err(|source| SynthError::Json {
-            path: path.clone(),
-            source,
-        })?;
+        let poses: Self = crate::side_file::read_json(&path)?;
         let bad = |reason: String| SynthError::TruePoses {
             path: path.clone(),
             reason,

@@ -778,6 +778,42 @@ fn cov_splats<'a>(s: &'a Scene, covs: &'a [Mat3<f64>]) -> CovSplats<'a, f64> {
     }
 }
 
+/// A random scene (seed, kinds, channels) with its covariances set, a random cotangent, and
+/// `render_cov_backward`'s gradients of L = Σ cot · (image, alpha, depth).
+fn cov_scene_and_gradients(
+    seed: u64,
+    kinds: &[usize],
+    c: usize,
+) -> (
+    Scene,
+    Vec<Mat3<f64>>,
+    (Vec<f64>, Vec<f64>, Vec<f64>),
+    rasterize_cpu::Gradients<f64>,
+) {
+    let mut s = random_scene(seed, kinds, c);
+    let covs: Vec<Mat3<f64>> = (0..s.n())
+        .map(|i| covariance_3d(s.log_scales[i], s.quats[i]))
+        .collect();
+    s.covs = Some(covs.clone());
+    let cot = random_cotangent(&s, seed);
+    let settings = s.settings();
+    let fwd = render_cov(&s.cam, &cov_splats(&s, &covs), &settings)
+        .unwrap_or_else(|e| panic!("render_cov: {e}"));
+    let g = render_cov_backward(
+        &s.cam,
+        &cov_splats(&s, &covs),
+        &settings,
+        &fwd,
+        &Cotangents {
+            image: &cot.0,
+            alpha: Some(&cot.1),
+            depth: Some(&cot.2),
+        },
+    )
+    .unwrap_or_else(|e| panic!("render_cov_backward: {e}"));
+    (s, covs, cot, g)
+}
+
 /// L = Σ cot · (image, alpha, depth) of `render_cov` with the scene's covariances.
 fn cov_loss(s: &Scene, cot: &(Vec<f64>, Vec<f64>, Vec<f64>)) -> f64 {
     let covs = s
@@ -807,22 +843,7 @@ proptest! {
         kinds in kinds_strategy(6),
         c in 1usize..4,
     ) {
-        let mut s = random_scene(seed, &kinds, c);
-        let covs: Vec<Mat3<f64>> =
-            (0..s.n()).map(|i| covariance_3d(s.log_scales[i], s.quats[i])).collect();
-        s.covs = Some(covs.clone());
-        let cot = random_cotangent(&s, seed);
-        let settings = s.settings();
-        let fwd = render_cov(&s.cam, &cov_splats(&s, &covs), &settings)
-            .unwrap_or_else(|e| panic!("render_cov: {e}"));
-        let g = render_cov_backward(
-            &s.cam,
-            &cov_splats(&s, &covs),
-            &settings,
-            &fwd,
-            &Cotangents { image: &cot.0, alpha: Some(&cot.1), depth: Some(&cot.2) },
-        )
-        .unwrap_or_else(|e| panic!("render_cov_backward: {e}"));
+        let (s, covs, cot, g) = cov_scene_and_gradients(seed, &kinds, c);
         prop_assert_eq!(g.covariances.len(), s.n());
         prop_assert!(g.log_scales.is_empty() && g.quats.is_empty());
         let base = oracle(&s, None).decisions;
@@ -928,22 +949,7 @@ proptest! {
         kinds in kinds_strategy(6),
         c in 1usize..4,
     ) {
-        let mut s = random_scene(seed, &kinds, c);
-        let covs: Vec<Mat3<f64>> =
-            (0..s.n()).map(|i| covariance_3d(s.log_scales[i], s.quats[i])).collect();
-        s.covs = Some(covs.clone());
-        let cot = random_cotangent(&s, seed);
-        let settings = s.settings();
-        let fwd = render_cov(&s.cam, &cov_splats(&s, &covs), &settings)
-            .unwrap_or_else(|e| panic!("render_cov: {e}"));
-        let g = render_cov_backward(
-            &s.cam,
-            &cov_splats(&s, &covs),
-            &settings,
-            &fwd,
-            &Cotangents { image: &cot.0, alpha: Some(&cot.1), depth: Some(&cot.2) },
-        )
-        .unwrap_or_else(|e| panic!("render_cov_backward: {e}"));
+        let (s, covs, cot, g) = cov_scene_and_gradients(seed, &kinds, c);
         let ana = camera_pose_gradient(&s.cam, &s.means, &covs, &g)
             .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
         let base = oracle(&s, None).decisions;
