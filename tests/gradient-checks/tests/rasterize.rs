@@ -778,18 +778,17 @@ fn cov_splats<'a>(s: &'a Scene, covs: &'a [Mat3<f64>]) -> CovSplats<'a, f64> {
     }
 }
 
-/// A random scene (seed, kinds, channels) with its covariances set, a random cotangent, and
-/// `render_cov_backward`'s gradients of L = Σ cot · (image, alpha, depth).
-fn cov_scene_and_gradients(
-    seed: u64,
-    kinds: &[usize],
-    c: usize,
-) -> (
+/// A scene with its covariances, a cotangent of (image, alpha, depth), and the render's gradients.
+type CovCase = (
     Scene,
     Vec<Mat3<f64>>,
     (Vec<f64>, Vec<f64>, Vec<f64>),
     rasterize_cpu::Gradients<f64>,
-) {
+);
+
+/// A random scene (seed, kinds, channels) with its covariances set, a random cotangent, and
+/// `render_cov_backward`'s gradients of L = Σ cot · (image, alpha, depth).
+fn cov_scene_and_gradients(seed: u64, kinds: &[usize], c: usize) -> CovCase {
     let mut s = random_scene(seed, kinds, c);
     let covs: Vec<Mat3<f64>> = (0..s.n())
         .map(|i| covariance_3d(s.log_scales[i], s.quats[i]))
