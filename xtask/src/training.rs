@@ -118,6 +118,12 @@ fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path
             config.event_weight, config.event_threshold
         );
     }
+    if let Some(slices) = done.modulated_slices {
+        println!(
+            "event modulation: {slices} slices of exposures, each render modulated by the events \
+             of its slice (EDI inside the slice)"
+        );
+    }
 }
 
 /// Mean seconds per step stage over `recent`, in the step's order, with their total.

@@ -574,9 +574,21 @@ fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
         "\"subframes\": 3",
         "\"event_loss\": true",
         "\"event_pairs\": \"exposure\"",
+        "\"event_modulation\": true",
     ] {
         assert!(metrics.contains(field), "{field}: {metrics}");
     }
+    assert!(stdout.contains("event modulation:"), "{stdout}");
+    // The events' modulation can be turned off on its own.
+    let plain = dir.path().join("unmodulated");
+    let o = reconstruct(
+        &plain,
+        &config,
+        &["--subframes", "3", "--event-modulation", "off"],
+    );
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("event modulation:"));
+    let metrics = std::fs::read_to_string(plain.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"event_modulation\": false"), "{metrics}");
     let sharp = dir.path().join("sharp");
     reconstruct(
         &sharp,
@@ -642,6 +654,7 @@ fn a_scene_without_events_trains_the_exposure_model_alone_and_says_so() {
     );
     let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     assert!(metrics.contains("\"event_loss\": false"), "{metrics}");
+    assert!(metrics.contains("\"event_modulation\": false"), "{metrics}");
 }
 
 /// Copies a directory tree.

@@ -44,6 +44,7 @@ fn value(
     all_pairs: bool,
     grey: bool,
     penalty: EventPenalty,
+    modulation: &[Option<Vec<f64>>],
 ) -> (f64, Vec<Vec<f64>>) {
     let renders: Vec<&[f64]> = x.chunks(PLANES * HW).collect();
     let shape = ImageShape {
@@ -62,6 +63,7 @@ fn value(
             penalty,
             log_eps: 1e-3,
             all_pairs,
+            modulation,
         }),
         PLANES,
         grey,
@@ -88,14 +90,14 @@ proptest! {
         let expected: Vec<Option<Vec<f64>>> = (0..subframes.saturating_sub(1))
             .map(|s| (s % 2 == 1 || subframes == 2).then(|| (0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
             .collect();
-        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs, grey, penalty);
+        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs, grey, penalty, &[]);
         let analytic: Vec<f64> = d.concat();
-        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs, grey, penalty).0, &x, H);
+        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs, grey, penalty, &[]).0, &x, H);
         let mut checker = GradientChecker::new();
         checker.check(&format!("exposure terms, S = {subframes}, all pairs {all_pairs}, grey {grey}"), &numeric, &analytic, TOL);
         if grey {
             // The luminance's adjoint is needed: the colour cotangent fails a grey frame.
-            let (_, colour) = value(&x, &observed, &expected, 0.7, all_pairs, false, penalty);
+            let (_, colour) = value(&x, &observed, &expected, 0.7, all_pairs, false, penalty, &[]);
             prop_assert!(!compare("colour cotangent on a grey frame", &numeric, &colour.concat(), TOL).passed());
         }
         // The probability plane is not part of the terms.
@@ -104,7 +106,7 @@ proptest! {
         }
         if subframes > 1 {
             // The mean's 1/S is needed: the unscaled photometric cotangent fails.
-            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs, grey, penalty);
+            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs, grey, penalty, &[]);
             let unscaled: Vec<f64> = d.iter().zip(&d_no_events).flat_map(|(with, without)| {
                 with.iter().zip(without).map(move |(&a, &b)| a + (subframes as f64 - 1.0) * b)
             }).collect();
@@ -117,6 +119,46 @@ proptest! {
                 prop_assert!(!compare("unweighted events", &numeric, &unweighted, TOL).passed());
             }
         }
+        checker.finish();
+    }
+
+    /// With the events' modulation of each render's slice (`ExposureEvents::modulation`: random
+    /// factors in [0.5, 2], the first render unmodulated), the prediction is the mean of
+    /// (r + ε)·M − ε; its cotangent reaches a render multiplied by M, which the cotangent without
+    /// the factor fails.
+    #[test]
+    fn modulated_exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..3, grey in any::<bool>()) {
+        let subframes = [2, 3, 5][which];
+        let mut rng = rng(seed);
+        let x: Vec<f64> = (0..subframes * PLANES * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
+        let mut observed: Vec<f64> = (0..3 * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
+        if grey {
+            let (first, rest) = observed.split_at_mut(HW);
+            rest[..HW].copy_from_slice(first);
+            rest[HW..].copy_from_slice(first);
+        }
+        let expected: Vec<Option<Vec<f64>>> = (0..subframes - 1)
+            .map(|_| Some((0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
+            .collect();
+        let modulation: Vec<Option<Vec<f64>>> = (0..subframes)
+            .map(|s| (s > 0).then(|| (0..HW).map(|_| rng.gen_range(0.5..2.0)).collect()))
+            .collect();
+        let f = |p: &[f64]| value(p, &observed, &expected, 0.7, false, grey, BOUND, &modulation);
+        let (_, d) = f(&x);
+        let numeric = central_differences(|p| f(p).0, &x, H);
+        let mut checker = GradientChecker::new();
+        checker.check(&format!("modulated exposure terms, S = {subframes}, grey {grey}"), &numeric, &d.concat(), TOL);
+        // The factor M is needed in the cotangent: without it the check fails.
+        let (_, d_events_only) = value(&x, &observed, &expected, 0.7, false, grey, BOUND, &[]);
+        let unfactored: Vec<f64> = d.iter().zip(&modulation).flat_map(|(render, m)| {
+            render.iter().enumerate().map(move |(i, &v)| match m {
+                Some(m) if i < 3 * HW => v / m[i % HW],
+                _ => v,
+            })
+        }).collect();
+        prop_assert!(!compare("cotangent without M", &numeric, &unfactored, TOL).passed());
+        // And the modulation changes the loss: the unmodulated gradient fails too.
+        prop_assert!(!compare("unmodulated", &numeric, &d_events_only.concat(), TOL).passed());
         checker.finish();
     }
 }

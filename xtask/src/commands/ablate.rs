@@ -55,7 +55,7 @@ struct Run {
     options: fn() -> TrainOptions,
 }
 
-const RUNS: [Run; 12] = [
+const RUNS: [Run; 13] = [
     Run {
         name: "semantic-none",
         what: "no semantics (every Gaussian deformed), no events",
@@ -168,15 +168,31 @@ const RUNS: [Run; 12] = [
         },
     },
     Run {
-        name: "exposure-events",
+        name: "exposure-events-unmodulated",
         what: "one-hot + exposure model + events between sub-exposure renders, counts as lower \
-               bounds (the default)",
+               bounds, renders not modulated by their slice's events (the previous default)",
         options: || TrainOptions {
             semantic: Some(SemanticMode::OneHot),
             blur_model: Some(BlurModel::Exposure),
             event_loss: Some(true),
             event_pairs: Some(EventPairs::Exposure),
             event_penalty: Some(EventPenaltyKind::Bound),
+            event_modulation: Some(false),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
+    },
+    Run {
+        name: "exposure-events",
+        what: "one-hot + exposure model + events between sub-exposure renders, counts as lower \
+               bounds, each render modulated by its slice's events (the default)",
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            blur_model: Some(BlurModel::Exposure),
+            event_loss: Some(true),
+            event_pairs: Some(EventPairs::Exposure),
+            event_penalty: Some(EventPenaltyKind::Bound),
+            event_modulation: Some(true),
             flow_loss: Some(false),
             ..TrainOptions::default()
         },

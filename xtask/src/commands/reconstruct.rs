@@ -138,8 +138,9 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
 }
 
 /// The defaults that depend on the scene, for the settings the user left alone: the contrast
-/// threshold its generator recorded, and the event loss between sub-exposure renders when the blur
-/// model is `exposure` and every frame has events (a scene without events trains with the exposure
+/// threshold its generator recorded, and the event loss between sub-exposure renders and the
+/// events' modulation of each render's slice when the blur model is `exposure` and every frame
+/// has events (a scene without events trains with the exposure
 /// model alone, and says so).
 fn scene_defaults(
     mut config: TrainConfig,
@@ -156,8 +157,17 @@ fn scene_defaults(
             config.event_threshold_neg = Some(c as f32);
         }
     }
+    let with_events = data.scene.frames.iter().all(|f| f.events.is_some());
+    if config.blur_model == BlurModel::Exposure && !training.sets("event_modulation")? {
+        config.event_modulation = with_events;
+        if with_events {
+            println!(
+                "events: each sub-exposure render is modulated by the events of its slice of the \
+                 exposure (--event-modulation off to train without)"
+            );
+        }
+    }
     if config.blur_model == BlurModel::Exposure && !training.sets("event_loss")? {
-        let with_events = data.scene.frames.iter().all(|f| f.events.is_some());
         config.event_loss = with_events;
         if with_events {
             println!(
@@ -347,6 +357,7 @@ pub fn run(args: Args) -> Result<()> {
             "event_threshold": config.event_threshold,
             "event_threshold_neg": config.event_threshold_neg,
             "event_penalty": config.event_penalty,
+            "event_modulation": config.event_modulation,
             "lpips_weight": config.lpips_weight,
             "pose_correction": config.pose_correction,
             "pose_error": pose_error,

@@ -317,6 +317,18 @@ training_options! {
     /// more than m thresholds (0: counts are pure lower bounds; the refractory period hides
     /// crossings, so a count is never too high, but a count at a slowly changing pixel is exact).
     event_overshoot_weight: f32 = 0.0,
+    /// With `blur_model = exposure` and a scene with events: each sub-exposure render stands for
+    /// its 1/S slice of the exposure modulated per pixel by the events inside that slice — the
+    /// event double integral (EDI) over the slice, anchored at the render's time — instead of
+    /// standing for the slice unchanged (`train::loss::photometric`). The events then describe
+    /// what happens between the renders (a thin stripe passing a pixel between two renders leaves
+    /// a net count of zero but a dip in the slice's mean), so the mean of S renders matches a
+    /// continuous blur. Independent of `event_loss`. Off in a bare configuration; `cargo xtask
+    /// reconstruct` turns it on when the blur model is `exposure` and the scene has events, unless
+    /// `--event-modulation` or the config file sets it. Default benchmark, `quick`: 34.35 / 29.92
+    /// dB (full frame / human box) against 34.11 / 29.67 without (`docs/BENCHMARKS.md`).
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    event_modulation: bool = false,
     /// Learned pose correction (`train::pose::correction`), for poses estimated by a fitter: per
     /// training frame, additive corrections of the 24 joint rotations (axis-angle, radians) and the
     /// translation (m) at mid exposure and, with `blur_model = exposure`, of their change over the

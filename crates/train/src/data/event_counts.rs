@@ -22,6 +22,43 @@ pub(super) fn expected_change(
     change
 }
 
+/// The events' modulation of one sub-exposure render's slice `(from_s, to_s, anchor_s)` of an
+/// exposure: per pixel (row-major H × W), the mean over the slice of exp(E(anchor → t)), E the
+/// threshold-weighted signed sum of the pixel's events between the anchor (the render's time) and
+/// t — the reciprocal of `events::edi_gain` over the slice. The pixels `hot` marks report no
+/// change (modulation 1). Thresholds C± as [`expected_change`].
+pub(super) fn slice_modulation(
+    events: &events::EventSlice<'_>,
+    sensor: events::SensorSize,
+    (from_s, to_s, anchor_s): (f64, f64, f64),
+    config: &TrainConfig,
+    hot: &[bool],
+) -> Result<Vec<f32>, TrainError> {
+    let us = |t: f64| (t * 1e6).round() as i64;
+    let exposure = events::Exposure {
+        start_us: us(from_s),
+        end_us: us(to_s).max(us(from_s) + 1),
+        reference_us: us(anchor_s),
+    };
+    let edi = events::EdiConfig {
+        c_pos: f64::from(config.event_threshold),
+        c_neg: f64::from(config.event_threshold_neg.unwrap_or(config.event_threshold)),
+    };
+    let gain = events::edi_gain(events, sensor, exposure, edi)
+        .map_err(|e| TrainError::Config(format!("the events' modulation of an exposure: {e}")))?;
+    Ok(gain
+        .iter()
+        .enumerate()
+        .map(|(p, &g)| {
+            if hot.get(p).copied().unwrap_or(false) {
+                1.0
+            } else {
+                (1.0 / g) as f32
+            }
+        })
+        .collect())
+}
+
 /// [`expected_change`] of every pixel.
 fn counted_change(
     events: &events::EventSlice<'_>,
@@ -97,5 +134,29 @@ mod tests {
         let hot = expected_change(&stream.as_slice(), sensor, &config, &[true, false, false]);
         assert_eq!(hot[0], 0.0);
         assert_eq!(hot[1..], two[1..]);
+    }
+
+    #[test]
+    fn a_slice_is_modulated_by_the_mean_of_exp_e_from_its_anchor() {
+        // Slice [0, 1000) µs anchored at 500 µs. Pixel 0: one ON event at 750 µs, so exp(E) is 1
+        // for three quarters of the slice and e^C for the last: M = 0.75 + 0.25·e^0.2. Pixel 1:
+        // one OFF event at 250 µs (before the anchor), so E(anchor → t) is +C before it: M =
+        // 0.25·e^0.2 + 0.75. Pixel 2: an ON event, but a hot pixel: 1.
+        let sensor = events::SensorSize::new(3, 1);
+        let mut stream = events::EventStream::new();
+        for (t, x, p) in [(250, 1, -1), (600, 2, 1), (750, 0, 1)] {
+            stream.push(events::Event { t, x, y: 0, p });
+        }
+        let config = TrainConfig {
+            event_threshold: 0.2,
+            ..TrainConfig::default()
+        };
+        let hot = [false, false, true];
+        let m = slice_modulation(&stream.as_slice(), sensor, (0.0, 1e-3, 5e-4), &config, &hot)
+            .expect("a valid slice");
+        let want = 0.75 + 0.25 * 0.2f64.exp();
+        assert!((f64::from(m[0]) - want).abs() < 1e-6, "{m:?}");
+        assert!((f64::from(m[1]) - want).abs() < 1e-6, "{m:?}");
+        assert_eq!(m[2], 1.0);
     }
 }

@@ -31,6 +31,8 @@ pub struct Preparation {
     /// Render pairs the event loss compares (`event_loss`): consecutive training frames, or
     /// consecutive sub-exposure renders, as `config.event_pairs` says.
     pub event_pairs: Option<usize>,
+    /// Sub-exposure slices the events modulate (`event_modulation`).
+    pub modulated_slices: Option<usize>,
 }
 
 impl TrainingData {
@@ -92,6 +94,13 @@ impl TrainingData {
                 }
             });
         }
+        let modulation = config.event_modulation && config.blur_model == BlurModel::Exposure;
+        if modulation && self.exposure_modulation.is_empty() {
+            self.enable_exposure_events(data, config)
+                .map_err(step("the events' modulation of the exposure"))?;
+        }
+        done.modulated_slices =
+            modulation.then(|| self.exposure_modulation.iter().flatten().flatten().count());
         Ok(done)
     }
 }

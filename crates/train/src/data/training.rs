@@ -3,7 +3,7 @@
 //! targets and event counts) — prepared once, refused at load time when a file is missing or wrong.
 
 use super::dataset::Dataset;
-use super::event_counts::{expected_change, hot_pixels};
+use super::event_counts::{expected_change, hot_pixels, slice_modulation};
 use super::event_files::read_frame_events;
 use crate::config::TrainConfig;
 use crate::loss::optical_flow::{network_target, prepare_target, FlowTarget};
@@ -100,6 +100,11 @@ pub struct TrainingData {
     /// (before the first frame's time); empty unless [`TrainingData::enable_exposure_events`] was
     /// called.
     pub exposure_events: Vec<Vec<Option<Vec<f32>>>>,
+    /// Per training slot, per sub-exposure render s, the events' modulation of its slice of the
+    /// exposure ([`crate::loss::photometric::ExposureEvents::modulation`]: mean over the slice of
+    /// exp(E(t_s → t)) per pixel, row-major H × W), `None` where no event file covers the slice;
+    /// empty unless [`TrainingData::enable_exposure_events`] was called with `event_modulation`.
+    pub exposure_modulation: Vec<Vec<Option<Vec<f32>>>>,
     /// The frozen LPIPS network of the perceptual loss (`None` unless
     /// [`TrainingData::enable_lpips`] was called).
     pub lpips: Option<lpips::Lpips<f32>>,
@@ -143,6 +148,7 @@ impl TrainingData {
             exposure_poses: Vec::new(),
             exposure_cameras: Vec::new(),
             exposure_events: Vec::new(),
+            exposure_modulation: Vec::new(),
             lpips: None,
         })
     }
@@ -274,6 +280,16 @@ impl TrainingData {
         })
     }
 
+    /// The events' modulation of each sub-exposure render's slice of slot `slot`'s exposure
+    /// ([`TrainingData::exposure_modulation`]), refused when [`TrainingData::prepare`] did not
+    /// compute it.
+    pub fn exposure_modulation(&self, slot: usize) -> Result<&[Option<Vec<f32>>], TrainError> {
+        self.exposure_modulation
+            .get(slot)
+            .map(Vec::as_slice)
+            .ok_or_else(|| not_prepared("event_modulation", "events' modulation of the exposure"))
+    }
+
     /// C·E per pixel between consecutive sub-exposure times of slot `slot`
     /// ([`TrainingData::exposure_events`]), refused when [`TrainingData::prepare`] did not count them.
     pub fn exposure_event_counts(&self, slot: usize) -> Result<&[Option<Vec<f32>>], TrainError> {
@@ -340,7 +356,9 @@ impl TrainingData {
     /// which are joined; a frame whose exposure needs a file that `scene.json` does not name is an
     /// error naming the frame and the field. Intervals outside the files' evidence
     /// (`scene::Scene::event_evidence_span`: before the first frame's time, or outside a
-    /// recording's events) get no supervision.
+    /// recording's events) get no supervision. With `config.event_modulation`, also each
+    /// sub-exposure render's modulation by the events of its slice of the exposure
+    /// ([`TrainingData::exposure_modulation`]; the slices tile the whole exposure).
     pub fn enable_exposure_events(
         &mut self,
         data: &Dataset,
@@ -357,6 +375,7 @@ impl TrainingData {
         let mut loaded: std::collections::BTreeMap<usize, events::EventStream> = Default::default();
         let us = |t: f64| (t * 1e6).round() as i64;
         let mut all = Vec::with_capacity(self.frames.len());
+        let mut modulation = Vec::new();
         for (p, frame) in data.frames.iter().enumerate() {
             if frame.split != Split::Train {
                 continue;
@@ -369,7 +388,16 @@ impl TrainingData {
             // The files this exposure reaches into, joined in time order, and the span over which
             // they are evidence (`scene::Scene::event_evidence_span`: consecutive files' spans
             // join into one interval).
-            let (first, last) = (times[0], times[times.len() - 1]);
+            let slices = crate::pose::exposure::exposure_slices(
+                frame.time_s,
+                frame.exposure_s,
+                config.subframes,
+            );
+            let (first, last) = if config.event_modulation {
+                (slices[0].0, slices[slices.len() - 1].1)
+            } else {
+                (times[0], times[times.len() - 1])
+            };
             let reached = (p.saturating_sub(1)..=p + 1).filter(|&q| {
                 q == p
                     || (q < p && first < frame.time_s)
@@ -408,8 +436,22 @@ impl TrainingData {
                 })
                 .collect();
             all.push(pairs);
+            if config.event_modulation {
+                let covered =
+                    |&(from, to, _): &(f64, f64, f64)| from >= covered_from && to <= covered_to;
+                let per_slice = slices
+                    .iter()
+                    .map(|slice_s| {
+                        covered(slice_s)
+                            .then(|| slice_modulation(&slice, sensor, *slice_s, config, &hot))
+                            .transpose()
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                modulation.push(per_slice);
+            }
         }
         self.exposure_events = all;
+        self.exposure_modulation = modulation;
         Ok(())
     }
 

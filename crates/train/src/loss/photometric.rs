@@ -3,6 +3,13 @@
 //! of the frame's S sub-exposure renders against the observed frame, and the event-generation loss
 //! between consecutive renders against the events between their times (`train::loss::event`).
 //!
+//! With the events' modulation (`ExposureEvents::modulation`, `--event-modulation`), render s
+//! stands for its slice of the exposure as the event double integral over that slice says:
+//! (r_s + ε)·M_s − ε, M_s = mean over the slice of exp(E(t_s → t)) per pixel — what the pixel's
+//! events say happened between the renders (a thin stripe that passes between two renders leaves
+//! no net count, but a dip in its slice's mean). M_s is data, so its cotangent is M_s times the
+//! mean's.
+//!
 //! Backward: the photometric cotangent of the mean reaches every render scaled by 1/S (unscaled for
 //! one render, so the single-render model is the S = 1 case bit for bit); each event pair —
 //! consecutive renders, or every pair — adds its weighted cotangents to its two renders.
@@ -26,6 +33,11 @@ pub struct ExposureEvents<'a, T> {
     /// Every pair of renders (s < s′, against the summed counts of the consecutive intervals
     /// between them, when all of them are covered) instead of consecutive ones.
     pub all_pairs: bool,
+    /// Per render s, the events' modulation M_s of its slice of the exposure (H × W: the mean over
+    /// the slice of exp(E(t_s → t))), or `None` (M_s = 1, e.g. a slice no events file covers);
+    /// empty: no modulation. The prediction is then the mean of (r_s + ε)·M_s − ε, every channel
+    /// modulated by the luma's events (EDI's assumption: the colour's ratios hold over the slice).
+    pub modulation: &'a [Option<Vec<T>>],
 }
 
 /// The value of the terms and the cotangent of every render.
@@ -61,7 +73,17 @@ pub fn exposure_loss<T: Real>(
     grey: bool,
 ) -> ExposureLoss<T> {
     let hw = shape.height * shape.width;
-    let mean = mean_image(renders, 3 * hw);
+    let modulation = events.map_or(&[][..], |e| e.modulation);
+    let modulated: Vec<std::borrow::Cow<'_, [T]>> = renders
+        .iter()
+        .enumerate()
+        .map(|(s, r)| match modulation.get(s).and_then(Option::as_ref) {
+            Some(m) => modulate(r, m, events.map_or(T::zero(), |e| e.log_eps), hw).into(),
+            None => std::borrow::Cow::Borrowed(&r[..3 * hw]),
+        })
+        .collect();
+    let modulated_refs: Vec<&[T]> = modulated.iter().map(|r| &r[..]).collect();
+    let mean = mean_image(&modulated_refs, 3 * hw);
     let prediction = if grey {
         crate::loss::image::luminance3(&mean, hw)
     } else {
@@ -87,6 +109,16 @@ pub fn exposure_loss<T: Real>(
         let d: Vec<T> = d_mean.iter().map(|&v| v * scale).collect();
         vec![d; renders.len()]
     };
+    // d(r·M)/dr = M on the three colour planes.
+    for (s, d) in d_renders.iter_mut().enumerate() {
+        if let Some(m) = modulation.get(s).and_then(Option::as_ref) {
+            for plane in d[..3 * hw].chunks_mut(hw) {
+                for (v, &g) in plane.iter_mut().zip(m) {
+                    *v = *v * g;
+                }
+            }
+        }
+    }
     let mut event_value = T::zero();
     if let Some(events) = events {
         let last = |s: usize| {
@@ -122,6 +154,20 @@ pub fn exposure_loss<T: Real>(
         prediction,
         d_renders,
     }
+}
+
+/// (r + ε)·M − ε on the three colour planes of the render `r` ((≥ 3, H, W)), `m` per pixel.
+fn modulate<T: Real>(r: &[T], m: &[T], log_eps: T, hw: usize) -> Vec<T> {
+    let mut out = Vec::with_capacity(3 * hw);
+    for plane in r[..3 * hw].chunks(hw) {
+        out.extend(
+            plane
+                .iter()
+                .zip(m)
+                .map(|(&v, &g)| (v + log_eps) * g - log_eps),
+        );
+    }
+    out
 }
 
 /// C·E of the interval between sub-exposure times `s` and `s2` > `s`: the consecutive intervals'

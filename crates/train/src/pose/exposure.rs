@@ -27,6 +27,22 @@ pub fn subframe_times(time_s: f64, exposure_s: f64, count: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The S slices of a frame's exposure that its S sub-exposure renders stand for, each
+/// `(from, to, anchor)` in seconds: `[t − E/2 + s·E/S, t − E/2 + (s+1)·E/S)` with the render's
+/// time ([`subframe_times`], the slice's middle) as anchor.
+pub fn exposure_slices(time_s: f64, exposure_s: f64, count: usize) -> Vec<(f64, f64, f64)> {
+    let s = count.max(1) as f64;
+    let start = time_s - 0.5 * exposure_s;
+    subframe_times(time_s, exposure_s, count)
+        .into_iter()
+        .enumerate()
+        .map(|(k, anchor)| {
+            let from = start + exposure_s * k as f64 / s;
+            (from, from + exposure_s / s, anchor)
+        })
+        .collect()
+}
+
 /// Key times in increasing order, and the C¹ curve through values at them that both tracks use.
 #[derive(Clone, Debug)]
 struct Keys {
@@ -232,6 +248,21 @@ impl CameraTrack {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_slices_tile_the_exposure_around_their_renders_times() {
+        let slices = exposure_slices(2.0, 0.03, 5);
+        let times = subframe_times(2.0, 0.03, 5);
+        assert!((slices[0].0 - 1.985).abs() < 1e-12 && (slices[4].1 - 2.015).abs() < 1e-12);
+        for (k, &(from, to, anchor)) in slices.iter().enumerate() {
+            assert!((to - from - 0.006).abs() < 1e-12);
+            assert_eq!(anchor, times[k]);
+            assert!((anchor - 0.5 * (from + to)).abs() < 1e-12);
+            if k > 0 {
+                assert_eq!(from, slices[k - 1].1);
+            }
+        }
+    }
 
     #[test]
     fn midpoint_times_span_the_exposure_symmetrically() {

@@ -501,13 +501,23 @@ fn frame_losses(
     let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
     let exposure_events =
         config.event_loss && config.event_pairs == EventPairs::Exposure && passes.len() > 1;
-    let events = if exposure_events {
+    let modulated = config.event_modulation && config.blur_model == BlurModel::Exposure;
+    let events = if exposure_events || modulated {
         Some(ExposureEvents {
-            expected: data.exposure_event_counts(slot)?,
+            expected: if exposure_events {
+                data.exposure_event_counts(slot)?
+            } else {
+                &[]
+            },
             weight: config.event_weight,
             penalty: config.event_penalty(),
             log_eps: config.event_log_eps,
             all_pairs: config.exposure_pairs == ExposurePairs::All,
+            modulation: if modulated {
+                data.exposure_modulation(slot)?
+            } else {
+                &[]
+            },
         })
     } else {
         None
