@@ -71,6 +71,21 @@ fn value(
     (out.photometric + out.events, out.d_renders)
 }
 
+/// S random renders (PLANES planes each, one after the other) and a random observed frame (three
+/// equal planes when `grey`), values in [0.05, 1).
+fn renders_and_frame(rng: &mut impl Rng, subframes: usize, grey: bool) -> (Vec<f64>, Vec<f64>) {
+    let x: Vec<f64> = (0..subframes * PLANES * HW)
+        .map(|_| rng.gen_range(0.05..1.0))
+        .collect();
+    let mut observed: Vec<f64> = (0..3 * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
+    if grey {
+        let (first, rest) = observed.split_at_mut(HW);
+        rest[..HW].copy_from_slice(first);
+        rest[HW..].copy_from_slice(first);
+    }
+    (x, observed)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(8))]
 
@@ -79,13 +94,7 @@ proptest! {
         let penalty = if bound { BOUND } else { EventPenalty::Squared };
         let subframes = [1, 2, 3, 5][which];
         let mut rng = rng(seed);
-        let x: Vec<f64> = (0..subframes * PLANES * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
-        let mut observed: Vec<f64> = (0..3 * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
-        if grey {
-            let (first, rest) = observed.split_at_mut(HW);
-            rest[..HW].copy_from_slice(first);
-            rest[HW..].copy_from_slice(first);
-        }
+        let (x, observed) = renders_and_frame(&mut rng, subframes, grey);
         // Every other pair has events (C·E with C = 0.2); the first pair has none.
         let expected: Vec<Option<Vec<f64>>> = (0..subframes.saturating_sub(1))
             .map(|s| (s % 2 == 1 || subframes == 2).then(|| (0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
@@ -130,13 +139,7 @@ proptest! {
     fn modulated_exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..3, grey in any::<bool>()) {
         let subframes = [2, 3, 5][which];
         let mut rng = rng(seed);
-        let x: Vec<f64> = (0..subframes * PLANES * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
-        let mut observed: Vec<f64> = (0..3 * HW).map(|_| rng.gen_range(0.05..1.0)).collect();
-        if grey {
-            let (first, rest) = observed.split_at_mut(HW);
-            rest[..HW].copy_from_slice(first);
-            rest[HW..].copy_from_slice(first);
-        }
+        let (x, observed) = renders_and_frame(&mut rng, subframes, grey);
         let expected: Vec<Option<Vec<f64>>> = (0..subframes - 1)
             .map(|_| Some((0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
             .collect();
