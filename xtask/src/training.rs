@@ -97,6 +97,13 @@ fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path
              training frames deblurred, the others' exposures are not covered by events"
         );
     }
+    if let Some(deblurred) = done.edi_warmup {
+        println!(
+            "EDI warm-up: the first {} steps train on EDI-deblurred frames with one render and no \
+             event term ({deblurred} of {frames} training frames deblurred)",
+            config.edi_warmup
+        );
+    }
     if let Some((shortest, longest)) = done.exposure_s {
         let span = if longest - shortest > 1e-9 {
             format!("{:.1}–{:.1} ms", 1e3 * shortest, 1e3 * longest)

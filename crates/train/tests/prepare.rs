@@ -1,9 +1,10 @@
 //! `TrainingData::prepare`: the supervision a configuration asks for, the same as the separate
-//! preparation steps, and a refusal naming the step when a frozen network is missing.
+//! preparation steps, and a refusal naming the step when a frozen network is missing; the EDI
+//! warm-up it prepares.
 
 mod common;
 
-use common::{context, exposure_events_config, fixture, tiny_config};
+use common::{assert_same_bits, bits, context, exposure_events_config, fixture, tiny_config};
 use train::config::TrainConfig;
 use train::data::{load_dataset, LossNetworks};
 use train::trainer::Trainer;
@@ -99,5 +100,79 @@ fn a_step_on_data_not_prepared_for_its_configuration_is_refused() {
             "{err}"
         );
         assert_eq!(trainer.step, 0, "a refused step takes no step");
+    }
+}
+
+/// The EDI warm-up's steps are the 2-D cascade's steps (`train_on = edi`, one render, no event
+/// term), bit for bit; after it the exposure model, its events and the observed frames take over.
+#[test]
+fn the_edi_warmup_steps_are_the_cascade_steps_then_the_exposure_model_takes_over() {
+    let data = load_dataset(&fixture()).unwrap();
+    let warm = TrainConfig {
+        edi_warmup: 2,
+        event_modulation: true,
+        ..exposure_events_config(6)
+    };
+    let cascade = TrainConfig {
+        train_on: train::config::TrainOn::Edi,
+        blur_model: train::config::BlurModel::None,
+        event_loss: false,
+        event_modulation: false,
+        edi_warmup: 0,
+        ..warm.clone()
+    };
+    let mut warm_ctx = context();
+    let done = warm_ctx
+        .prepare(&data, &warm, LossNetworks::default())
+        .unwrap();
+    let mut cascade_ctx = context();
+    let cascaded = cascade_ctx
+        .prepare(&data, &cascade, LossNetworks::default())
+        .unwrap();
+    assert!(done.edi_warmup.is_some_and(|n| n > 0), "{done:?}");
+    assert_eq!(done.edi_warmup, cascaded.edi_deblurred);
+    assert!(done.modulated_slices.is_some() && done.event_pairs.is_some());
+    // The observed frames stay the frames; the warm-up images are the cascade's.
+    for (slot, frame) in warm_ctx.frames.iter().enumerate() {
+        assert_eq!(warm_ctx.target_image(slot, false), frame.image.as_slice());
+        assert_eq!(
+            warm_ctx.target_image(slot, true),
+            cascade_ctx.frames[slot].image.as_slice()
+        );
+    }
+    let mut a = Trainer::new(&warm_ctx, warm).unwrap();
+    let mut b = Trainer::new(&cascade_ctx, cascade).unwrap();
+    for _ in 0..2 {
+        let (ra, rb) = (a.step(&warm_ctx).unwrap(), b.step(&cascade_ctx).unwrap());
+        assert_eq!(ra.loss.to_bits(), rb.loss.to_bits());
+        assert_eq!((ra.event, rb.event), (0.0, 0.0));
+    }
+    assert_same_bits(&bits(&a), &bits(&b));
+    let (ra, rb) = (a.step(&warm_ctx).unwrap(), b.step(&cascade_ctx).unwrap());
+    assert!(ra.event > 0.0, "the event term is on after the warm-up");
+    assert_ne!(ra.loss.to_bits(), rb.loss.to_bits());
+}
+
+#[test]
+fn an_edi_warmup_is_refused_with_other_images_or_as_long_as_the_run() {
+    for (config, why) in [
+        (
+            TrainConfig {
+                edi_warmup: 2,
+                train_on: train::config::TrainOn::Sharp,
+                ..tiny_config(6)
+            },
+            "train_on = blurred",
+        ),
+        (
+            TrainConfig {
+                edi_warmup: 6,
+                ..tiny_config(6)
+            },
+            "fewer than `steps`",
+        ),
+    ] {
+        let err = config.validate().unwrap_err().to_string();
+        assert!(err.contains("edi_warmup") && err.contains(why), "{err}");
     }
 }

@@ -206,6 +206,13 @@ training_options! {
     /// `edi` (each frame deblurred on its own by the event double integral from its events, the
     /// 2-D cascade baseline; with `--blur-model none --event-loss off`).
     train_on: TrainOn = TrainOn::Blurred,
+    /// Steps, from step 0, that train on the EDI-deblurred frames (each frame deblurred on its own
+    /// by the event double integral, as `train_on = edi`) with one render at mid exposure and no
+    /// event term, before the blur model, the event terms and the observed frames take over: a
+    /// start near the sharp solution, which the exposure model's loss prefers but its gradients
+    /// reach slowly. 0: off. Frames whose events do not cover their exposure keep their observed
+    /// image.
+    edi_warmup: usize = 0,
     /// How a training frame's prediction is formed: `exposure` (the default: the mean, in linear
     /// intensity, of `subframes` renders at poses spread over the frame's exposure;
     /// `train::pose::exposure`) or `none` (one render at mid exposure, the paper). On the default benchmark's

@@ -98,6 +98,16 @@ impl TrainConfig {
         if !(self.event_log_eps > 0.0 && self.event_log_eps.is_finite()) {
             return bad("event_log_eps", "must be a finite number > 0");
         }
+        if self.edi_warmup > 0 && self.train_on != super::TrainOn::Blurred {
+            return bad(
+                "edi_warmup",
+                "warms up before training on the observed (blurred) frames: \
+                 needs `train_on = blurred`",
+            );
+        }
+        if self.edi_warmup > 0 && self.edi_warmup >= self.steps {
+            return bad("edi_warmup", "must be fewer than `steps`");
+        }
         Ok(())
     }
 

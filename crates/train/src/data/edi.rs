@@ -1,12 +1,16 @@
 //! The frames of the 2-D cascade baseline (`--train-on edi`): every training frame deblurred on its
 //! own by the event double integral (`events::edi`), from the events of its exposure, before any
 //! 3-D model sees it — the paper's "deblur first, then reconstruct" rows with the weight-free event
-//! deblurring.
+//! deblurring — and of the EDI warm-up (`edi_warmup`), which trains on them before the observed
+//! frames.
 
 use super::dataset::{Dataset, TrainFrame};
 pub use super::event_counts::hot_pixels;
 use super::event_files::read_frame_events;
+use super::TrainingData;
+use crate::config::TrainConfig;
 use crate::TrainError;
+use scene::Split;
 
 /// The events of `[from_s, to_s)` around frame `p` (its own file and its neighbours', joined in
 /// time order), or `None` when the frames' files are no evidence over that whole span (before the
@@ -87,4 +91,67 @@ pub fn edi_image(
         ))
     })?;
     Ok(Some(image))
+}
+
+impl TrainingData {
+    /// Replaces every training frame's image by its EDI deblurring (`--train-on edi`, the 2-D
+    /// cascade baseline; [`super::edi`]), with C± and ε from `config`. Frames whose exposure the
+    /// event files do not cover keep their blurred image; returns how many were deblurred. A scene
+    /// without events is an error naming the first frame without an `events` file.
+    pub fn use_edi_images(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+    ) -> Result<usize, TrainError> {
+        let deblurred = self.edi_images(data, config)?;
+        let count = deblurred.iter().flatten().count();
+        for (frame, image) in self.frames.iter_mut().zip(deblurred) {
+            if let Some(image) = image {
+                frame.image = image;
+            }
+        }
+        Ok(count)
+    }
+
+    /// Prepares the EDI warm-up (`edi_warmup`): every training frame's EDI deblurring as
+    /// [`TrainingData::use_edi_images`] makes it, kept beside the observed image
+    /// ([`TrainingData::warmup_images`]); returns how many frames were deblurred.
+    pub fn enable_edi_warmup(
+        &mut self,
+        data: &Dataset,
+        config: &TrainConfig,
+    ) -> Result<usize, TrainError> {
+        let deblurred = self.edi_images(data, config)?;
+        let count = deblurred.iter().flatten().count();
+        self.warmup_images = self
+            .frames
+            .iter()
+            .zip(deblurred)
+            .map(|(frame, image)| image.unwrap_or_else(|| frame.image.clone()))
+            .collect();
+        Ok(count)
+    }
+
+    /// Every training frame's EDI deblurring (`None` where the event files do not cover its
+    /// exposure), with C± and ε from `config`.
+    fn edi_images(
+        &self,
+        data: &Dataset,
+        config: &TrainConfig,
+    ) -> Result<Vec<Option<Vec<f32>>>, TrainError> {
+        let edi = events::EdiConfig {
+            c_pos: f64::from(config.event_threshold),
+            c_neg: f64::from(config.event_threshold_neg.unwrap_or(config.event_threshold)),
+        };
+        let training = data
+            .frames
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.split == Split::Train);
+        let hot = hot_pixels(data, config.event_hot_pixel_filter, "EDI deblurring")?;
+        let log_eps = f64::from(config.event_log_eps);
+        training
+            .map(|(p, source)| super::edi::edi_image(data, p, source, edi, log_eps, &hot))
+            .collect()
+    }
 }

@@ -26,6 +26,8 @@ pub struct Preparation {
     pub lpips: bool,
     /// Training frames deblurred by EDI (`train_on = edi`); the others keep their observed image.
     pub edi_deblurred: Option<usize>,
+    /// Training frames the EDI warm-up deblurred (`edi_warmup > 0`).
+    pub edi_warmup: Option<usize>,
     /// The shortest and longest exposure (s) of the frames (`blur_model = exposure`).
     pub exposure_s: Option<(f64, f64)>,
     /// Render pairs the event loss compares (`event_loss`): consecutive training frames, or
@@ -73,6 +75,10 @@ impl TrainingData {
                 done.edi_deblurred = Some(deblurred.map_err(step("the EDI-deblurred frames"))?);
             }
             TrainOn::Blurred => {}
+        }
+        if config.edi_warmup > 0 {
+            let deblurred = self.enable_edi_warmup(data, config);
+            done.edi_warmup = Some(deblurred.map_err(step("the EDI warm-up"))?);
         }
         if config.blur_model == BlurModel::Exposure {
             self.enable_exposure(data, config.subframes)

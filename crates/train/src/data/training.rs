@@ -105,6 +105,10 @@ pub struct TrainingData {
     /// exp(E(t_s → t)) per pixel, row-major H × W), `None` where no event file covers the slice;
     /// empty unless [`TrainingData::enable_exposure_events`] was called with `event_modulation`.
     pub exposure_modulation: Vec<Vec<Option<Vec<f32>>>>,
+    /// Per training slot, the image the EDI warm-up trains on (`edi_warmup`: the frame's EDI
+    /// deblurring, or its observed image where the events do not cover its exposure); empty unless
+    /// [`TrainingData::enable_edi_warmup`] was called.
+    pub warmup_images: Vec<Vec<f32>>,
     /// The frozen LPIPS network of the perceptual loss (`None` unless
     /// [`TrainingData::enable_lpips`] was called).
     pub lpips: Option<lpips::Lpips<f32>>,
@@ -149,6 +153,7 @@ impl TrainingData {
             exposure_cameras: Vec::new(),
             exposure_events: Vec::new(),
             exposure_modulation: Vec::new(),
+            warmup_images: Vec::new(),
             lpips: None,
         })
     }
@@ -170,34 +175,13 @@ impl TrainingData {
         Ok(())
     }
 
-    /// Replaces every training frame's image by its EDI deblurring (`--train-on edi`, the 2-D
-    /// cascade baseline; [`super::edi`]), with C± and ε from `config`. Frames whose exposure the
-    /// event files do not cover keep their blurred image; returns how many were deblurred. A scene
-    /// without events is an error naming the first frame without an `events` file.
-    pub fn use_edi_images(
-        &mut self,
-        data: &Dataset,
-        config: &TrainConfig,
-    ) -> Result<usize, TrainError> {
-        let edi = events::EdiConfig {
-            c_pos: f64::from(config.event_threshold),
-            c_neg: f64::from(config.event_threshold_neg.unwrap_or(config.event_threshold)),
-        };
-        let training = data
-            .frames
-            .iter()
-            .enumerate()
-            .filter(|(_, f)| f.split == Split::Train);
-        let hot = hot_pixels(data, config.event_hot_pixel_filter, "EDI deblurring")?;
-        let mut deblurred = 0;
-        for (frame, (p, source)) in self.frames.iter_mut().zip(training) {
-            let log_eps = f64::from(config.event_log_eps);
-            if let Some(image) = super::edi::edi_image(data, p, source, edi, log_eps, &hot)? {
-                frame.image = image;
-                deblurred += 1;
-            }
+    /// The image a step trains frame `slot` on: its warm-up image during the EDI warm-up
+    /// (`warmup` and [`TrainingData::warmup_images`] prepared), else the frame's image.
+    pub fn target_image(&self, slot: usize, warmup: bool) -> &[f32] {
+        match self.warmup_images.get(slot) {
+            Some(image) if warmup => image,
+            _ => &self.frames[slot].image,
         }
-        Ok(deblurred)
     }
 
     /// Prepares the exposure model: for every training frame, the body poses at `subframes`

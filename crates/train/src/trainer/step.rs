@@ -24,6 +24,19 @@ use rasterize_cpu::TileSharing;
 use smpl_deform::math::Affine;
 use std::time::Instant;
 
+/// The configuration step `step` trains with: `config` itself, except during the EDI warm-up
+/// (`step < edi_warmup`), which renders once at mid exposure with no event term (its target is
+/// the frame's EDI deblurring, [`TrainingData::target_image`]).
+fn step_config(config: &TrainConfig, step: usize) -> TrainConfig {
+    let mut config = config.clone();
+    if step < config.edi_warmup {
+        config.blur_model = BlurModel::None;
+        config.event_loss = false;
+        config.event_modulation = false;
+    }
+    config
+}
+
 /// Frame k's passes: one at mid exposure, or one per sub-exposure pose.
 struct FramePasses<'a> {
     passes: Vec<FramePass<'a>>,
@@ -76,10 +89,12 @@ impl Trainer {
     /// [`Trainer::refine`]. On a non-finite loss or gradient nothing is updated and
     /// [`TrainError::NonFinite`] is returned.
     pub fn step(&mut self, data: &TrainingData) -> Result<StepReport, TrainError> {
-        let config = self.config.clone();
         let step = self.step;
+        let config = step_config(&self.config, step);
+        let warmup = step < self.config.edi_warmup;
         let slot = self.next_slot(data.frames.len());
         let frame = &data.frames[slot];
+        let target = data.target_image(slot, warmup);
         let mut times = StageTimes::default();
         let model = &self.model;
 
@@ -93,7 +108,7 @@ impl Trainer {
             None
         };
         let frame_k = frame_passes(model, data, &config, slot, corrected.as_ref(), &mut times)?;
-        let mut losses = frame_losses(data, &config, slot, &frame_k.passes, &mut times)?;
+        let mut losses = frame_losses(data, &config, slot, target, &frame_k.passes, &mut times)?;
 
         // Frame k+1 when a pair loss applies.
         let t_pair = Instant::now();
@@ -182,7 +197,7 @@ impl Trainer {
             flow,
             event,
             pose_prior: back.pose_prior,
-            psnr: psnr(&losses.prediction, &frame.image),
+            psnr: psnr(&losses.prediction, target),
             gaussians_human: human,
             gaussians_scene: self.model.set.len() - human,
             active,
@@ -487,10 +502,10 @@ fn frame_losses(
     data: &TrainingData,
     config: &TrainConfig,
     slot: usize,
+    target: &[f32],
     passes: &[FramePass<'_>],
     times: &mut StageTimes,
 ) -> Result<FrameLosses, TrainError> {
-    let frame = &data.frames[slot];
     let (height, width) = (data.camera.height as usize, data.camera.width as usize);
     let t0 = Instant::now();
     let shape = ImageShape {
@@ -524,7 +539,7 @@ fn frame_losses(
     };
     let photo = exposure_loss(
         &renders,
-        &frame.image,
+        target,
         shape,
         config.ssim_weight,
         events,
@@ -538,7 +553,7 @@ fn frame_losses(
         perceptual_term(
             data.lpips_network()?,
             &photo.prediction,
-            &frame.image,
+            target,
             height,
             width,
             config.lpips_weight,
