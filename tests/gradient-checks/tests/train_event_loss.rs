@@ -1,6 +1,7 @@
 //! Finite-difference check of the event-generation loss (`train::loss::event::pair_event_loss_with`)
 //! w.r.t. both renders, with the squared penalty and with the bound penalty (counts as lower
-//! bounds, a dead zone without events, a weighted overshoot past the count). The loss is smooth where the luma is positive (log of a
+//! bounds, a dead zone without events, a weighted overshoot past the count), and with the bound
+//! penalty capped (each pixel's cost at most w·τ²; a kink at |r| = τ like the others). The loss is smooth where the luma is positive (log of a
 //! positive value, squared residual); renders are drawn in [0.05, 1] so no probe reaches the clamp
 //! at 0. The bound penalty's residual is continuous and piecewise linear in ΔL, so r² has a
 //! continuous first derivative; a probe of h = 1e-6 straddles one of its kinks with probability
@@ -22,6 +23,18 @@ const BOUND: EventPenalty = EventPenalty::Bound {
     margin: 0.5,
     dead_zone: 1.0,
     overshoot: 0.3,
+    cap: f64::INFINITY,
+};
+
+/// [`BOUND`] with each pixel's cost capped at τ = 1: random renders in [0.05, 1] give changes of
+/// up to ±3, so most draws hold pixels on both sides of the cap.
+const CAPPED: EventPenalty = EventPenalty::Bound {
+    c_pos: 0.2,
+    c_neg: 0.25,
+    margin: 0.5,
+    dead_zone: 1.0,
+    overshoot: 0.3,
+    cap: 1.0,
 };
 
 proptest! {
@@ -31,9 +44,13 @@ proptest! {
     fn event_loss_gradient_matches(
         images in prop::collection::vec(0.05f64..1.0, 2 * 3 * N),
         counts in prop::collection::vec(-3i32..4, N),
-        bound in any::<bool>(),
+        which in 0u8..3,
     ) {
-        let penalty = if bound { BOUND } else { EventPenalty::Squared };
+        let (bound, penalty) = match which {
+            0 => (false, EventPenalty::Squared),
+            1 => (true, BOUND),
+            _ => (true, CAPPED),
+        };
         let expected: Vec<f64> = counts
             .iter()
             .map(|&c| if c > 0 { 0.2 * f64::from(c) } else { 0.25 * f64::from(c) })
@@ -56,11 +73,20 @@ proptest! {
             prop_assert!(!compare("squared for bound", &numeric, &other, TOL).passed());
             // The overshoot term is there: where a pixel overshoots (the losses differ), the
             // gradient of the pure bound fails it.
-            let pure = EventPenalty::Bound { c_pos: 0.2, c_neg: 0.25, margin: 0.5, dead_zone: 1.0, overshoot: 0.0 };
+            let pure = EventPenalty::Bound { c_pos: 0.2, c_neg: 0.25, margin: 0.5, dead_zone: 1.0, overshoot: 0.0, cap: f64::INFINITY };
             let pure = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, pure);
-            if pure.loss != out.loss {
+            if pure.loss != out.loss && which == 1 {
                 let other: Vec<f64> = pure.d_first.iter().chain(&pure.d_second).copied().collect();
                 prop_assert!(!compare("pure bound for bound with overshoot", &numeric, &other, TOL).passed());
+            }
+            // The cap is there: where a pixel is capped (the losses differ), the uncapped
+            // gradient fails it.
+            if which == 2 {
+                let uncapped = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, BOUND);
+                if uncapped.loss != out.loss {
+                    let other: Vec<f64> = uncapped.d_first.iter().chain(&uncapped.d_second).copied().collect();
+                    prop_assert!(!compare("uncapped for capped", &numeric, &other, TOL).passed());
+                }
             }
         }
         checker.finish();

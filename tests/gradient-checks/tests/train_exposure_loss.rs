@@ -33,6 +33,7 @@ const BOUND: EventPenalty = EventPenalty::Bound {
     margin: 0.5,
     dead_zone: 1.0,
     overshoot: 0.3,
+    cap: f64::INFINITY,
 };
 
 /// The terms' value for S renders laid out one after the other in `x` (PLANES × HW each).

@@ -83,6 +83,11 @@ macro_rules! training_options {
                 margin: f64::from(self.event_bound_margin),
                 dead_zone: f64::from(self.event_dead_zone),
                 overshoot: f64::from(self.event_overshoot_weight),
+                cap: if self.event_residual_cap > 0.0 {
+                    f64::from(self.event_residual_cap)
+                } else {
+                    f64::INFINITY
+                },
             },
         }
     }
@@ -324,6 +329,11 @@ training_options! {
     /// more than m thresholds (0: counts are pure lower bounds; the refractory period hides
     /// crossings, so a count is never too high, but a count at a slowly changing pixel is exact).
     event_overshoot_weight: f32 = 0.0,
+    /// τ of the `bound` penalty: a pixel's event cost is capped at τ² (log-intensity units; 0:
+    /// no cap), so a pixel whose count the sensor's refractory period turned into the wrong sign
+    /// or size stops pulling once its change is τ away from what the count allows (a truncated
+    /// quadratic; `train::loss::event`).
+    event_residual_cap: f32 = 0.0,
     /// With `blur_model = exposure` and a scene with events: each sub-exposure render stands for
     /// its 1/S slice of the exposure modulated per pixel by the events inside that slice — the
     /// event double integral (EDI) over the slice, anchored at the render's time — instead of

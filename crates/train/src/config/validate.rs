@@ -95,6 +95,7 @@ impl TrainConfig {
             0.0,
             1.0,
         )?;
+        non_negative("event_residual_cap", self.event_residual_cap)?;
         if !(self.event_log_eps > 0.0 && self.event_log_eps.is_finite()) {
             return bad("event_log_eps", "must be a finite number > 0");
         }

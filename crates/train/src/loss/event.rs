@@ -19,12 +19,16 @@
 //! r(p) = min(0, ΔL − (C+·n⁺ − C−·n⁻ − m·C+)) where the events sum positive,
 //! r(p) = max(0, ΔL − (C+·n⁺ − C−·n⁻ + m·C−)) where they sum negative,
 //! r(p) = sign(ΔL)·max(0, |ΔL| − z·C) without events (C the mean of C±),
-//! L_ev = (1/N) Σ_p w(p)·r(p)², with the margin m for the quantisation of the counts (the change
+//! L_ev = (1/N) Σ_p w(p)·min(r(p)², τ²), with the margin m for the quantisation of the counts (the change
 //! between two crossings is up to one threshold either side) and the dead zone z; w = 1 but for an
 //! overshoot past the count (ΔL beyond C+·n⁺ − C−·n⁻ ± m·C in the events' direction), which costs
 //! its squared excess times the overshoot weight o (0: a pure bound; 1 with m = 0: the squared
 //! penalty on pixels with events). o between the two trusts an unsaturated count a little: the
-//! refractory period hides crossings, it never invents them.
+//! refractory period hides crossings, it never invents them. The cap τ (∞: none) bounds what one
+//! pixel can cost: on a sensor with a refractory period a pixel crossed by texture in both
+//! directions within one interval reports a net count whose sign and size are arbitrary, and
+//! without a cap those few pixels hold a sharp model's changes to them (measured:
+//! `docs/notes/2026-11-28-what-holds-the-blur.md`).
 
 use nn::Real;
 
@@ -47,7 +51,21 @@ pub enum EventPenalty {
         /// o: the weight of the squared overshoot of a change past its count by more than m
         /// thresholds (0: counts are pure lower bounds).
         overshoot: f64,
+        /// τ: a pixel's cost is capped at w·τ² (log-intensity units; ∞: no cap), so a pixel
+        /// whose residual exceeds τ — a count the sensor's dropped crossings turned into the
+        /// wrong sign or size — stops pulling (a truncated quadratic, robust to such outliers).
+        cap: f64,
     },
+}
+
+impl EventPenalty {
+    /// τ², the largest cost of one pixel before its weight, when the penalty caps it.
+    pub fn cap(&self) -> Option<f64> {
+        match *self {
+            EventPenalty::Bound { cap, .. } if cap.is_finite() => Some(cap),
+            _ => None,
+        }
+    }
 }
 
 /// Rec. 709 luma weights of linear R, G, B (the same as `events::grey_from_rgb`).
@@ -89,6 +107,7 @@ pub fn event_residual<T: Real>(change: T, expected: T, penalty: EventPenalty) ->
             margin,
             dead_zone,
             overshoot,
+            ..
         } => {
             let zero = T::zero();
             // r outside [low, high], weighted by the side's weight; 0 inside.
@@ -130,6 +149,7 @@ pub fn pair_event_loss_with<T: Real>(
         |img: &[T], i: usize| luma[0] * img[i] + luma[1] * img[n + i] + luma[2] * img[2 * n + i];
     let inv = T::one() / T::of(n.max(1) as f64);
     let two = T::of(2.0);
+    let cap = penalty.cap().map(|tau| T::of(tau * tau));
     let mut loss = T::zero();
     let mut d_first = vec![T::zero(); 3 * n];
     let mut d_second = vec![T::zero(); 3 * n];
@@ -138,8 +158,16 @@ pub fn pair_event_loss_with<T: Real>(
         let (ca, cb) = (ya.max(T::zero()), yb.max(T::zero()));
         let change = (cb + log_eps).ln() - (ca + log_eps).ln();
         let (r, w) = event_residual(change, expected[i], penalty);
-        loss = loss + w * r * r * inv;
-        let g = two * w * r * inv;
+        let g = match cap {
+            Some(cap) if r * r > cap => {
+                loss = loss + w * cap * inv;
+                T::zero()
+            }
+            _ => {
+                loss = loss + w * r * r * inv;
+                two * w * r * inv
+            }
+        };
         // d/dY of log(max(Y, 0) + ε): 1/(Y + ε) above 0, 0 below (the clamp).
         let ga = if ya > T::zero() {
             -g / (ca + log_eps)
@@ -192,6 +220,7 @@ mod tests {
             margin: 0.5,
             dead_zone: 1.0,
             overshoot: 0.0,
+            cap: f64::INFINITY,
         };
         let r = |change: f64, expected: f64, penalty| event_residual(change, expected, penalty).0;
         // Two positive events (0.4): any change above 0.3 is free, a smaller one costs.
@@ -220,6 +249,7 @@ mod tests {
             margin: 0.5,
             dead_zone: 1.0,
             overshoot: 0.1,
+            cap: f64::INFINITY,
         };
         // Two positive events: free in [0.3, 0.5]; 0.9 overshoots by 0.4 at weight 0.1.
         let (r, w) = event_residual(0.9f64, 0.4, bound);
@@ -230,5 +260,31 @@ mod tests {
         assert!((r + 0.225).abs() < 1e-12 && w == 0.1);
         // Falling short still costs in full.
         assert_eq!(event_residual(0.0, -0.25, bound).1, 1.0);
+    }
+
+    #[test]
+    fn a_capped_pixel_costs_its_cap_and_pulls_no_more() {
+        let capped = |cap| EventPenalty::Bound {
+            c_pos: 0.2,
+            c_neg: 0.2,
+            margin: 0.5,
+            dead_zone: 1.0,
+            overshoot: 0.0,
+            cap,
+        };
+        let eps = 1e-3f64;
+        let grey = |y: f64| vec![y, y, y];
+        let (y0, y1) = (0.2, (0.2 + eps) * 0.5f64.exp() - eps);
+        // Two negative events against a brightening by 0.5: r = 0.5 − (−0.4 + 0.1) = 0.8.
+        let free = pair_event_loss_with(&grey(y0), &grey(y1), &[-0.4], eps, capped(f64::INFINITY));
+        assert!((free.loss - 0.64).abs() < 1e-12, "{}", free.loss);
+        let cut = pair_event_loss_with(&grey(y0), &grey(y1), &[-0.4], eps, capped(0.3));
+        assert!((cut.loss - 0.09).abs() < 1e-12, "{}", cut.loss);
+        assert!(cut.d_first.iter().chain(&cut.d_second).all(|&d| d == 0.0));
+        // Below the cap nothing changes.
+        let near = pair_event_loss_with(&grey(y0), &grey(y1), &[-0.4], eps, capped(0.9));
+        assert_eq!(near.loss, free.loss);
+        assert_eq!(near.d_second, free.d_second);
+        assert_eq!(capped(f64::INFINITY).cap(), None);
     }
 }
