@@ -84,7 +84,10 @@ macro_rules! training_options {
                 dead_zone: f64::from(self.event_dead_zone),
                 overshoot: f64::from(self.event_overshoot_weight),
                 cap: if self.event_residual_cap > 0.0 {
+                    let c_neg = self.event_threshold_neg.unwrap_or(self.event_threshold);
                     f64::from(self.event_residual_cap)
+                        * 0.5
+                        * (f64::from(self.event_threshold) + f64::from(c_neg))
                 } else {
                     f64::INFINITY
                 },
@@ -329,11 +332,13 @@ training_options! {
     /// more than m thresholds (0: counts are pure lower bounds; the refractory period hides
     /// crossings, so a count is never too high, but a count at a slowly changing pixel is exact).
     event_overshoot_weight: f32 = 0.0,
-    /// τ of the `bound` penalty: a pixel's event cost is capped at τ² (log-intensity units; 0:
-    /// no cap), so a pixel whose count the sensor's refractory period turned into the wrong sign
-    /// or size stops pulling once its change is τ away from what the count allows (a truncated
-    /// quadratic; `train::loss::event`).
-    event_residual_cap: f32 = 0.0,
+    /// The cap of the `bound` penalty, in thresholds (the mean of C±): a pixel's event cost is
+    /// capped at τ² with τ this many thresholds (0: no cap, the default before 2026-11-28's
+    /// thirtieth session), so a pixel whose count the sensor's refractory period turned into the
+    /// wrong sign or size stops pulling once its change is τ away from what the count allows (a
+    /// truncated quadratic; `train::loss::event`). The default, one threshold, gains 0.40 dB in
+    /// the human box at `quick` (1.27 dB with `--subframes 9`; `docs/BENCHMARKS.md`).
+    event_residual_cap: f32 = 1.0,
     /// With `blur_model = exposure` and a scene with events: each sub-exposure render stands for
     /// its 1/S slice of the exposure modulated per pixel by the events inside that slice — the
     /// event double integral (EDI) over the slice, anchored at the render's time — instead of
