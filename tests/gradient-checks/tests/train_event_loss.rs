@@ -1,7 +1,8 @@
 //! Finite-difference check of the event-generation loss (`train::loss::event::pair_event_loss_with`)
 //! w.r.t. both renders, with the squared penalty and with the bound penalty (counts as lower
 //! bounds, a dead zone without events, a weighted overshoot past the count), and with the bound
-//! penalty capped (each pixel's cost at most w·τ²; a kink at |r| = τ like the others). The loss is smooth where the luma is positive (log of a
+//! penalty capped (each pixel's cost at most w·τ²; a kink at |r| = τ like the others); about a
+//! fifth of the pixels are unconstrained (their events fired both polarities) and cost nothing. The loss is smooth where the luma is positive (log of a
 //! positive value, squared residual); renders are drawn in [0.05, 1] so no probe reaches the clamp
 //! at 0. The bound penalty's residual is continuous and piecewise linear in ΔL, so r² has a
 //! continuous first derivative; a probe of h = 1e-6 straddles one of its kinks with probability
@@ -11,7 +12,7 @@
 
 use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
 use proptest::prelude::*;
-use train::loss::event::{pair_event_loss_with, EventPenalty};
+use train::loss::event::{pair_event_loss_with, EventPenalty, UNCONSTRAINED};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;
@@ -45,15 +46,22 @@ proptest! {
         images in prop::collection::vec(0.05f64..1.0, 2 * 3 * N),
         counts in prop::collection::vec(-3i32..4, N),
         which in 0u8..3,
+        silent in prop::collection::vec(prop::bool::weighted(0.2), N),
     ) {
         let (bound, penalty) = match which {
             0 => (false, EventPenalty::Squared),
             1 => (true, BOUND),
             _ => (true, CAPPED),
         };
-        let expected: Vec<f64> = counts
+        // About a fifth of the pixels are unconstrained (fired both polarities).
+        let held: Vec<f64> = counts
             .iter()
             .map(|&c| if c > 0 { 0.2 * f64::from(c) } else { 0.25 * f64::from(c) })
+            .collect();
+        let expected: Vec<f64> = held
+            .iter()
+            .zip(&silent)
+            .map(|(&e, &s)| if s { f64::from(UNCONSTRAINED) } else { e })
             .collect();
         let loss = |x: &[f64]| pair_event_loss_with(&x[..3 * N], &x[3 * N..], &expected, 1e-3, penalty);
         let out = loss(&images);
@@ -66,6 +74,15 @@ proptest! {
         let neg: Vec<f64> = analytic.iter().map(|a| -a).collect();
         prop_assert!(!compare("negated", &numeric, &neg, TOL).passed());
         prop_assert!(analytic.iter().any(|&a| a != 0.0));
+        // The unconstrained pixels are free: where their counts would pull one of them (a
+        // non-zero gradient there; a capped or satisfied pixel does not pull), holding them to
+        // their counts gives another gradient.
+        let counted = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &held, 1e-3, penalty);
+        let other: Vec<f64> = counted.d_first.iter().chain(&counted.d_second).copied().collect();
+        let pulled = (0..2 * 3 * N).any(|k| silent[k % N] && other[k].abs() > 1e-6);
+        if pulled {
+            prop_assert!(!compare("held for unconstrained", &numeric, &other, TOL).passed());
+        }
         if bound {
             // The bound is not the squared penalty: the squared gradient fails it.
             let squared = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, EventPenalty::Squared);

@@ -339,6 +339,13 @@ training_options! {
     /// truncated quadratic; `train::loss::event`). The default, one threshold, gains 0.40 dB in
     /// the human box at `quick` (1.27 dB with `--subframes 9`; `docs/BENCHMARKS.md`).
     event_residual_cap: f32 = 1.0,
+    /// A pixel that fired events of both polarities within an interval says nothing about its net
+    /// change there: on a sensor with a refractory period, texture crossing the pixel both ways
+    /// drops crossings of either sign, so the net count's sign and size are arbitrary. On: such a
+    /// pixel is unconstrained by the event loss in that interval (`train::loss::event`); off:
+    /// held to its net count like any other (the default before this option).
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    event_ignore_mixed: bool = false,
     /// With `blur_model = exposure` and a scene with events: each sub-exposure render stands for
     /// its 1/S slice of the exposure modulated per pixel by the events inside that slice — the
     /// event double integral (EDI) over the slice, anchored at the render's time — instead of

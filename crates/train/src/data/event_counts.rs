@@ -59,24 +59,32 @@ pub(super) fn slice_modulation(
         .collect())
 }
 
-/// [`expected_change`] of every pixel.
+/// [`expected_change`] of every pixel; [`crate::loss::event::UNCONSTRAINED`] where the pixel
+/// fired both polarities and `config.event_ignore_mixed` is on.
 fn counted_change(
     events: &events::EventSlice<'_>,
     sensor: events::SensorSize,
     config: &TrainConfig,
 ) -> Vec<f32> {
     let c_pos = config.event_threshold;
-    match config.event_threshold_neg {
-        None => events::count_frame(events, sensor, events::CountMode::Signed)
+    match (config.event_threshold_neg, config.event_ignore_mixed) {
+        (None, false) => events::count_frame(events, sensor, events::CountMode::Signed)
             .iter()
             .map(|c| c * c_pos)
             .collect(),
-        Some(c_neg) => {
+        (c_neg, ignore_mixed) => {
+            let c_neg = c_neg.unwrap_or(c_pos);
             let two = events::count_frame(events, sensor, events::CountMode::TwoChannel);
             let (pos, neg) = two.split_at(two.len() / 2);
             pos.iter()
                 .zip(neg)
-                .map(|(p, n)| p * c_pos - n * c_neg)
+                .map(|(&p, &n)| {
+                    if ignore_mixed && p > 0.0 && n > 0.0 {
+                        crate::loss::event::UNCONSTRAINED
+                    } else {
+                        p * c_pos - n * c_neg
+                    }
+                })
                 .collect()
         }
     }
@@ -134,6 +142,29 @@ mod tests {
         let hot = expected_change(&stream.as_slice(), sensor, &config, &[true, false, false]);
         assert_eq!(hot[0], 0.0);
         assert_eq!(hot[1..], two[1..]);
+    }
+
+    #[test]
+    fn a_pixel_of_both_polarities_is_unconstrained_only_when_asked() {
+        // Pixel 1 fired one OFF and one ON event: a net count of zero, or no constraint.
+        let sensor = events::SensorSize::new(3, 1);
+        let mut stream = events::EventStream::new();
+        for (t, x, p) in [(1, 0, 1), (2, 0, 1), (3, 1, -1), (4, 1, 1), (5, 2, -1)] {
+            stream.push(events::Event { t, x, y: 0, p });
+        }
+        let mut config = TrainConfig {
+            event_threshold: 0.2,
+            ..TrainConfig::default()
+        };
+        let net = expected_change(&stream.as_slice(), sensor, &config, &[]);
+        assert_eq!(net, vec![0.4, 0.0, -0.2]);
+        config.event_ignore_mixed = true;
+        let mixed = expected_change(&stream.as_slice(), sensor, &config, &[]);
+        assert!(mixed[1].is_nan(), "{mixed:?}");
+        assert_eq!((mixed[0], mixed[2]), (0.4, -0.2));
+        // A hot pixel still reports no change.
+        let hot = expected_change(&stream.as_slice(), sensor, &config, &[false, true, false]);
+        assert_eq!(hot[1], 0.0);
     }
 
     #[test]

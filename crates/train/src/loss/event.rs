@@ -28,7 +28,9 @@
 //! pixel can cost: on a sensor with a refractory period a pixel crossed by texture in both
 //! directions within one interval reports a net count whose sign and size are arbitrary, and
 //! without a cap those few pixels hold a sharp model's changes to them (measured:
-//! `docs/notes/2026-11-28-what-holds-the-blur.md`).
+//! `docs/notes/2026-11-28-what-holds-the-blur.md`). An expected change of [`UNCONSTRAINED`] (NaN:
+//! the events say nothing of the net change, e.g. a pixel that fired both polarities) costs
+//! nothing under either penalty, and a sum of intervals that holds one stays unconstrained.
 
 use nn::Real;
 
@@ -68,6 +70,10 @@ impl EventPenalty {
     }
 }
 
+/// The expected change of a pixel whose events say nothing about its net change (NaN, so that a
+/// sum over intervals containing one stays unconstrained): it costs nothing.
+pub const UNCONSTRAINED: f32 = f32::NAN;
+
 /// Rec. 709 luma weights of linear R, G, B (the same as `events::grey_from_rgb`).
 pub const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 
@@ -96,9 +102,12 @@ pub fn pair_event_loss<T: Real>(
 
 /// The residual r(p) of a pixel whose log-intensity change is `change` and whose events sum to
 /// `expected` = C+·n⁺ − C−·n⁻, and its weight w(p) (see the module doc): the loss is w·r², its
-/// derivative in `change` 2·w·r.
+/// derivative in `change` 2·w·r. An [`UNCONSTRAINED`] (NaN) `expected` gives r = 0.
 pub fn event_residual<T: Real>(change: T, expected: T, penalty: EventPenalty) -> (T, T) {
     let one = T::one();
+    if expected.is_nan() {
+        return (T::zero(), one);
+    }
     match penalty {
         EventPenalty::Squared => (change - expected, one),
         EventPenalty::Bound {
@@ -286,5 +295,33 @@ mod tests {
         assert_eq!(near.loss, free.loss);
         assert_eq!(near.d_second, free.d_second);
         assert_eq!(capped(f64::INFINITY).cap(), None);
+    }
+
+    #[test]
+    fn an_unconstrained_pixel_costs_nothing_under_either_penalty() {
+        let eps = 1e-3f64;
+        let nan = f64::from(UNCONSTRAINED);
+        let (y0, y1) = (0.2, (0.2 + eps) * 0.5f64.exp() - eps);
+        // Two pixels brightening by 0.5: one unconstrained, one held to no change.
+        let first = [y0, y0, y0, y0, y0, y0];
+        let second = [y1, y1, y1, y1, y1, y1];
+        let bound = EventPenalty::Bound {
+            c_pos: 0.2,
+            c_neg: 0.2,
+            margin: 0.5,
+            dead_zone: 1.0,
+            overshoot: 0.0,
+            cap: f64::INFINITY,
+        };
+        for penalty in [EventPenalty::Squared, bound] {
+            let free = pair_event_loss_with(&first, &second, &[nan, 0.0], eps, penalty);
+            let held = pair_event_loss_with(&first, &second, &[0.0, 0.0], eps, penalty);
+            assert!(free.loss.is_finite() && free.loss > 0.0);
+            assert!((2.0 * free.loss - held.loss).abs() < 1e-12, "{penalty:?}");
+            for c in 0..3 {
+                assert_eq!((free.d_first[2 * c], free.d_second[2 * c]), (0.0, 0.0));
+                assert_eq!(free.d_second[2 * c + 1], held.d_second[2 * c + 1]);
+            }
+        }
     }
 }
