@@ -34,14 +34,14 @@ enum Command {
     /// then evaluate the test split and write the model, metrics.json, strips and report.html.
     ///
     /// Every training option below overrides the preset and the --config file. The default is the
-    /// best method measured within the `quick` preset's time budget: the physical model of the blur (each training frame the mean of renders
-    /// over its exposure) with the events between those renders when the scene has events, their
-    /// counts read as lower bounds on the change as a sensor with a refractory period gives them
-    /// and each pixel's cost capped at one threshold (`--event-loss off`: the exposure model
-    /// alone). The previous default, without the cap, is `--event-residual-cap 0`; the one
-    /// before, the squared event loss, `--event-penalty squared --event-weight 0.3
-    /// --event-modulation off`. The best measured, slower than the `quick` budget, adds
-    /// `--subframes 9`; the 2-D cascade baseline (every
+    /// best method measured within the `quick` preset's time budget: the physical model of the blur (each training frame the mean of 9 renders
+    /// over its exposure; 5 at `full`) with the events between those renders when the scene has events, their
+    /// counts read as lower bounds on the change as a sensor with a refractory period gives them,
+    /// each pixel's cost capped at one threshold and a pixel that fired both polarities left
+    /// unconstrained (`--event-loss off`: the exposure model alone). The previous default is
+    /// `--subframes 5 --event-ignore-mixed off`; the one before, without the cap, adds
+    /// `--event-residual-cap 0`; the squared event loss is `--event-penalty squared
+    /// --event-weight 0.3 --event-modulation off`. The 2-D cascade baseline (every
     /// frame deblurred by EDI first) is `--train-on edi --blur-model none --event-loss off`. The
     /// paper's own configuration (one render per frame, the event-flow loss) is
     /// `--blur-model none --event-loss off --flow-loss on --flow-source events`.

@@ -227,8 +227,11 @@ training_options! {
     /// `quick` preset the exposure model scores 33.24 / 28.75 dB (full frame / human box) against
     /// 29.23 / 24.65 without it and 29.32 / 24.68 for the blurred input (`docs/BENCHMARKS.md`).
     blur_model: BlurModel = BlurModel::Exposure,
-    /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure).
-    subframes: usize = 5,
+    /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure). `quick`
+    /// takes 9: with the events' cap and mixed pixels unconstrained, 35.81 / 31.47 dB (full frame /
+    /// human box) against 34.79 / 30.38 with 5, in 8 min 20 s of wall time against 5 min 12 s
+    /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` keeps 5 for its 90-minute budget.
+    subframes: usize = 9,
     /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,
     /// skinning weights and both colours are evaluated at the mid-exposure pose and each
     /// sub-exposure render re-poses them by linear blend skinning alone, `train::pose::reposing`) or
@@ -343,9 +346,11 @@ training_options! {
     /// change there: on a sensor with a refractory period, texture crossing the pixel both ways
     /// drops crossings of either sign, so the net count's sign and size are arbitrary. On: such a
     /// pixel is unconstrained by the event loss in that interval (`train::loss::event`); off:
-    /// held to its net count like any other (the default before this option).
+    /// held to its net count like any other (the default before 2026-11-29). At `quick`: +0.28 dB
+    /// in the human box with 9 renders per exposure (35.81 / 31.47 dB against 35.54 / 31.19),
+    /// +0.06 dB with 5 (`docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
-    event_ignore_mixed: bool = false,
+    event_ignore_mixed: bool = true,
     /// With `blur_model = exposure` and a scene with events: each sub-exposure render stands for
     /// its 1/S slice of the exposure modulated per pixel by the events inside that slice — the
     /// event double integral (EDI) over the slice, anchored at the render's time — instead of
@@ -437,6 +442,8 @@ impl TrainConfig {
                 densify_until: 4000,
                 opacity_reset_every: 3000,
                 checkpoint_every: 1000,
+                // 9 renders per exposure would take ~1.6x the 90-minute budget.
+                subframes: 5,
                 ..quick
             },
         }

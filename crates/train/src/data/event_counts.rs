@@ -129,8 +129,10 @@ mod tests {
         for (t, x, p) in [(1, 0, 1), (2, 0, 1), (3, 1, -1), (4, 1, 1), (5, 2, -1)] {
             stream.push(events::Event { t, x, y: 0, p });
         }
+        // Pixel 1's two polarities are read through their net count here (see the next test).
         let mut config = TrainConfig {
             event_threshold: 0.2,
+            event_ignore_mixed: false,
             ..TrainConfig::default()
         };
         let same = expected_change(&stream.as_slice(), sensor, &config, &[]);
@@ -154,6 +156,7 @@ mod tests {
         }
         let mut config = TrainConfig {
             event_threshold: 0.2,
+            event_ignore_mixed: false,
             ..TrainConfig::default()
         };
         let net = expected_change(&stream.as_slice(), sensor, &config, &[]);
