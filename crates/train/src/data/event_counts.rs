@@ -122,19 +122,24 @@ pub fn hot_pixels(data: &Dataset, filter: bool, needed_by: &str) -> Result<Vec<b
 mod tests {
     use super::*;
 
-    #[test]
-    fn counts_are_weighted_by_their_polarity_threshold_and_hot_pixels_report_nothing() {
-        let sensor = events::SensorSize::new(3, 1);
+    /// Three pixels in a row: two ON events at pixel 0, one OFF and one ON at pixel 1, one OFF at
+    /// pixel 2; and a configuration with C = 0.2 that reads pixel 1 through its net count.
+    fn three_pixels() -> (events::SensorSize, events::EventStream, TrainConfig) {
         let mut stream = events::EventStream::new();
         for (t, x, p) in [(1, 0, 1), (2, 0, 1), (3, 1, -1), (4, 1, 1), (5, 2, -1)] {
             stream.push(events::Event { t, x, y: 0, p });
         }
-        // Pixel 1's two polarities are read through their net count here (see the next test).
-        let mut config = TrainConfig {
+        let config = TrainConfig {
             event_threshold: 0.2,
             event_ignore_mixed: false,
             ..TrainConfig::default()
         };
+        (events::SensorSize::new(3, 1), stream, config)
+    }
+
+    #[test]
+    fn counts_are_weighted_by_their_polarity_threshold_and_hot_pixels_report_nothing() {
+        let (sensor, stream, mut config) = three_pixels();
         let same = expected_change(&stream.as_slice(), sensor, &config, &[]);
         assert_eq!(same, vec![0.4, 0.0, -0.2]);
         config.event_threshold_neg = Some(0.3);
@@ -149,16 +154,7 @@ mod tests {
     #[test]
     fn a_pixel_of_both_polarities_is_unconstrained_only_when_asked() {
         // Pixel 1 fired one OFF and one ON event: a net count of zero, or no constraint.
-        let sensor = events::SensorSize::new(3, 1);
-        let mut stream = events::EventStream::new();
-        for (t, x, p) in [(1, 0, 1), (2, 0, 1), (3, 1, -1), (4, 1, 1), (5, 2, -1)] {
-            stream.push(events::Event { t, x, y: 0, p });
-        }
-        let mut config = TrainConfig {
-            event_threshold: 0.2,
-            event_ignore_mixed: false,
-            ..TrainConfig::default()
-        };
+        let (sensor, stream, mut config) = three_pixels();
         let net = expected_change(&stream.as_slice(), sensor, &config, &[]);
         assert_eq!(net, vec![0.4, 0.0, -0.2]);
         config.event_ignore_mixed = true;
