@@ -37,10 +37,10 @@ enum Command {
     /// best method measured within the `quick` preset's time budget: the physical model of the blur (each training frame the mean of 9 renders
     /// over its exposure; 5 at `full`) with the events between those renders when the scene has events, their
     /// counts read as lower bounds on the change as a sensor with a refractory period gives them,
-    /// each pixel's cost capped at one threshold and a pixel that fired both polarities left
-    /// unconstrained (`--event-loss off`: the exposure model alone). The previous default is
-    /// `--subframes 5 --event-ignore-mixed off`; the one before, without the cap, adds
-    /// `--event-residual-cap 0`; the squared event loss is `--event-penalty squared
+    /// each pixel's cost capped at one threshold, a pixel that fired both polarities left
+    /// unconstrained and the event term at weight 2 (`--event-loss off`: the exposure model
+    /// alone). The previous defaults are `--event-weight 1`, then also `--subframes 5
+    /// --event-ignore-mixed off`, then also `--event-residual-cap 0`; the squared event loss is `--event-penalty squared
     /// --event-weight 0.3 --event-modulation off`. The 2-D cascade baseline (every
     /// frame deblurred by EDI first) is `--train-on edi --blur-model none --event-loss off`. The
     /// paper's own configuration (one render per frame, the event-flow loss) is
