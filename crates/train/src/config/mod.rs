@@ -229,7 +229,7 @@ training_options! {
     blur_model: BlurModel = BlurModel::Exposure,
     /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure). `quick`
     /// takes 9: with the events' cap and mixed pixels unconstrained, 35.81 / 31.47 dB (full frame /
-    /// human box) against 34.79 / 30.38 with 5, in 8 min 20 s of wall time against 5 min 12 s
+    /// human box) against 34.79 / 30.38 with 5, in 8 min 28 s of wall time against 5 min 12 s
     /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` keeps 5 for its 90-minute budget.
     subframes: usize = 9,
     /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,
