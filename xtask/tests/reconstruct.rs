@@ -579,6 +579,9 @@ fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
         assert!(metrics.contains(field), "{field}: {metrics}");
     }
     assert!(stdout.contains("event modulation:"), "{stdout}");
+    // The fixture's sensor has a 1 ms refractory period: mixed-polarity pixels are left free.
+    let used = std::fs::read_to_string(out.join("config.json")).unwrap();
+    assert!(used.contains("\"event_ignore_mixed\": true"), "{used}");
     // The events' modulation can be turned off on its own.
     let plain = dir.path().join("unmodulated");
     let o = reconstruct(
@@ -655,6 +658,48 @@ fn a_scene_without_events_trains_the_exposure_model_alone_and_says_so() {
     let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     assert!(metrics.contains("\"event_loss\": false"), "{metrics}");
     assert!(metrics.contains("\"event_modulation\": false"), "{metrics}");
+}
+
+#[test]
+fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    let scene_dir = dir.path().join("ideal-sensor");
+    copy_dir(&fixture(), &scene_dir);
+    let scene_path = scene_dir.join("scene.json");
+    let mut scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&scene_path).unwrap()).unwrap();
+    scene["generator"]["config"]["refractory_us"] = serde_json::json!(0);
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        let o = xtask()
+            .arg("reconstruct")
+            .arg("--data")
+            .arg(&scene_dir)
+            .arg("--out")
+            .arg(out)
+            .arg("--config")
+            .arg(&config)
+            .args(["--subframes", "3"])
+            .args(extra)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&o.stdout).to_string();
+        assert!(
+            o.status.success(),
+            "{stdout}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let used = std::fs::read_to_string(out.join("config.json")).unwrap();
+        (stdout, used)
+    };
+    let (stdout, used) = run(&dir.path().join("default"), &[]);
+    assert!(stdout.contains("no refractory period"), "{stdout}");
+    assert!(used.contains("\"event_ignore_mixed\": false"), "{used}");
+    // The user's choice wins over the scene's default.
+    let (stdout, used) = run(&dir.path().join("chosen"), &["--event-ignore-mixed", "on"]);
+    assert!(!stdout.contains("no refractory period"), "{stdout}");
+    assert!(used.contains("\"event_ignore_mixed\": true"), "{used}");
 }
 
 /// Copies a directory tree.

@@ -138,7 +138,8 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
 }
 
 /// The defaults that depend on the scene, for the settings the user left alone: the contrast
-/// threshold its generator recorded, and the event loss between sub-exposure renders and the
+/// thresholds its generator recorded, mixed-polarity pixels held to their counts when it recorded a
+/// sensor without a refractory period, and the event loss between sub-exposure renders and the
 /// events' modulation of each render's slice when the blur model is `exposure` and every frame
 /// has events (a scene without events trains with the exposure
 /// model alone, and says so).
@@ -156,6 +157,15 @@ fn scene_defaults(
         if !training.sets("event_threshold_neg")? {
             config.event_threshold_neg = Some(c as f32);
         }
+    }
+    // A sensor without a refractory period reports every crossing, so a pixel that fired both
+    // polarities within an interval has an exact net count: evidence, not noise.
+    if data.recorded("refractory_us") == Some(0.0) && !training.sets("event_ignore_mixed")? {
+        config.event_ignore_mixed = false;
+        println!(
+            "events: the scene's sensor has no refractory period, so a pixel that fired both \
+             polarities is held to its net count (--event-ignore-mixed on to leave it free)"
+        );
     }
     let with_events = data.scene.frames.iter().all(|f| f.events.is_some());
     if config.blur_model == BlurModel::Exposure && !training.sets("event_modulation")? {

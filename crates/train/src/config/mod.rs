@@ -350,7 +350,9 @@ training_options! {
     /// pixel is unconstrained by the event loss in that interval (`train::loss::event`); off:
     /// held to its net count like any other (the default before 2026-11-29). At `quick`: +0.28 dB
     /// in the human box with 9 renders per exposure (35.81 / 31.47 dB against 35.54 / 31.19),
-    /// +0.06 dB with 5 (`docs/BENCHMARKS.md`).
+    /// +0.06 dB with 5 (`docs/BENCHMARKS.md`). `reconstruct` turns it off for a scene whose
+    /// generator recorded a sensor without a refractory period (`refractory_us = 0`), whose counts
+    /// are exact: +0.46 dB in the box there (31.40 against 30.94 dB at weight 1).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_ignore_mixed: bool = true,
     /// With `blur_model = exposure` and a scene with events: each sub-exposure render stands for

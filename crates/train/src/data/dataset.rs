@@ -63,12 +63,18 @@ impl Dataset {
     /// A positive finite number the scene's generator recorded under `config.<key>` (e.g. the
     /// sensor's `event_threshold`), if it recorded one.
     pub fn recorded_positive(&self, key: &str) -> Option<f64> {
+        self.recorded(key).filter(|c| *c > 0.0)
+    }
+
+    /// A finite number the scene's generator recorded under `config.<key>` (e.g. the sensor's
+    /// `refractory_us`, which may be 0), if it recorded one.
+    pub fn recorded(&self, key: &str) -> Option<f64> {
         self.scene
             .generator
             .as_ref()
             .and_then(|g| g.pointer(&format!("/config/{key}")))
             .and_then(serde_json::Value::as_f64)
-            .filter(|c| c.is_finite() && *c > 0.0)
+            .filter(|c| c.is_finite())
     }
 }
 
