@@ -1,6 +1,7 @@
 //! Writers of the importers' fixtures (`data-fixtures/import/`, made from the tiny benchmark
 //! fixture): shared by the import tests and by the ignored test that regenerates the committed
-//! files (`cargo test -p xtask --test import_fixtures -- --ignored`).
+//! files (`cargo test -p xtask --test import_fixtures -- --ignored`); and the tiny fixture edited,
+//! trained a few steps by `reconstruct`.
 #![allow(dead_code, clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
@@ -158,6 +159,11 @@ pub fn tiny_config(dir: &Path) -> PathBuf {
 
 /// Runs `reconstruct` and returns its standard output.
 pub fn reconstruct(data: &Path, run: &Path, config: &Path) -> String {
+    reconstruct_with(data, run, config, &[])
+}
+
+/// Runs `reconstruct` with `extra` options and returns its standard output.
+pub fn reconstruct_with(data: &Path, run: &Path, config: &Path, extra: &[&str]) -> String {
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_xtask"))
         .arg("reconstruct")
         .arg("--data")
@@ -166,9 +172,40 @@ pub fn reconstruct(data: &Path, run: &Path, config: &Path) -> String {
         .arg(run)
         .arg("--config")
         .arg(config)
+        .args(extra)
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Copies a directory tree.
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
+
+/// A copy of the tiny fixture at `dir/name` whose `scene.json` `edit` has changed.
+pub fn fixture_with_scene(
+    dir: &Path,
+    name: &str,
+    edit: impl FnOnce(&mut serde_json::Value),
+) -> PathBuf {
+    let scene_dir = dir.join(name);
+    copy_dir(&fixture(), &scene_dir);
+    let path = scene_dir.join("scene.json");
+    let mut scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    edit(&mut scene);
+    std::fs::write(&path, scene.to_string()).unwrap();
+    scene_dir
 }

@@ -1,0 +1,51 @@
+//! `cargo xtask reconstruct`'s defaults that depend on the scene, on edited copies of the tiny
+//! fixture: a scene without events trains the exposure model alone, and a sensor recorded without
+//! a refractory period holds mixed-polarity pixels to their counts unless the user says otherwise.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use common::{fixture_with_scene, reconstruct_with, tiny_config};
+
+#[test]
+fn a_scene_without_events_trains_the_exposure_model_alone_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_dir = fixture_with_scene(dir.path(), "no-events", |scene| {
+        for frame in scene["frames"].as_array_mut().unwrap() {
+            frame.as_object_mut().unwrap().remove("events");
+        }
+    });
+    std::fs::remove_dir_all(scene_dir.join("events")).unwrap();
+    let out = dir.path().join("out");
+    let stdout = reconstruct_with(&scene_dir, &out, &tiny_config(dir.path()), &[]);
+    assert!(
+        stdout.contains("the scene has no events") && stdout.contains("exposure model alone"),
+        "{stdout}"
+    );
+    let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"event_loss\": false"), "{metrics}");
+    assert!(metrics.contains("\"event_modulation\": false"), "{metrics}");
+}
+
+#[test]
+fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    let scene_dir = fixture_with_scene(dir.path(), "ideal-sensor", |scene| {
+        scene["generator"]["config"]["refractory_us"] = serde_json::json!(0);
+    });
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let args = [&["--subframes", "3"], extra].concat();
+        let stdout = reconstruct_with(&scene_dir, &out, &config, &args);
+        let used = std::fs::read_to_string(out.join("config.json")).unwrap();
+        (stdout, used)
+    };
+    let (stdout, used) = run("default", &[]);
+    assert!(stdout.contains("no refractory period"), "{stdout}");
+    assert!(used.contains("\"event_ignore_mixed\": false"), "{used}");
+    // The user's choice wins over the scene's default.
+    let (stdout, used) = run("chosen", &["--event-ignore-mixed", "on"]);
+    assert!(!stdout.contains("no refractory period"), "{stdout}");
+    assert!(used.contains("\"event_ignore_mixed\": true"), "{used}");
+}
