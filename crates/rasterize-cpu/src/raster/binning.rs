@@ -4,8 +4,9 @@
 
 use rayon::prelude::*;
 
+use super::kernels::pixel_span;
 use crate::project::Projected;
-use crate::Real;
+use crate::{lit, Real, TILE_SIZE};
 
 /// Visible Gaussians per binning job of [`bin_and_sort`]: at least this many.
 const BIN_CHUNK: usize = 4096;
@@ -18,6 +19,33 @@ const BIN_COUNTER_BUDGET: usize = 1 << 20;
 /// One binning job's entries (depth keys, see [`Real::depth_key`]) grouped by tile, and where each
 /// tile's group starts (n_tiles + 1 offsets).
 type BinJob<K> = (Vec<usize>, Vec<K>);
+
+/// Shrinks `p.rect` (INRIA's 3σ rectangle) to the tiles where the tile kernels can blend some pixel
+/// of `p`: those whose pixel span within `p.extent` (the opacity-aware box where alpha can reach
+/// 1/255) is non-empty in x and in y, by the kernels' own rule. A tile dropped here is one the
+/// kernels would skip for this Gaussian, so images and gradients keep their bits; it only saves
+/// listing, sorting, gathering and replaying the pair. `width` × `height` is the image size.
+pub(super) fn trim_rect<T: Real>(p: &mut Projected<T>, width: usize, height: usize) {
+    let axis = |mean: T, half: T, lo: u32, hi: u32, len: usize| -> (u32, u32) {
+        let live = |tile: u32| {
+            let origin = tile as usize * TILE_SIZE;
+            let size = TILE_SIZE.min(len.saturating_sub(origin));
+            let (a, b) = pixel_span(mean, half, lit(origin as f64), size);
+            a < b
+        };
+        let (mut lo, mut hi) = (lo, hi);
+        while lo < hi && !live(lo) {
+            lo += 1;
+        }
+        while hi > lo && !live(hi - 1) {
+            hi -= 1;
+        }
+        (lo, hi)
+    };
+    let (x0, x1) = axis(p.mean2d[0], p.extent[0], p.rect[0], p.rect[2], width);
+    let (y0, y1) = axis(p.mean2d[1], p.extent[1], p.rect[1], p.rect[3], height);
+    p.rect = [x0, y0, x1, y1];
+}
 
 /// Tile lists: for every tile, the indices of the visible Gaussians overlapping it sorted by
 /// (view depth, index), as offsets into one list. Equals INRIA's stable radix sort on
@@ -168,5 +196,87 @@ mod tests {
             let got = pool.install(|| super::bin_and_sort(&visible, gx, n_tiles));
             assert_eq!(got, expected, "{threads} threads");
         }
+    }
+
+    /// A tile leaves a Gaussian's rectangle exactly when the tile kernels would skip the pair
+    /// (`splat_lanes` gives `None`), on an image whose border tiles are partial, with means and
+    /// extents at the pixel-centre edges the kernels round on.
+    #[test]
+    fn trimmed_rectangles_keep_exactly_the_tiles_the_kernels_blend() {
+        use crate::raster::kernels::{splat_lanes, PairSplat};
+        use crate::{lit, TILE_SIZE};
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (width, height) = (83usize, 50usize);
+        let (gx, gy) = (width.div_ceil(TILE_SIZE), height.div_ceil(TILE_SIZE));
+        let (mut kept, mut dropped) = (0usize, 0usize);
+        for _ in 0..20_000 {
+            let snap = |v: f32, k: f32| if k < 0.3 { (v * 2.0).round() / 2.0 } else { v };
+            let mean2d = [
+                snap(next() * 120.0 - 20.0, next()),
+                snap(next() * 90.0 - 20.0, next()),
+            ];
+            let extent = [snap(next() * 25.0, next()), snap(next() * 25.0, next())];
+            // INRIA's square rectangle, at least as large as the extent box.
+            let radius = extent[0].max(extent[1]) + next() * 10.0;
+            let to_tile =
+                |v: f32, n: usize| ((v / TILE_SIZE as f32).max(0.0) as usize).min(n) as u32;
+            let rect = [
+                to_tile(mean2d[0] - 0.5 - radius, gx),
+                to_tile(mean2d[1] - 0.5 - radius, gy),
+                to_tile(mean2d[0] - 0.5 + radius + TILE_SIZE as f32, gx),
+                to_tile(mean2d[1] - 0.5 + radius + TILE_SIZE as f32, gy),
+            ];
+            let mut p = super::Projected {
+                mean2d,
+                conic: [1.0, 0.0, 1.0],
+                depth: 1.0,
+                opacity: 0.5,
+                extent,
+                rect,
+                radius: 1,
+            };
+            super::trim_rect(&mut p, width, height);
+            let pair = PairSplat {
+                mean2d,
+                conic: p.conic,
+                opacity: p.opacity,
+                depth: p.depth,
+                extent,
+            };
+            for ty in rect[1]..rect[3] {
+                for tx in rect[0]..rect[2] {
+                    let origin = [tx as usize * TILE_SIZE, ty as usize * TILE_SIZE];
+                    let size = [
+                        TILE_SIZE.min(width - origin[0]),
+                        TILE_SIZE.min(height - origin[1]),
+                    ];
+                    let blended =
+                        splat_lanes(&pair, lit(origin[0] as f64), lit(origin[1] as f64), size)
+                            .is_some();
+                    let listed = (p.rect[0]..p.rect[2]).contains(&tx)
+                        && (p.rect[1]..p.rect[3]).contains(&ty);
+                    assert_eq!(
+                        listed, blended,
+                        "tile ({tx}, {ty}) of {mean2d:?} ± {extent:?}"
+                    );
+                    if listed {
+                        kept += 1;
+                    } else {
+                        dropped += 1;
+                    }
+                }
+            }
+        }
+        // Both outcomes are common, so the comparison is not vacuous.
+        assert!(
+            kept > 10_000 && dropped > 10_000,
+            "{kept} kept, {dropped} dropped"
+        );
     }
 }

@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::binning::bin_and_sort;
+use super::binning::{bin_and_sort, trim_rect};
 use super::inputs::{background, validate, Inputs};
 use super::kernels::{forward_tile, PairSplat, BUF_C, BUF_D, BUF_T};
 use super::{CovSplats, RenderOutput, RenderSettings, Splats};
@@ -115,9 +115,14 @@ pub(super) fn bin_pass<T: Real>(
     let [gx, gy] = cam.grid;
     let (gx, gy) = (gx as usize, gy as usize);
 
+    let (width, height) = (camera.width as usize, camera.height as usize);
     let projected: Vec<Option<Projected<T>>> = (0..n)
         .into_par_iter()
-        .map(|i| splats.project(&cam, i))
+        .map(|i| {
+            let mut p = splats.project(&cam, i)?;
+            trim_rect(&mut p, width, height);
+            Some(p)
+        })
         .collect();
     let mut radii = vec![0u32; n];
     let mut visible = Vec::new();

@@ -31,7 +31,7 @@ pub(super) const BUF_C: usize = 2 * TILE_PIXELS;
 /// taken by truncation inside the clamp range, where the values are positive, so that the tile
 /// kernels call no libm rounding function (baseline x86-64 has no rounding instruction).
 #[inline(always)]
-fn pixel_span<T: Real>(mean: T, half: T, origin: T, len: usize) -> (usize, usize) {
+pub(super) fn pixel_span<T: Real>(mean: T, half: T, origin: T, len: usize) -> (usize, usize) {
     let h: T = lit(0.5);
     let len_t: T = lit(len as f64);
     let lo = mean - half - h - origin;

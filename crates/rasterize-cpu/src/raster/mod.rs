@@ -1,6 +1,7 @@
 //! Tile binning, depth sort, front-to-back blending and its analytic backward.
 //!
-//! Forward (INRIA rules): every visible Gaussian is duplicated once per 16×16 tile of its rectangle;
+//! Forward (INRIA rules): every visible Gaussian is duplicated once per 16×16 tile of its rectangle
+//! (trimmed to the tiles where alpha can reach 1/255 at some pixel, which changes no output);
 //! the pairs are ordered by tile, then view depth (ties by input index, which is what INRIA's stable
 //! radix sort does); each tile blends its list front to back with α = min(0.99, o·exp(power)),
 //! skipping power > 0 and α < 1/255, and a pixel stops when T·(1 − α) < 1e-4 (that splat excluded).
