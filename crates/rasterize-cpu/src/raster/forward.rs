@@ -82,6 +82,8 @@ pub(super) struct Binned<T> {
     radii: Vec<u32>,
     visible: Vec<Projected<T>>,
     visible_ids: Vec<u32>,
+    /// The visible Gaussians' INRIA tile rectangles, before [`trim_rect`].
+    inria_rects: Vec<[u32; 4]>,
     pub(super) tile_offsets: Vec<usize>,
     tile_list: Vec<u32>,
     pair_splats: Vec<PairSplat<T>>,
@@ -116,22 +118,25 @@ pub(super) fn bin_pass<T: Real>(
     let (gx, gy) = (gx as usize, gy as usize);
 
     let (width, height) = (camera.width as usize, camera.height as usize);
-    let projected: Vec<Option<Projected<T>>> = (0..n)
+    let projected: Vec<Option<(Projected<T>, [u32; 4])>> = (0..n)
         .into_par_iter()
         .map(|i| {
             let mut p = splats.project(&cam, i)?;
+            let inria_rect = p.rect;
             trim_rect(&mut p, width, height);
-            Some(p)
+            Some((p, inria_rect))
         })
         .collect();
     let mut radii = vec![0u32; n];
     let mut visible = Vec::new();
     let mut visible_ids = Vec::new();
+    let mut inria_rects = Vec::new();
     for (i, p) in projected.into_iter().enumerate() {
-        if let Some(p) = p {
+        if let Some((p, inria_rect)) = p {
             radii[i] = p.radius;
             visible.push(p);
             visible_ids.push(i as u32);
+            inria_rects.push(inria_rect);
         }
     }
 
@@ -169,6 +174,7 @@ pub(super) fn bin_pass<T: Real>(
         radii,
         visible,
         visible_ids,
+        inria_rects,
         tile_offsets,
         tile_list,
         pair_splats,
@@ -179,12 +185,14 @@ pub(super) fn bin_pass<T: Real>(
 }
 
 impl<T> Binned<T> {
-    /// The visible Gaussians' input indices and their tile rectangles `[x0, y0, x1, y1)`.
+    /// The visible Gaussians' input indices and their INRIA tile rectangles `[x0, y0, x1, y1)`
+    /// (untrimmed: the tiles shared between renders keep INRIA's rule, so the order in which a
+    /// static Gaussian's gradients are summed does not depend on the trim).
     pub(super) fn visible_rects(&self) -> impl Iterator<Item = (u32, [u32; 4])> + '_ {
         self.visible_ids
             .iter()
-            .zip(&self.visible)
-            .map(|(&id, p)| (id, p.rect))
+            .zip(&self.inria_rects)
+            .map(|(&id, &rect)| (id, rect))
     }
 
     /// Tiles per row and number of tiles.
