@@ -17,6 +17,7 @@
 use crate::loss::event::{pair_event_loss_with, EventPenalty};
 use crate::loss::image::{l1, ssim, ImageShape};
 use nn::Real;
+use rayon::prelude::*;
 
 /// The events between consecutive sub-exposure renders of a frame.
 #[derive(Clone, Copy, Debug)]
@@ -75,7 +76,7 @@ pub fn exposure_loss<T: Real>(
     let hw = shape.height * shape.width;
     let modulation = events.map_or(&[][..], |e| e.modulation);
     let modulated: Vec<std::borrow::Cow<'_, [T]>> = renders
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(s, r)| match modulation.get(s).and_then(Option::as_ref) {
             Some(m) => modulate(r, m, events.map_or(T::zero(), |e| e.log_eps), hw).into(),
@@ -128,11 +129,14 @@ pub fn exposure_loss<T: Real>(
                 s + 1
             }
         };
-        for s in 0..renders.len().saturating_sub(1) {
-            for s2 in s + 1..=last(s) {
-                let Some(expected) = interval_counts(events.expected, s, s2) else {
-                    continue;
-                };
+        let pairs: Vec<(usize, usize)> = (0..renders.len().saturating_sub(1))
+            .flat_map(|s| (s + 1..=last(s)).map(move |s2| (s, s2)))
+            .collect();
+        // The pairs' terms in parallel, accumulated in pair order (the bits of a serial loop).
+        let terms: Vec<_> = pairs
+            .par_iter()
+            .map(|&(s, s2)| {
+                let expected = interval_counts(events.expected, s, s2)?;
                 let el = pair_event_loss_with(
                     renders[s],
                     renders[s2],
@@ -140,10 +144,13 @@ pub fn exposure_loss<T: Real>(
                     events.log_eps,
                     events.penalty,
                 );
-                event_value = event_value + events.weight * el.loss;
-                add_scaled(&mut d_renders[s], &el.d_first, events.weight);
-                add_scaled(&mut d_renders[s2], &el.d_second, events.weight);
-            }
+                Some((s, s2, el))
+            })
+            .collect();
+        for (s, s2, el) in terms.into_iter().flatten() {
+            event_value = event_value + events.weight * el.loss;
+            add_scaled(&mut d_renders[s], &el.d_first, events.weight);
+            add_scaled(&mut d_renders[s2], &el.d_second, events.weight);
         }
     }
     ExposureLoss {

@@ -35,6 +35,7 @@ use crate::colour::{ColourInputs, ColourNet};
 use crate::TrainError;
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};
 use nn::Real;
+use rayon::prelude::*;
 use smpl_deform::deform_net::{
     deform_gaussians, deform_gaussians_backward_with_moved, CanonicalGaussians, DeformCache,
     NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
@@ -261,28 +262,36 @@ pub(crate) fn blend_backward_active<T: Real>(
 ) -> ActiveBlendGrads<T> {
     let k = mode.logits_per_gaussian();
     let na = active.len();
+    // Every active Gaussian's backward in parallel, then written in order (the serial bits).
+    let per_active: Vec<_> = active
+        .par_iter()
+        .enumerate()
+        .map(|(a, &i)| {
+            let p = mode.probability(&semantic_logits[i * k..(i + 1) * k]);
+            let d_out = Blended {
+                x: cot.means[i],
+                cov: cot.covariances[i],
+                c: [
+                    cot.colours[i * 3],
+                    cot.colours[i * 3 + 1],
+                    cot.colours[i * 3 + 2],
+                ],
+            };
+            let (dp, d_in) = blend_backward(p, &inputs[a], &d_out);
+            let (dm, ds) =
+                deformed_covariance_backward(&posed_mats[a], &posed_log_scales[a], &d_in.cov_def);
+            (dp, d_in, dm, ds)
+        })
+        .collect();
     let mut grads = ActiveBlendGrads {
         x_def: Vec::with_capacity(na),
         mats: Vec::with_capacity(na),
         log_scales: Vec::with_capacity(na),
         human_rgb: Vec::with_capacity(na * 3),
     };
-    for (a, &i) in active.iter().enumerate() {
-        let p = mode.probability(&semantic_logits[i * k..(i + 1) * k]);
-        let d_out = Blended {
-            x: cot.means[i],
-            cov: cot.covariances[i],
-            c: [
-                cot.colours[i * 3],
-                cot.colours[i * 3 + 1],
-                cot.colours[i * 3 + 2],
-            ],
-        };
-        let (dp, d_in) = blend_backward(p, &inputs[a], &d_out);
+    for (&i, (dp, d_in, dm, ds)) in active.iter().zip(per_active) {
         out.probability[i] = out.probability[i] + dp;
         grads.x_def.push(d_in.x_def);
-        let (dm, ds) =
-            deformed_covariance_backward(&posed_mats[a], &posed_log_scales[a], &d_in.cov_def);
         grads.mats.push(dm);
         grads.log_scales.push(ds);
         grads.human_rgb.extend_from_slice(&d_in.c_human);
@@ -644,18 +653,21 @@ fn static_backward<T: Real>(
 ) -> (Vec<[T; 3]>, Vec<[T; 4]>) {
     let n = g.means.len();
     let k = mode.logits_per_gaussian();
-    let mut d_log_scales = Vec::with_capacity(n);
-    let mut d_quats = Vec::with_capacity(n);
-    for i in 0..n {
-        mode.probability_backward(
-            &g.semantic_logits[i * k..(i + 1) * k],
-            d_p[i],
-            &mut d_semantic[i * k..(i + 1) * k],
-        );
-        let (ds_static, dq_static) =
-            covariance_3d_backward(g.log_scales[i], g.quats[i], &d_cov_static[i]);
-        d_log_scales.push(ds_static);
-        d_quats.push(dq_static);
+    let semantic_backward = |i: usize, d_semantic: &mut [T]| {
+        mode.probability_backward(&g.semantic_logits[i * k..(i + 1) * k], d_p[i], d_semantic);
+        covariance_3d_backward(g.log_scales[i], g.quats[i], &d_cov_static[i])
+    };
+    // Per Gaussian, in parallel (each writes only its own logits' slots).
+    if k == 0 {
+        (0..n)
+            .into_par_iter()
+            .map(|i| semantic_backward(i, &mut []))
+            .unzip()
+    } else {
+        d_semantic[..n * k]
+            .par_chunks_mut(k)
+            .enumerate()
+            .map(|(i, d)| semantic_backward(i, d))
+            .unzip()
     }
-    (d_log_scales, d_quats)
 }
