@@ -5,7 +5,7 @@
 use crate::common::{shipped_flow_network, shipped_lpips_weights};
 use anyhow::{Context, Result};
 use std::path::Path;
-use train::config::{EventPairs, FlowMeasure, FlowSource, TrainConfig, TrainOn};
+use train::config::{EventPairs, ExposurePairs, FlowMeasure, FlowSource, TrainConfig, TrainOn};
 use train::data::{LossNetworks, Preparation, TrainingData};
 use train::pose::body::Body;
 use train::trainer::StepReport;
@@ -120,8 +120,14 @@ fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path
             EventPairs::Frames => "consecutive training frames",
             EventPairs::Exposure => "consecutive sub-exposure renders",
         };
+        let compared = match (config.event_pairs, config.exposure_pairs) {
+            (EventPairs::Exposure, ExposurePairs::All) => {
+                " (every pair of an exposure's renders compared, the counts between them summed)"
+            }
+            _ => "",
+        };
         println!(
-            "event loss: {pairs} pairs of {between}, weight {}, C {}",
+            "event loss: {pairs} pairs of {between}{compared}, weight {}, C {}",
             config.event_weight, config.event_threshold
         );
     }
@@ -130,6 +136,14 @@ fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path
             "event modulation: {slices} slices of exposures, each render modulated by the events \
              of its slice (EDI inside the slice)"
         );
+    }
+}
+
+/// The renders the exposure's event loss compares, as the run's messages name them.
+pub fn compared_renders(pairs: ExposurePairs) -> &'static str {
+    match pairs {
+        ExposurePairs::Consecutive => "consecutive sub-exposure renders",
+        ExposurePairs::All => "every pair of sub-exposure renders",
     }
 }
 

@@ -181,8 +181,9 @@ fn scene_defaults(
         config.event_loss = with_events;
         if with_events {
             println!(
-                "events: the event loss compares consecutive sub-exposure renders (weight {}, C+ {}, \
-                 C- {}, {:?} penalty; --event-loss off to train without)",
+                "events: the event loss compares {} (weight {}, C+ {}, C- {}, {:?} penalty; \
+                 --event-loss off to train without)",
+                crate::training::compared_renders(config.exposure_pairs),
                 config.event_weight,
                 config.event_threshold,
                 config.event_threshold_neg.unwrap_or(config.event_threshold),
