@@ -79,6 +79,17 @@ fn pose_correction_trains_on_estimated_poses_and_reports_their_error() {
         total > 0.0 && bench["render_ms"].as_f64().unwrap() > 0.0,
         "{bench}"
     );
+    // A preset names a default run, so it cannot be given with the run.
+    let refused = xtask()
+        .args(["bench", "step", "--preset", "full", "--run"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && stderr.contains("cannot be used with"),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -13,10 +13,14 @@ use train::trainer::Trainer;
 /// Arguments of `cargo xtask bench step`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The run directory whose `checkpoint.safetensors` is stepped from (default: the `quick`
-    /// run of the default benchmark, `target/reconstruct/default-quick`).
-    #[arg(long)]
+    /// The run directory whose `checkpoint.safetensors` is stepped from (default: the
+    /// `--preset` run of the default benchmark, `target/reconstruct/default-<preset>`, as
+    /// `cargo xtask reconstruct [--preset full]` writes it).
+    #[arg(long, conflicts_with = "preset")]
     pub run: Option<PathBuf>,
+    /// Which preset's default run to step from when `--run` is not given.
+    #[arg(long, value_enum, default_value = "quick")]
+    pub preset: train::config::Preset,
     /// The scene the run trained on (default: the synthetic benchmark's `default` preset).
     #[arg(long)]
     pub data: Option<PathBuf>,
@@ -32,9 +36,13 @@ pub struct Args {
 /// Runs the benchmark.
 pub fn run(args: Args) -> Result<()> {
     let run = args.run.unwrap_or_else(|| {
+        let preset = match args.preset {
+            train::config::Preset::Quick => "quick",
+            train::config::Preset::Full => "full",
+        };
         crate::common::target_dir()
             .join("reconstruct")
-            .join("default-quick")
+            .join(format!("default-{preset}"))
     });
     let data_dir = match args.data {
         Some(d) => d,
@@ -51,8 +59,13 @@ pub fn run(args: Args) -> Result<()> {
         .and_then(|c| c["seed"].as_u64())
         .unwrap_or(0);
     let mut ctx = TrainingData::new(&data, body, seed)?;
-    let mut trainer = Trainer::load_checkpoint(&checkpoint, &ctx)
-        .with_context(|| format!("loading {}", checkpoint.display()))?;
+    let mut trainer = Trainer::load_checkpoint(&checkpoint, &ctx).with_context(|| {
+        format!(
+            "loading {} (a `cargo xtask reconstruct` run's checkpoint: run one first, or name \
+                 another run with --run)",
+            checkpoint.display()
+        )
+    })?;
     if let Some(share) = args.share_static_tiles {
         trainer.set_share_static_tiles(share);
     }
