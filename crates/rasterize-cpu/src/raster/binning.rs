@@ -205,13 +205,7 @@ mod tests {
     fn trimmed_rectangles_keep_exactly_the_tiles_the_kernels_blend() {
         use crate::raster::kernels::{splat_lanes, PairSplat};
         use crate::{lit, TILE_SIZE};
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut next = crate::raster::test_uniform(0x2545_F491_4F6C_DD1D);
         let (width, height) = (83usize, 50usize);
         let (gx, gy) = (width.div_ceil(TILE_SIZE), height.div_ceil(TILE_SIZE));
         let (mut kept, mut dropped) = (0usize, 0usize);

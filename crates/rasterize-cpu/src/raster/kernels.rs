@@ -601,13 +601,7 @@ mod tests {
 
     #[test]
     fn pixel_span_equals_the_ceil_floor_definition() {
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut next = crate::raster::test_uniform(0x2545_F491_4F6C_DD1D);
         let mut cases = vec![
             (f32::NAN, 1.0, 0.0),
             (8.0, f32::NAN, 0.0),

@@ -48,3 +48,16 @@ pub use inputs::{
     COVARIANCE_SYMMETRY_TOLERANCE, DEFAULT_NEAR_PLANE,
 };
 pub use shared::{render_cov_shared, render_cov_shared_backward, SharedRenders, TileSharing};
+
+/// A xorshift generator of uniform f32 values in [0, 1) for the raster module's tests
+/// (deterministic from `seed`, no crate).
+#[cfg(test)]
+fn test_uniform(seed: u64) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
