@@ -5,6 +5,8 @@
 //! signal — within 20 s and under a 1 GiB address-space limit (`ulimit -v`, so an allocation sized
 //! by an unchecked header fails instead of succeeding lazily).
 
+mod common;
+
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -126,7 +128,7 @@ fn every_crafted_input_is_refused_by_name_within_the_limits() {
     std::fs::write(d.join("random-scene/scene.json"), &rnd).unwrap();
     let tiny_with = |name: &str, damage: &dyn Fn(&Path)| {
         let scene = d.join(name);
-        copy_dir(&fx.join("tiny"), &scene);
+        common::copy_dir(&fx.join("tiny"), &scene);
         damage(&scene.join("flow/000003.flo"));
     };
     tiny_with("scene-random-flo", &|f| std::fs::write(f, &rnd).unwrap());
@@ -378,17 +380,4 @@ fn every_crafted_input_is_refused_by_name_within_the_limits() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n---\n"));
-}
-
-fn copy_dir(src: &Path, dst: &Path) {
-    std::fs::create_dir_all(dst).unwrap();
-    for entry in std::fs::read_dir(src).unwrap() {
-        let entry = entry.unwrap();
-        let to = dst.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &to);
-        } else {
-            std::fs::copy(entry.path(), &to).unwrap();
-        }
-    }
 }

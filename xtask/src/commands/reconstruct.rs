@@ -40,10 +40,7 @@ pub struct TrainingArgs {
 impl TrainingArgs {
     /// The preset's name as typed on the command line.
     pub fn preset_name(&self) -> &'static str {
-        match self.preset {
-            Preset::Quick => "quick",
-            Preset::Full => "full",
-        }
+        self.preset.name()
     }
 
     /// Whether the user chose the training option `key` (snake_case): given on the command line or

@@ -29,6 +29,16 @@ pub enum Preset {
     Full,
 }
 
+impl Preset {
+    /// The preset's name as typed on the command line (and in default run directories).
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Quick => "quick",
+            Preset::Full => "full",
+        }
+    }
+}
+
 /// Declares every training option once — its documentation (which is also its `--help` text), its
 /// type, its `quick`-preset default and any clap attribute — and generates from that one list
 /// [`TrainConfig`] (the complete, serde-(de)serialisable configuration), [`TrainOptions`] (one

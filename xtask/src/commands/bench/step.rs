@@ -36,13 +36,9 @@ pub struct Args {
 /// Runs the benchmark.
 pub fn run(args: Args) -> Result<()> {
     let run = args.run.unwrap_or_else(|| {
-        let preset = match args.preset {
-            train::config::Preset::Quick => "quick",
-            train::config::Preset::Full => "full",
-        };
         crate::common::target_dir()
             .join("reconstruct")
-            .join(format!("default-{preset}"))
+            .join(format!("default-{}", args.preset.name()))
     });
     let data_dir = match args.data {
         Some(d) => d,
