@@ -22,7 +22,7 @@ use train::data::{load_dataset, Dataset, TrainingData};
 use train::loss::event::{event_residual, LUMA};
 use train::loss::image::ImageShape;
 use train::loss::photometric::{exposure_loss, ExposureEvents};
-use train::model::{PassPlan, RENDER_CHANNELS};
+use train::model::{PassCamera, PassPlan, RENDER_CHANNELS};
 use train::pose::exposure::subframe_times;
 use train::trainer::Trainer;
 
@@ -158,7 +158,11 @@ fn audit(
             .iter()
             .map(|p| &p.prepared)
             .collect();
-        let cameras = blurred.cameras(slot, true)?;
+        let cameras: Vec<_> = blurred
+            .cameras(slot, true)?
+            .into_iter()
+            .map(PassCamera::of)
+            .collect();
         let plan = PassPlan {
             reposed: true,
             share_static_tiles: false,

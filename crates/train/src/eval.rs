@@ -315,7 +315,8 @@ pub struct EvaluatedFrame {
 /// data without one, against the observed frame — the figures then measure fidelity to the input);
 /// LPIPS with `lpips` (NaN without).
 /// Unseen frames use the latent of the nearest training frame and, with pose correction, the
-/// correction interpolated from their neighbouring training frames ([`crate::model::Model::corrected_params`]).
+/// correction interpolated from their neighbouring training frames ([`crate::model::Model::corrected_params`]),
+/// and with camera correction the camera's ([`crate::model::Model::render_frame`]).
 pub fn evaluate_split(
     model: &crate::model::Model,
     body: &crate::pose::body::Body,
@@ -327,7 +328,7 @@ pub fn evaluate_split(
     let mut out = Vec::new();
     for f in data.frames.iter().filter(|f| f.split == split) {
         let pose = body.prepare(&model.corrected_params(f.index, &f.smpl))?;
-        let r = model.render(&f.camera, &pose, model.latent_for(f.index))?;
+        let r = model.render_frame(f.index, &f.camera, &pose, model.latent_for(f.index))?;
         // Grey frames are compared with the render's luminance, as in training.
         let grey_render = data
             .scene

@@ -6,6 +6,7 @@
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::config::TrainConfig;
 use crate::model::{Model, NETWORK_GROUPS};
+use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::correction::{root_indices, CORRECTION_VALUES, POSE_VALUES};
 use crate::TrainError;
 use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
@@ -22,7 +23,12 @@ pub struct Optimisers {
     /// The pose corrections' Adam, one row per training frame with its own step count: a frame's
     /// correction moves only on the steps that train that frame.
     corrections: nn::RowAdam<f32>,
+    /// The camera corrections' Adam, one row per training frame, lazy like `corrections`.
+    cameras: nn::RowAdam<f32>,
 }
+
+/// The prefix of the camera corrections' Adam tensors.
+const CAMERA_ADAM: &str = "camera_correction_adam";
 
 /// The name of the pose-correction group in [`NETWORK_GROUPS`].
 const CORRECTION_GROUP: &str = "pose_correction";
@@ -59,6 +65,31 @@ fn correction_adam(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<
         rates[POSE_VALUES..].fill(0.0);
     }
     // One rate per column of the rows (`CORRECTION_VALUES`): this cannot fail.
+    adam.with_column_rates(rates)
+        .unwrap_or_else(|e| unreachable!("{e}"))
+}
+
+/// The camera corrections' per-frame Adam for `rows` frames: `lr_camera_rotation` for the
+/// twists' rotations, `lr_camera_translation` for their shifts.
+fn camera_adam(rows: usize, config: &TrainConfig) -> nn::RowAdam<f32> {
+    camera_rates(
+        nn::RowAdam::new(
+            rows,
+            CAMERA_CORRECTION_VALUES,
+            adam_config(config.lr_camera_rotation),
+        ),
+        config,
+    )
+}
+
+/// `adam` with the camera corrections' column rates.
+fn camera_rates(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<f32> {
+    let (rotation, shift) = (
+        f64::from(config.lr_camera_rotation),
+        f64::from(config.lr_camera_translation),
+    );
+    let rates = [rotation, rotation, rotation, shift, shift, shift].repeat(2);
+    // One rate per column of the rows (`CAMERA_CORRECTION_VALUES`): this cannot fail.
     adam.with_column_rates(rates)
         .unwrap_or_else(|e| unreachable!("{e}"))
 }
@@ -103,6 +134,10 @@ impl Optimisers {
                     CORRECTION_VALUES,
                     adam_config(config.lr_pose_correction),
                 ),
+                config,
+            ),
+            cameras: camera_adam(
+                model.camera_corrections.len() / CAMERA_CORRECTION_VALUES,
                 config,
             ),
         }
@@ -151,6 +186,20 @@ impl Optimisers {
             .step_rows_scaled(corrections, grads, slots, f64::from(rate_scale))?)
     }
 
+    /// One lazy Adam step of the camera corrections of the training slots `slots` at `rate_scale`
+    /// times their rates; every other frame keeps its correction and moments.
+    pub fn step_camera_corrections(
+        &mut self,
+        corrections: &mut [f32],
+        grads: &[f32],
+        slots: &[usize],
+        rate_scale: f32,
+    ) -> Result<(), TrainError> {
+        Ok(self
+            .cameras
+            .step_rows_scaled(corrections, grads, slots, f64::from(rate_scale))?)
+    }
+
     /// Adds every moment to `w` (`adam.<group>.{m,v}` and `<group>_adam.{m,v}`; an empty group's
     /// are not stored); returns the step counts for the metadata.
     pub fn save(&self, w: &mut CheckpointWriter) -> OptimiserSteps {
@@ -176,6 +225,13 @@ impl Optimisers {
                 }
             })
             .collect();
+        let (m, v) = self.cameras.moments();
+        if !m.is_empty() {
+            w.push(format!("{CAMERA_ADAM}.m"), m.to_vec());
+            w.push(format!("{CAMERA_ADAM}.v"), v.to_vec());
+            let steps = self.cameras.row_steps().iter().map(|&t| t as f32).collect();
+            w.push(format!("{CAMERA_ADAM}.row_steps"), steps);
+        }
         OptimiserSteps {
             gaussians,
             networks,
@@ -218,11 +274,39 @@ impl Optimisers {
             .collect::<Result<_, _>>()?;
         let corrections =
             Self::load_corrections(r, model, config, counts[group_index(CORRECTION_GROUP)?])?;
+        let cameras = Self::load_cameras(r, model, config)?;
         Ok(Self {
             gaussians,
             networks,
             corrections,
+            cameras,
         })
+    }
+
+    /// The camera corrections' per-frame Adam (none when the model has no camera corrections).
+    fn load_cameras(
+        r: &CheckpointReader,
+        model: &Model,
+        config: &TrainConfig,
+    ) -> Result<nn::RowAdam<f32>, TrainError> {
+        let len = model.camera_corrections.len();
+        let rows = len / CAMERA_CORRECTION_VALUES;
+        if len == 0 {
+            return Ok(camera_adam(0, config));
+        }
+        let m = r.get_len(&format!("{CAMERA_ADAM}.m"), len)?;
+        let v = r.get_len(&format!("{CAMERA_ADAM}.v"), len)?;
+        let steps = row_steps(r, &format!("{CAMERA_ADAM}.row_steps"), rows)?;
+        Ok(camera_rates(
+            nn::RowAdam::from_parts(
+                adam_config(config.lr_camera_rotation),
+                CAMERA_CORRECTION_VALUES,
+                m,
+                v,
+                steps,
+            )?,
+            config,
+        ))
     }
 
     /// The pose corrections' per-frame Adam; a checkpoint from before it (one dense Adam over
@@ -247,16 +331,7 @@ impl Optimisers {
         let v = r.get_len(&format!("{prefix}.v"), len)?;
         let name = format!("{prefix}.row_steps");
         let steps = if r.has(&name) {
-            r.get_len(&name, rows)?
-                .iter()
-                .map(|&t| {
-                    if t >= 0.0 && t.fract() == 0.0 && t < 16_777_216.0 {
-                        Ok(t as u64)
-                    } else {
-                        Err(r.error(format!("tensor `{name}`: {t} is not a step count")))
-                    }
-                })
-                .collect::<Result<Vec<u64>, _>>()?
+            row_steps(r, &name, rows)?
         } else {
             vec![count; rows]
         };
@@ -265,4 +340,18 @@ impl Optimisers {
             rates,
         ))
     }
+}
+
+/// The per-row step counts stored in tensor `name` (`rows` of them, whole numbers stored as f32).
+fn row_steps(r: &CheckpointReader, name: &str, rows: usize) -> Result<Vec<u64>, TrainError> {
+    r.get_len(name, rows)?
+        .iter()
+        .map(|&t| {
+            if t >= 0.0 && t.fract() == 0.0 && t < 16_777_216.0 {
+                Ok(t as u64)
+            } else {
+                Err(r.error(format!("tensor `{name}`: {t} is not a step count")))
+            }
+        })
+        .collect()
 }

@@ -331,7 +331,12 @@ pub fn run(args: Args) -> Result<()> {
         let pose = ctx
             .body
             .prepare(&model.corrected_params(first.index, &first.pose.params))?;
-        let r = model.render(&first.camera, &pose, model.latent_for(first.index))?;
+        let r = model.render_frame(
+            first.index,
+            &first.camera,
+            &pose,
+            model.latent_for(first.index),
+        )?;
         let posed = train::export::posed_set(model, &r.posed);
         let path = model_dir.join(format!("posed_frame_{:06}.ply", first.index));
         gaussians::ply::write_ply(&path, &posed)

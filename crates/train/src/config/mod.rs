@@ -430,6 +430,37 @@ training_options! {
     /// A frame's Adam step is about its rate whatever its gradient's size, so the rate is the
     /// corrections' noise floor; the decay lets them settle.
     lr_pose_correction_final_fraction: f32 = 1.0,
+    /// Learned camera correction (`train::pose::camera_correction`), for a moving camera whose
+    /// poses come from a tracker (SLAM, SfM, COLMAP): per training frame a rigid twist of its
+    /// camera at mid exposure (rotation about the camera centre, radians; shift, metres; camera
+    /// coordinates) and, with `blur_model = exposure`, its change over the exposure (the camera's
+    /// path inside the exposure, which the frames' cameras sample too coarsely to follow a hand's
+    /// tremor), regularised towards zero and towards the neighbouring frames'. Held-out frames take
+    /// the twist interpolated from their neighbouring training frames. Off by default.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    camera_correction: bool = false,
+    /// Adam learning rate of the camera corrections' rotations (radians per step of a frame; a
+    /// frame's correction steps only when that frame trains).
+    lr_camera_rotation: f32 = 1e-3,
+    /// Adam learning rate of the camera corrections' shifts (metres per step of a frame).
+    lr_camera_translation: f32 = 1e-3,
+    /// The camera corrections' rates decay log-linearly from `camera_correction_from` to the last
+    /// step, to this fraction (1: constant rates; a lazy Adam's rate is its noise floor).
+    lr_camera_final_fraction: f32 = 0.1,
+    /// λ₀ of the camera-correction prior: weight of ‖ξ_k‖² (radians², m²) pulling each training
+    /// frame's twists towards zero.
+    camera_correction_zero_weight: f32 = 1e-3,
+    /// λ_s of the camera-correction prior: weight of ‖ξ_k − ξ_{k±1}‖² between consecutive training
+    /// frames' twists.
+    camera_correction_smooth_weight: f32 = 1e-2,
+    /// Whether camera correction also learns each exposure's change of the camera (with
+    /// `blur_model = exposure`); off: the sub-exposure cameras keep the interpolated path and only
+    /// move with the mid-exposure twist.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    camera_correction_change: bool = true,
+    /// The camera corrections stay zero before this step (the first steps' model is a blur of
+    /// Gaussians whose gradients do not yet say where the room's edges are).
+    camera_correction_from: usize = 100,
 }
 
 impl Default for TrainConfig {

@@ -146,6 +146,16 @@ impl TrainConfig {
                 "pose_correction_smooth_weight",
                 self.pose_correction_smooth_weight,
             ),
+            ("lr_camera_rotation", self.lr_camera_rotation),
+            ("lr_camera_translation", self.lr_camera_translation),
+            (
+                "camera_correction_zero_weight",
+                self.camera_correction_zero_weight,
+            ),
+            (
+                "camera_correction_smooth_weight",
+                self.camera_correction_smooth_weight,
+            ),
             ("skinning_weight", self.skinning_weight),
             ("aiap_position_weight", self.aiap_position_weight),
             ("aiap_covariance_weight", self.aiap_covariance_weight),
@@ -180,6 +190,7 @@ impl TrainConfig {
                 "lr_pose_correction_final_fraction",
                 self.lr_pose_correction_final_fraction,
             ),
+            ("lr_camera_final_fraction", self.lr_camera_final_fraction),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return bad(

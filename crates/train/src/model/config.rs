@@ -27,6 +27,8 @@ pub struct ModelConfig {
     pub pose_correction: bool,
     /// Training frames per pose-correction knot.
     pub pose_correction_knot_every: usize,
+    /// The model carries learned per-training-frame camera corrections.
+    pub camera_correction: bool,
 }
 
 impl From<&TrainConfig> for ModelConfig {
@@ -42,6 +44,7 @@ impl From<&TrainConfig> for ModelConfig {
             near_plane: config.near_plane,
             pose_correction: config.pose_correction,
             pose_correction_knot_every: config.pose_correction_knot_every,
+            camera_correction: config.camera_correction,
         }
     }
 }

@@ -13,6 +13,7 @@
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::pose::body::PreparedPose;
+use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::correction::{
     corrected_params, interpolated_correction, knot_slots, KnotSpan, CORRECTION_VALUES,
 };
@@ -23,8 +24,10 @@ use crate::pose::posing::{
 use crate::pose::reposing::{repose_frame, repose_frame_backward, ReposeCotangents, ReposedCache};
 use crate::TrainError;
 
+mod camera;
 mod config;
 mod pass;
+pub use camera::{corrected_camera, PassCamera};
 pub use config::ModelConfig;
 use gaussians::GaussianSet;
 use rasterize_cpu::{
@@ -51,6 +54,10 @@ pub const NETWORK_GROUPS: [(&str, &str); 6] = [
     ("pose_correction", "pose_corrections"),
 ];
 
+/// The tensor the camera corrections are stored under (not a [`NETWORK_GROUPS`] entry: they have
+/// their own per-frame optimiser, and models without them keep their bytes).
+pub const CAMERA_CORRECTIONS_TENSOR: &str = "camera_corrections";
+
 /// What a reconstruction learned.
 #[derive(Clone, Debug)]
 pub struct Model {
@@ -67,6 +74,9 @@ pub struct Model {
     /// Per-training-frame pose corrections, (frames, [`CORRECTION_VALUES`]) (`train::pose::correction`);
     /// empty when `pose_correction` is off.
     pub pose_corrections: Vec<f32>,
+    /// Per-training-frame camera corrections, (frames, [`CAMERA_CORRECTION_VALUES`])
+    /// (`train::pose::camera_correction`); empty when `camera_correction` is off.
+    pub camera_corrections: Vec<f32>,
     /// Scene extent (m): scales the position rate and the density thresholds.
     pub scene_extent: f32,
 }
@@ -102,6 +112,8 @@ enum PassCache {
 pub struct FramePass<'a> {
     model: &'a Model,
     camera: &'a Camera,
+    /// The camera centre the colours were viewed from (world, metres; see [`PassCamera`]).
+    view_centre: [f32; 3],
     pose: &'a PreparedPose,
     latent: &'a [f32],
     cache: PassCache,
@@ -133,6 +145,7 @@ pub struct ExposurePasses<'a> {
 
 /// A pass posed but not yet rendered.
 struct PosedPass<'a> {
+    view_centre: [f32; 3],
     pose: &'a PreparedPose,
     latent: &'a [f32],
     cache: PassCache,
@@ -152,6 +165,7 @@ impl<'a> PosedPass<'a> {
         FramePass {
             model,
             camera,
+            view_centre: self.view_centre,
             pose: self.pose,
             latent: self.latent,
             cache: self.cache,
@@ -234,6 +248,11 @@ impl Model {
         } else {
             Vec::new()
         };
+        let camera_corrections = if config.camera_correction {
+            vec![0.0; frame_indices.len() * CAMERA_CORRECTION_VALUES]
+        } else {
+            Vec::new()
+        };
         Ok(Self {
             config,
             set,
@@ -241,6 +260,7 @@ impl Model {
             latents,
             frame_indices,
             pose_corrections,
+            camera_corrections,
             scene_extent,
         })
     }
@@ -287,13 +307,17 @@ impl Model {
         ]
     }
 
-    /// Adds every network group as a tensor (the one writer of network weights: checkpoints and
-    /// model directories share it).
+    /// Adds every network group as a tensor, and the camera corrections (`camera_corrections`)
+    /// when the model has them (the one writer of network weights: checkpoints and model
+    /// directories share it).
     pub fn push_networks(&self, w: &mut CheckpointWriter) {
         for ((_, tensor), params) in NETWORK_GROUPS.iter().zip(self.network_groups()) {
             if !params.is_empty() {
                 w.push(*tensor, params.clone());
             }
+        }
+        if !self.camera_corrections.is_empty() {
+            w.push(CAMERA_CORRECTIONS_TENSOR, self.camera_corrections.clone());
         }
     }
 
@@ -304,6 +328,10 @@ impl Model {
             if !params.is_empty() {
                 *params = r.get_len(tensor, params.len())?;
             }
+        }
+        if !self.camera_corrections.is_empty() {
+            self.camera_corrections =
+                r.get_len(CAMERA_CORRECTIONS_TENSOR, self.camera_corrections.len())?;
         }
         Ok(())
     }
@@ -416,12 +444,23 @@ impl Model {
         pose: &'a PreparedPose,
         latent: &'a [f32],
     ) -> Result<FramePass<'a>, TrainError> {
-        let posed = self.posed_pass(camera, pose, latent)?;
-        self.rasterize(camera, posed)
+        self.forward_from(PassCamera::of(camera), pose, latent)
+    }
+
+    /// [`Model::forward`] from a pass camera (rasterized from `camera.raster`, coloured as seen
+    /// from `camera.view_centre`).
+    pub fn forward_from<'a>(
+        &'a self,
+        camera: PassCamera<'a>,
+        pose: &'a PreparedPose,
+        latent: &'a [f32],
+    ) -> Result<FramePass<'a>, TrainError> {
+        let posed = self.posed_pass(camera.view_centre, pose, latent)?;
+        self.rasterize(camera.raster, posed)
     }
 
     /// Renders one frame at each of `poses` (its sub-exposure poses), pass s from `cameras[s]` (the
-    /// same camera for every pass unless the camera moves within the exposure). With
+    /// same camera for every pass unless the camera moves within the exposure or is corrected). With
     /// `plan.reposed` the networks are evaluated once, at `poses[reference]`, and that pass is
     /// re-posed for the others by linear blend skinning alone (`train::pose::reposing`; differentiate the
     /// passes together with [`Model::reposed_backward`]); else every pass is posed by the networks.
@@ -431,7 +470,7 @@ impl Model {
     /// (`rasterize_cpu::render_cov_shared`; differentiate with [`Model::shared_render_backward`]).
     pub fn forward_passes<'a>(
         &'a self,
-        cameras: &[&'a Camera],
+        cameras: &[PassCamera<'a>],
         poses: &[&'a PreparedPose],
         reference: usize,
         latent: &'a [f32],
@@ -451,14 +490,14 @@ impl Model {
                 found: cameras.len(),
             });
         }
-        let first = self.posed_pass(camera, reference_pose, latent)?;
+        let first = self.posed_pass(camera.view_centre, reference_pose, latent)?;
         let mut posed = Vec::with_capacity(poses.len());
         for (s, &pose) in poses.iter().enumerate() {
             if s == reference {
                 continue;
             }
             if !plan.reposed {
-                posed.push(self.posed_pass(cameras[s], pose, latent)?);
+                posed.push(self.posed_pass(cameras[s].view_centre, pose, latent)?);
                 continue;
             }
             let PassCache::Frame(reference_cache) = &first.cache else {
@@ -467,6 +506,7 @@ impl Model {
             let t0 = Instant::now();
             let (frame, cache) = repose_frame(&first.posed, reference_cache, &pose.bones)?;
             posed.push(PosedPass {
+                view_centre: cameras[s].view_centre,
                 pose,
                 latent,
                 cache: PassCache::Reposed(cache),
@@ -478,14 +518,14 @@ impl Model {
         posed.insert(reference, first);
         // Tiles are shared only between renders from one camera (a moving camera moves every
         // Gaussian on the image).
-        let one_camera = cameras.iter().all(|&c| c == camera);
+        let one_camera = cameras.iter().all(|c| c.raster == camera.raster);
         if plan.share_static_tiles && posed.len() > 1 && one_camera {
-            return self.rasterize_shared(camera, posed, reference);
+            return self.rasterize_shared(camera.raster, posed, reference);
         }
         let passes = posed
             .into_iter()
             .zip(cameras)
-            .map(|(p, &c)| self.rasterize(c, p))
+            .map(|(p, c)| self.rasterize(c.raster, p))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(ExposurePasses {
             passes,
@@ -493,10 +533,11 @@ impl Model {
         })
     }
 
-    /// Poses the model in `pose` with the frame latent `latent` (networks, blend).
+    /// Poses the model in `pose` with the frame latent `latent`, its colours viewed from
+    /// `view_centre` (networks, blend).
     fn posed_pass<'a>(
         &'a self,
-        camera: &Camera,
+        view_centre: [f32; 3],
         pose: &'a PreparedPose,
         latent: &'a [f32],
     ) -> Result<PosedPass<'a>, TrainError> {
@@ -506,9 +547,10 @@ impl Model {
             self.config.semantic,
             self.config.semantic_gate,
             &self.params(),
-            &frame_inputs(camera, pose, latent),
+            &frame_inputs(view_centre, pose, latent),
         )?;
         Ok(PosedPass {
+            view_centre,
             pose,
             latent,
             cache: PassCache::Frame(Box::new(cache)),
@@ -614,7 +656,7 @@ impl Model {
             self.config.semantic,
             &params,
             &frame_inputs(
-                reference_pass.camera,
+                reference_pass.view_centre,
                 reference_pass.pose,
                 reference_pass.latent,
             ),
@@ -643,16 +685,21 @@ impl Model {
 }
 
 fn frame_inputs<'a>(
-    camera: &Camera,
+    view_centre: [f32; 3],
     pose: &'a PreparedPose,
     latent: &'a [f32],
 ) -> FrameInputs<'a, f32> {
     FrameInputs {
         pose_code: &pose.pose_code,
         bones: &pose.bones,
-        camera_centre: camera.center_world().map(|v| v as f32),
+        camera_centre: view_centre,
         latent,
     }
+}
+
+/// The centre of `camera` (world, metres) in the posing's precision.
+fn view_centre(camera: &Camera) -> [f32; 3] {
+    camera.center_world().map(|v| v as f32)
 }
 
 /// The rasterizer's view of a posed frame: its means and covariances with the set's opacities and

@@ -103,7 +103,7 @@ impl FramePass<'_> {
             &model.nets,
             model.config.semantic,
             &model.params(),
-            &frame_inputs(self.camera, self.pose, self.latent),
+            &frame_inputs(self.view_centre, self.pose, self.latent),
             cache,
             &posed.cotangents(),
             None,

@@ -108,8 +108,20 @@ pub fn prior_terms<T: Float>(
     prior: CorrectionPrior<T>,
     grad: &mut [T],
 ) -> T {
-    let slots = corrections.len() / CORRECTION_VALUES;
-    let of = |k: usize| &corrections[k * CORRECTION_VALUES..(k + 1) * CORRECTION_VALUES];
+    knot_prior_terms(corrections, CORRECTION_VALUES, slot, prior, grad)
+}
+
+/// [`prior_terms`] for knots of `values_per_knot` values each (the camera corrections' too).
+pub fn knot_prior_terms<T: Float>(
+    corrections: &[T],
+    values_per_knot: usize,
+    slot: usize,
+    prior: CorrectionPrior<T>,
+    grad: &mut [T],
+) -> T {
+    let n = values_per_knot;
+    let slots = corrections.len() / n;
+    let of = |k: usize| &corrections[k * n..(k + 1) * n];
     let own = of(slot);
     let two = T::one() + T::one();
     let mut value = T::zero();

@@ -9,6 +9,7 @@
 //! influences the parameters is deterministic for a seed and independent of the thread count; only the
 //! reported stage timings vary.
 
+mod camera;
 mod checkpoint;
 mod correction;
 mod report;
@@ -168,6 +169,7 @@ impl Trainer {
         opacity_grads: Vec<f32>,
         second_latent: Option<(usize, Vec<f32>)>,
         correction_update: Option<(Vec<f32>, Vec<usize>)>,
+        camera_update: Option<camera::CameraGradient>,
     ) -> Result<(), TrainError> {
         let config = &self.config;
         let step = self.step;
@@ -237,6 +239,20 @@ impl Trainer {
                 continue;
             }
             self.optimisers.step_network(name, params, g)?;
+        }
+        if let Some(update) = camera_update {
+            let rate_scale = correction_rate_scale(
+                config.lr_camera_final_fraction,
+                config.camera_correction_from,
+                step,
+                config.steps,
+            );
+            self.optimisers.step_camera_corrections(
+                &mut self.model.camera_corrections,
+                &update.values,
+                &update.slots,
+                rate_scale,
+            )?;
         }
         Ok(())
     }

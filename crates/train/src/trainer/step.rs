@@ -3,6 +3,7 @@
 //! of every pass into one set of gradients (the AIAP regulariser on the mid pass, the pose
 //! corrections' share of each pass); then the update and density control.
 
+use super::camera::{CameraGradient, CorrectedCameras};
 use super::correction::{self, CorrectedPoses};
 use super::terms::{
     add_aiap_canonical, aiap_terms, pair_terms, skinning_term, PairSupervision, PairTerms,
@@ -17,7 +18,10 @@ use crate::eval::psnr;
 use crate::loss::image::ImageShape;
 use crate::loss::perceptual::perceptual_term;
 use crate::loss::photometric::{exposure_loss, ExposureEvents};
-use crate::model::{ExposurePasses, FramePass, Model, PassPlan, PosedGradients, RENDER_CHANNELS};
+use crate::model::{
+    ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
+};
+use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::posing::ModelGradients;
 use crate::TrainError;
 use rasterize_cpu::TileSharing;
@@ -77,6 +81,8 @@ struct StepGradients {
     pass_norms: Option<Vec<f32>>,
     /// ∂L/∂pose corrections, and the knots the step's frames are interpolated from.
     corrections: Option<(Vec<f32>, Vec<usize>)>,
+    /// ∂L/∂camera corrections of the step's frames (with camera correction).
+    cameras: Option<CameraGradient>,
     /// Frame k+1's slot and ∂L/∂ its latent code.
     next_latent: Option<(usize, Vec<f32>)>,
     aiap: f32,
@@ -107,7 +113,20 @@ impl Trainer {
         } else {
             None
         };
-        let frame_k = frame_passes(model, data, &config, slot, corrected.as_ref(), &mut times)?;
+        let exposure = config.blur_model == BlurModel::Exposure;
+        let correcting_cameras = config.camera_correction && step >= config.camera_correction_from;
+        let cameras = correcting_cameras
+            .then(|| data.cameras(slot, exposure))
+            .transpose()?
+            .map(|given| CorrectedCameras::of(model, &given, slot));
+        let frame_k = frame_passes(
+            model,
+            data,
+            &config,
+            slot,
+            (corrected.as_ref(), cameras.as_ref()),
+            &mut times,
+        )?;
         let mut losses = frame_losses(data, &config, slot, target, &frame_k.passes, &mut times)?;
 
         // Frame k+1 when a pair loss applies.
@@ -119,13 +138,21 @@ impl Trainer {
             }
             _ => None,
         };
+        let next_cameras = match &pair {
+            Some(pair) if correcting_cameras => Some(CorrectedCameras::of(
+                model,
+                &[&data.frames[pair.next_slot].camera],
+                pair.next_slot,
+            )),
+            _ => None,
+        };
         let next = match &pair {
             Some(pair) => Some(next_frame(
                 model,
                 data,
                 &config,
                 pair,
-                next_corrected.as_ref(),
+                (next_corrected.as_ref(), next_cameras.as_ref()),
                 &frame_k.passes[frame_k.mid],
                 &mut losses.d_images[frame_k.mid],
                 &mut times,
@@ -141,6 +168,7 @@ impl Trainer {
             &losses.d_images,
             next.as_ref(),
             (corrected.as_ref(), next_corrected.as_ref()),
+            (cameras.as_ref(), next_cameras.as_ref()),
             &mut times,
         )?;
         let (flow, event) = next
@@ -153,7 +181,8 @@ impl Trainer {
             + back.skinning
             + flow
             + event
-            + back.pose_prior;
+            + back.pose_prior
+            + back.cameras.as_ref().map_or(0.0, |c| c.prior);
         if !(loss.is_finite() && back.all_finite()) {
             return Err(TrainError::NonFinite { step });
         }
@@ -178,6 +207,7 @@ impl Trainer {
             back.opacity,
             back.next_latent,
             back.corrections,
+            back.cameras,
         )?;
         times.adam = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
@@ -218,6 +248,7 @@ impl Trainer {
         d_images: &[Vec<f32>],
         next: Option<&NextFrame<'_>>,
         (corrected, next_corrected): (Option<&CorrectedPoses>, Option<&CorrectedPoses>),
+        (cameras, next_cameras): (Option<&CorrectedCameras>, Option<&CorrectedCameras>),
         times: &mut StageTimes,
     ) -> Result<StepGradients, TrainError> {
         let model = &self.model;
@@ -228,8 +259,14 @@ impl Trainer {
             frame_k,
             d_images,
             d_geometric.map(|(a, _)| a.as_slice()),
+            cameras,
             times,
         )?;
+        let mut camera_frames: Vec<(usize, Vec<f64>)> = cameras
+            .zip(k.camera_grad.take())
+            .map(|(c, g)| (c.slot, g))
+            .into_iter()
+            .collect();
         // The pose corrections' gradient: frame k's passes, frame k+1's below, and the prior.
         let mut corrections = corrected.map(|c| {
             let mut g = vec![0.0f32; model.pose_corrections.len()];
@@ -256,6 +293,12 @@ impl Trainer {
                 .render_backward(&next.terms.d_second, d_geometric_second)?;
             let grads = next.pass.model_backward(&posed)?;
             k.grads.add_shared(&grads);
+            if let Some(c) = next_cameras {
+                let mut g = vec![0.0; CAMERA_CORRECTION_VALUES];
+                let p = &next.pass.posed;
+                c.add_gradient(0, &p.means, &p.covariances, &posed, &mut g)?;
+                camera_frames.push((c.slot, g));
+            }
             if let (Some(c), Some(g)) = (next_corrected, corrections.as_mut()) {
                 c.add_gradient(
                     &data.body,
@@ -302,6 +345,7 @@ impl Trainer {
             means_2d: k.means_2d,
             pass_norms: k.pass_norms,
             corrections: corrections.map(|g| (g, knots)),
+            cameras: cameras.map(|_| CameraGradient::of(model, config, &camera_frames)),
             next_latent,
             aiap: k.aiap,
             skinning,
@@ -319,6 +363,7 @@ impl Trainer {
         frame_k: &FramePasses<'_>,
         d_images: &[Vec<f32>],
         d_geometric: Option<&[f32]>,
+        cameras: Option<&CorrectedCameras>,
         times: &mut StageTimes,
     ) -> Result<PassesBackward, TrainError> {
         let model = &self.model;
@@ -350,6 +395,19 @@ impl Trainer {
         };
         times.render_backward = t0.elapsed().as_secs_f64();
         let started = Instant::now();
+        // The camera corrections' gradient, from the renders' own gradients (before the AIAP
+        // regulariser adds to the mid pass's).
+        let mut camera_grad = cameras.map(|_| vec![0.0f64; CAMERA_CORRECTION_VALUES]);
+        let mut camera_gradient = |s: usize, pass: &FramePass<'_>, g: &PosedGradients| match (
+            cameras,
+            camera_grad.as_mut(),
+        ) {
+            (Some(c), Some(grad)) => {
+                c.add_gradient(s, &pass.posed.means, &pass.posed.covariances, g, grad)
+            }
+            _ => Ok(()),
+        };
+        camera_gradient(mid, first, &posed)?;
         let (aiap, aiap_canonical) =
             aiap_terms(&self.aiap, model, &first.posed, config, &mut posed);
         // Per pass, ∂L/∂bones and ∂L/∂pose code (for the pose correction).
@@ -385,6 +443,7 @@ impl Trainer {
             if let Some(norms) = pass_norms.as_mut() {
                 add_ndc_norms(norms, &sub.means_2d, camera);
             }
+            camera_gradient(s, pass, &sub)?;
             if let Some(grads) = own.as_mut() {
                 let g = pass.model_backward(&sub)?;
                 grads.add_shared(&g);
@@ -419,6 +478,7 @@ impl Trainer {
             pass_norms,
             bones,
             codes,
+            camera_grad,
             aiap,
             started,
             sub_render_seconds,
@@ -434,6 +494,8 @@ struct PassesBackward {
     pass_norms: Option<Vec<f32>>,
     bones: Vec<Vec<Affine<f32>>>,
     codes: Vec<Vec<f32>>,
+    /// ∂L/∂ the frame's camera correction (with camera correction).
+    camera_grad: Option<Vec<f64>>,
     aiap: f32,
     /// When the model backward started (after the mid pass's render backward), and the seconds
     /// of the other passes' render backward since: the stage times subtract them.
@@ -447,6 +509,7 @@ impl StepGradients {
         self.corrections
             .as_ref()
             .is_none_or(|(g, _)| g.iter().all(|v| v.is_finite()))
+            && self.cameras.as_ref().is_none_or(CameraGradient::all_finite)
             && self.opacity.iter().all(|v| v.is_finite())
             && self
                 .next_latent
@@ -457,13 +520,14 @@ impl StepGradients {
 }
 
 /// Frame k's passes: one at mid exposure, or with the exposure model one per sub-exposure pose
-/// (`corrected`: the poses as the frame's pose correction moves them).
+/// (`corrected`: the poses as the frame's pose correction moves them; `cameras`: the cameras as its
+/// camera correction moves them).
 fn frame_passes<'a>(
     model: &'a Model,
     data: &'a TrainingData,
     config: &TrainConfig,
     slot: usize,
-    corrected: Option<&'a CorrectedPoses>,
+    (corrected, cameras): (Option<&'a CorrectedPoses>, Option<&'a CorrectedCameras>),
     times: &mut StageTimes,
 ) -> Result<FramePasses<'a>, TrainError> {
     let exposure = config.blur_model == BlurModel::Exposure;
@@ -475,11 +539,20 @@ fn frame_passes<'a>(
             .map(|p| &p.prepared)
             .collect(),
     };
-    let cameras = data.cameras(slot, exposure)?;
+    let cameras = match cameras {
+        Some(c) => c.pass_cameras(),
+        None => data
+            .cameras(slot, exposure)?
+            .into_iter()
+            .map(PassCamera::of)
+            .collect(),
+    };
     let mid = poses.len() / 2;
+    // Corrected cameras differ between passes once the correction's change does; their gradient
+    // needs each pass's own, so no tiles are shared.
     let plan = PassPlan {
         reposed: poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once,
-        share_static_tiles: config.share_static_tiles,
+        share_static_tiles: config.share_static_tiles && cameras_unchanged(config),
     };
     let ExposurePasses { passes, sharing } =
         model.forward_passes(&cameras, &poses, mid, model.latent(slot), plan)?;
@@ -575,22 +648,32 @@ fn frame_losses(
     })
 }
 
-/// Frame k+1's pass (at its corrected pose when `corrected`) and the pair losses between it and
-/// frame k's mid pass `first`, whose share of their cotangent is added to `d_first`.
+/// Whether the step renders from the given cameras (no camera correction).
+fn cameras_unchanged(config: &TrainConfig) -> bool {
+    !config.camera_correction
+}
+
+/// Frame k+1's pass (at its corrected pose and camera when `corrected` and `camera` are given)
+/// and the pair losses between it and frame k's mid pass `first`, whose share of their cotangent
+/// is added to `d_first`.
 #[allow(clippy::too_many_arguments)]
 fn next_frame<'a>(
     model: &'a Model,
     data: &'a TrainingData,
     config: &TrainConfig,
     pair: &PairSupervision<'_>,
-    corrected: Option<&'a CorrectedPoses>,
+    (corrected, camera): (Option<&'a CorrectedPoses>, Option<&'a CorrectedCameras>),
     first: &FramePass<'_>,
     d_first: &mut [f32],
     times: &mut StageTimes,
 ) -> Result<NextFrame<'a>, TrainError> {
     let next = &data.frames[pair.next_slot];
     let pose = corrected.map_or(&next.pose.prepared, |c| &c.prepared[0]);
-    let pass = model.forward(&next.camera, pose, model.latent(pair.next_slot))?;
+    let camera = match camera {
+        Some(c) => c.pass_cameras()[0],
+        None => PassCamera::of(&next.camera),
+    };
+    let pass = model.forward_from(camera, pose, model.latent(pair.next_slot))?;
     let size = (data.camera.height as usize, data.camera.width as usize);
     let terms = pair_terms(pair, config, first.rgb(), pass.rgb(), size, d_first)?;
     times.flow_network = terms.flow_network_seconds;

@@ -82,6 +82,7 @@ pub fn bits(t: &Trainer) -> Vec<u32> {
         .chain(&t.model.nets.scene_colour.mlp.params)
         .chain(&t.model.latents)
         .chain(&t.model.pose_corrections)
+        .chain(&t.model.camera_corrections)
         .map(|v| v.to_bits())
         .collect()
 }

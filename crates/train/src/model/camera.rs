@@ -1,0 +1,98 @@
+//! The cameras a model renders from: a pass's camera (the one it is rasterized from and the centre
+//! its colours are viewed from) and the model's learned camera corrections
+//! (`crate::pose::camera_correction`).
+
+use super::{Model, Rendered};
+use crate::pose::body::PreparedPose;
+use crate::pose::camera_correction::{
+    corrected_world_to_camera, interpolated_camera_correction, twist_at, CAMERA_CORRECTION_VALUES,
+};
+use crate::TrainError;
+use rasterize_cpu::Camera;
+
+/// The camera of one pass: the one the Gaussians are rasterized from, and the camera centre the
+/// colour networks' view directions start at (world, metres). They are one camera's except under
+/// camera correction, where colours keep the given camera's view (the correction moves only the
+/// projection; `crate::pose::camera_correction`).
+#[derive(Clone, Copy, Debug)]
+pub struct PassCamera<'a> {
+    /// The camera the pass is rasterized from.
+    pub raster: &'a Camera,
+    /// The centre of the colours' view directions.
+    pub view_centre: [f32; 3],
+}
+
+impl<'a> PassCamera<'a> {
+    /// One camera for both.
+    pub fn of(camera: &'a Camera) -> Self {
+        Self {
+            raster: camera,
+            view_centre: super::view_centre(camera),
+        }
+    }
+}
+
+/// `camera` with its pose corrected by a frame's `correction` at exposure offset `offset`.
+pub fn corrected_camera(camera: &Camera, correction: &[f32], offset: f32) -> Camera {
+    Camera {
+        world_to_camera: corrected_world_to_camera(
+            &camera.world_to_camera,
+            &twist_at(correction, offset),
+        ),
+        ..camera.clone()
+    }
+}
+
+impl Model {
+    /// Training slot `slot`'s camera correction ([`CAMERA_CORRECTION_VALUES`] values; empty when
+    /// camera correction is off).
+    pub fn training_camera_correction(&self, slot: usize) -> &[f32] {
+        let n = CAMERA_CORRECTION_VALUES;
+        self.camera_corrections
+            .get(slot * n..(slot + 1) * n)
+            .unwrap_or(&[])
+    }
+
+    /// The camera correction of frame `index` at mid exposure, interpolated between the training
+    /// frames around it (empty when camera correction is off).
+    pub fn camera_correction_for(&self, index: u32) -> Vec<f32> {
+        interpolated_camera_correction(&self.frame_indices, &self.camera_corrections, index)
+    }
+
+    /// Frame `index`'s `camera` with its learned correction at mid exposure (`camera` unchanged
+    /// when camera correction is off): what evaluation renders a scene's frame from.
+    pub fn corrected_camera(&self, index: u32, camera: &Camera) -> Camera {
+        let correction = self.camera_correction_for(index);
+        if correction.is_empty() {
+            camera.clone()
+        } else {
+            corrected_camera(camera, &correction, 0.0)
+        }
+    }
+
+    /// Renders scene frame `index` (its given `camera`) in `pose` with the frame latent `latent`,
+    /// from the camera as its learned correction moves it (colours viewed from the given camera,
+    /// as in training; [`PassCamera`]).
+    pub fn render_frame(
+        &self,
+        index: u32,
+        camera: &Camera,
+        pose: &PreparedPose,
+        latent: &[f32],
+    ) -> Result<Rendered, TrainError> {
+        let raster = self.corrected_camera(index, camera);
+        let pass = self.forward_from(
+            PassCamera {
+                raster: &raster,
+                view_centre: super::view_centre(camera),
+            },
+            pose,
+            latent,
+        )?;
+        Ok(Rendered {
+            rgb: pass.rgb().to_vec(),
+            human: pass.human().to_vec(),
+            posed: pass.posed,
+        })
+    }
+}

@@ -1,0 +1,254 @@
+//! Learned camera correction: per training frame, a rigid correction of the camera pose it was
+//! given — a SLAM or SfM estimate, never exact — and of the camera's motion over the exposure,
+//! learned with the reconstruction (as BAD-Gaussians learns each exposure's camera path).
+//!
+//! **Layout**: each training frame holds [`CAMERA_CORRECTION_VALUES`] numbers: the mid-exposure
+//! twist `ξ = (ω, v)` (ω radians, v metres, both in the camera's coordinates), then its change over
+//! the exposure (end minus start; same units). A render at exposure offset `o ∈ (−½, ½)`
+//! (`crate::pose::correction::exposure_offset`; 0 at mid exposure) uses `ξ(o) = mid + o · change`
+//! and the camera
+//!
+//! `world_to_camera' = [Exp(ω) | v] · world_to_camera`, i.e. `p_c' = Exp(ω) · p_c + v`:
+//! the camera turned about its own centre by ω, then shifted by −v (seen in its coordinates).
+//!
+//! **Gradient**: the rasterizer gives `g = dL/dξ_left` for a further left twist of the corrected
+//! camera (`rasterize_cpu::camera_pose_gradient`). A change δv of v is exactly such a twist, so
+//! `dL/dv = g_v`; a change δω turns the camera by `φ = J_l(ω) δω` (the left Jacobian of SO(3)) about
+//! the point that v then shifts, which is the left twist `(φ, v × φ)`, so
+//! `dL/dω = J_l(ω)ᵀ (g_ω + g_v × v)` ([`twist_backward`]). Exact; checked by f64 central
+//! differences through a render in `gradient-checks`.
+//!
+//! **Colours** keep the view directions of the given camera: the correction moves only the
+//! camera the Gaussians are rasterized from (for the few millimetres and tenths of a degree a
+//! tracker errs by, the view directions change by far less than a degree).
+//!
+//! **Held-out frames** take the mid-exposure correction interpolated in frame number between the
+//! training frames around them, never fitted to held-out images. The regulariser is the pose
+//! correction's (`crate::pose::correction::knot_prior_terms`), one knot per training frame.
+
+use crate::pose::correction::KnotSpan;
+
+/// Values of one twist: ω (radians), then v (metres), camera coordinates.
+pub const TWIST_VALUES: usize = 6;
+
+/// Correction values per training frame: the mid-exposure twist and its change over the exposure.
+pub const CAMERA_CORRECTION_VALUES: usize = 2 * TWIST_VALUES;
+
+/// The twist of a frame's `correction` ([`CAMERA_CORRECTION_VALUES`] values) at exposure offset
+/// `offset` (−½ … ½): `mid + offset · change`.
+pub fn twist_at(correction: &[f32], offset: f32) -> [f64; TWIST_VALUES] {
+    std::array::from_fn(|k| {
+        f64::from(correction[k]) + f64::from(offset) * f64::from(correction[TWIST_VALUES + k])
+    })
+}
+
+/// The cross product matrix `[w]ₓ` (`[w]ₓ a = w × a`).
+fn hat(w: [f64; 3]) -> [[f64; 3]; 3] {
+    [[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]
+}
+
+fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
+}
+
+/// `I + a·K + b·K²` with `K = [ω]ₓ`: the form of both Exp(ω) and J_l(ω).
+fn rodrigues_form(omega: [f64; 3], a: f64, b: f64) -> [[f64; 3]; 3] {
+    let k = hat(omega);
+    let k2 = mat_mul(&k, &k);
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| f64::from(u8::from(i == j)) + a * k[i][j] + b * k2[i][j])
+    })
+}
+
+/// The rotation `Exp(ω)` (Rodrigues' formula; a series below 1e-4 rad).
+pub fn exp_so3(omega: [f64; 3]) -> [[f64; 3]; 3] {
+    let t2 = omega.iter().map(|v| v * v).sum::<f64>();
+    let t = t2.sqrt();
+    let (a, b) = if t < 1e-4 {
+        (1.0 - t2 / 6.0, 0.5 - t2 / 24.0)
+    } else {
+        (t.sin() / t, (1.0 - t.cos()) / t2)
+    };
+    rodrigues_form(omega, a, b)
+}
+
+/// The left Jacobian of SO(3): `Exp(ω + δ) = Exp(J_l(ω) δ) · Exp(ω)` to first order in δ.
+pub fn left_jacobian_so3(omega: [f64; 3]) -> [[f64; 3]; 3] {
+    let t2 = omega.iter().map(|v| v * v).sum::<f64>();
+    let t = t2.sqrt();
+    let (a, b) = if t < 1e-4 {
+        (0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0)
+    } else {
+        ((1.0 - t.cos()) / t2, (t - t.sin()) / (t2 * t))
+    };
+    rodrigues_form(omega, a, b)
+}
+
+/// `world_to_camera` corrected by `twist` = (ω, v): `[Exp(ω) | v] · world_to_camera` (row-major
+/// 4×4 rigid transforms).
+pub fn corrected_world_to_camera(
+    world_to_camera: &[[f64; 4]; 4],
+    twist: &[f64; TWIST_VALUES],
+) -> [[f64; 4]; 4] {
+    let r = exp_so3([twist[0], twist[1], twist[2]]);
+    let mut out = [
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0; 4],
+        [0.0; 4],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    for i in 0..3 {
+        for j in 0..4 {
+            out[i][j] = (0..3).map(|k| r[i][k] * world_to_camera[k][j]).sum();
+        }
+        out[i][3] += twist[3 + i];
+    }
+    out
+}
+
+/// `dL/d(ω, v)` of a camera corrected by `twist` from `d_left`, dL/dξ of that corrected camera for a
+/// further left twist (`rasterize_cpu::camera_pose_gradient`): `(J_l(ω)ᵀ (g_ω + g_v × v), g_v)`.
+pub fn twist_backward(
+    d_left: &[f64; TWIST_VALUES],
+    twist: &[f64; TWIST_VALUES],
+) -> [f64; TWIST_VALUES] {
+    let (g_w, g_v) = (
+        [d_left[0], d_left[1], d_left[2]],
+        [d_left[3], d_left[4], d_left[5]],
+    );
+    let v = [twist[3], twist[4], twist[5]];
+    let turn = [
+        g_w[0] + g_v[1] * v[2] - g_v[2] * v[1],
+        g_w[1] + g_v[2] * v[0] - g_v[0] * v[2],
+        g_w[2] + g_v[0] * v[1] - g_v[1] * v[0],
+    ];
+    let j = left_jacobian_so3([twist[0], twist[1], twist[2]]);
+    let mut out = [0.0; TWIST_VALUES];
+    for a in 0..3 {
+        out[a] = (0..3).map(|i| j[i][a] * turn[i]).sum();
+        out[3 + a] = g_v[a];
+    }
+    out
+}
+
+/// Adds `dL/d correction` ([`CAMERA_CORRECTION_VALUES`] values) to `grad` from `d_twist`, dL/dξ of
+/// the twist taken at exposure offset `offset` ([`twist_at`]).
+pub fn correction_backward(d_twist: &[f64; TWIST_VALUES], offset: f32, grad: &mut [f64]) {
+    let (mid, change) = grad.split_at_mut(TWIST_VALUES);
+    for k in 0..TWIST_VALUES {
+        mid[k] += d_twist[k];
+        change[k] += f64::from(offset) * d_twist[k];
+    }
+}
+
+/// The mid-exposure correction of frame `index` ([`CAMERA_CORRECTION_VALUES`] values, the change
+/// zero): the training frames' (`frames`, ascending, one row of `corrections` each) interpolated
+/// linearly in frame number, the nearest one's outside their range. Empty when `corrections` is.
+pub fn interpolated_camera_correction(frames: &[u32], corrections: &[f32], index: u32) -> Vec<f32> {
+    if corrections.is_empty() || frames.is_empty() {
+        return Vec::new();
+    }
+    KnotSpan::of(frames, index).blend(corrections, CAMERA_CORRECTION_VALUES, TWIST_VALUES)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn det(m: &[[f64; 3]; 3]) -> f64 {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    }
+
+    #[test]
+    fn exp_is_a_rotation_about_its_axis_and_the_series_joins_the_closed_form() {
+        for omega in [[0.3, -0.2, 0.9], [1e-5, 2e-5, -1e-5], [0.0, 0.0, 2.0]] {
+            let r = exp_so3(omega);
+            let rtr = mat_mul(
+                &std::array::from_fn(|i| std::array::from_fn(|j| r[j][i])),
+                &r,
+            );
+            for (i, row) in rtr.iter().enumerate() {
+                for (j, v) in row.iter().enumerate() {
+                    assert!((v - f64::from(u8::from(i == j))).abs() < 1e-12, "{omega:?}");
+                }
+            }
+            assert!((det(&r) - 1.0).abs() < 1e-12);
+            // The axis is fixed.
+            let axis: [f64; 3] = std::array::from_fn(|i| (0..3).map(|k| r[i][k] * omega[k]).sum());
+            for k in 0..3 {
+                assert!((axis[k] - omega[k]).abs() < 1e-12);
+            }
+        }
+        // A quarter turn about z maps x to y.
+        let r = exp_so3([0.0, 0.0, std::f64::consts::FRAC_PI_2]);
+        assert!((r[1][0] - 1.0).abs() < 1e-12 && r[0][0].abs() < 1e-12);
+        // Just above and below the series' switch: the same rotation to rounding.
+        let (a, b) = (exp_so3([0.0, 0.0, 0.99e-4]), exp_so3([0.0, 0.0, 1.01e-4]));
+        assert!((a[1][0] - 0.99e-4).abs() < 1e-15 && (b[1][0] - 1.01e-4).abs() < 1e-15);
+    }
+
+    #[test]
+    fn the_left_jacobian_maps_a_change_of_the_vector_to_a_left_turn() {
+        // Exp(ω + hδ) Exp(ω)ᵀ ≈ I + h [J_l δ]ₓ: central differences in h.
+        let omega = [0.4, -0.7, 0.25];
+        let j = left_jacobian_so3(omega);
+        let r0 = exp_so3(omega);
+        let r0t: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|k| r0[k][i]));
+        let h = 1e-6;
+        for d in 0..3 {
+            let shifted = |s: f64| {
+                let mut w = omega;
+                w[d] += s;
+                mat_mul(&exp_so3(w), &r0t)
+            };
+            let (up, down) = (shifted(h), shifted(-h));
+            let fd = [
+                (up[2][1] - down[2][1]) / (2.0 * h),
+                (up[0][2] - down[0][2]) / (2.0 * h),
+                (up[1][0] - down[1][0]) / (2.0 * h),
+            ];
+            for a in 0..3 {
+                // Central differences of smooth f64 functions at h = 1e-6: error ≈ h² + 1e-16/h.
+                assert!((fd[a] - j[a][d]).abs() < 1e-8, "column {d} row {a}: {fd:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_zero_twist_keeps_the_camera_and_a_shift_moves_it_in_its_own_coordinates() {
+        let m = [
+            [0.0, 0.0, 1.0, 0.5],
+            [1.0, 0.0, 0.0, -0.2],
+            [0.0, 1.0, 0.0, 3.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        assert_eq!(corrected_world_to_camera(&m, &[0.0; 6]), m);
+        let shifted = corrected_world_to_camera(&m, &[0.0, 0.0, 0.0, 0.01, 0.0, -0.02]);
+        assert_eq!(shifted[0][3], 0.51);
+        assert_eq!(shifted[2][3], 2.98);
+        let c = [
+            0.1f32, 0.2, 0.3, 0.4, 0.5, 0.6, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0,
+        ];
+        let t = twist_at(&c, -0.5);
+        assert!((t[0] - (0.1f32 as f64 - 0.5)).abs() < 1e-12 && (t[5] + 2.4).abs() < 1e-6);
+        let mut g = vec![0.0; 12];
+        correction_backward(&[1.0, 0.0, 0.0, 0.0, 0.0, 2.0], 0.25, &mut g);
+        assert_eq!((g[0], g[5], g[6], g[11]), (1.0, 2.0, 0.25, 0.5));
+    }
+
+    #[test]
+    fn held_out_frames_interpolate_the_training_frames_mid_exposure_twists() {
+        let rows: Vec<f32> = [1.0f32, 3.0]
+            .iter()
+            .flat_map(|&v| [[v; 6], [7.0; 6]].concat())
+            .collect();
+        let at = interpolated_camera_correction(&[2, 6], &rows, 3);
+        assert_eq!(at.len(), CAMERA_CORRECTION_VALUES);
+        assert_eq!(at[0], 1.5);
+        assert!(at[TWIST_VALUES..].iter().all(|&v| v == 0.0));
+        assert_eq!(interpolated_camera_correction(&[2, 6], &rows, 9)[2], 3.0);
+        assert!(interpolated_camera_correction(&[2, 6], &[], 3).is_empty());
+    }
+}

@@ -1,0 +1,135 @@
+//! The step's share of learned camera correction (`crate::pose::camera_correction`): a frame's
+//! pass cameras corrected by its twists, and the corrections' gradient from each pass's
+//! rasterizer-input gradients.
+
+use crate::config::TrainConfig;
+use crate::model::{corrected_camera, Model, PassCamera, PosedGradients};
+use crate::pose::camera_correction::{
+    correction_backward, twist_at, twist_backward, CAMERA_CORRECTION_VALUES,
+};
+use crate::pose::correction::{exposure_offset, knot_prior_terms, CorrectionPrior};
+use crate::TrainError;
+use rasterize_cpu::{camera_pose_gradient, Camera};
+
+/// One training frame's corrected pass cameras and what their backward needs.
+pub(super) struct CorrectedCameras {
+    /// The frame's training slot.
+    pub slot: usize,
+    /// The corrected cameras, one per pass.
+    cameras: Vec<Camera>,
+    /// The given cameras' centres (the colours' view; [`PassCamera`]).
+    view_centres: Vec<[f32; 3]>,
+    /// Each pass's twist and exposure offset.
+    twists: Vec<([f64; 6], f32)>,
+}
+
+impl CorrectedCameras {
+    /// The cameras `given` (one per pass, in exposure order) of training slot `slot` corrected by
+    /// its current camera correction.
+    pub fn of(model: &Model, given: &[&Camera], slot: usize) -> Self {
+        let correction = model.training_camera_correction(slot);
+        let count = given.len();
+        let offsets: Vec<f32> = (0..count).map(|s| exposure_offset(s, count)).collect();
+        Self {
+            slot,
+            cameras: given
+                .iter()
+                .zip(&offsets)
+                .map(|(c, &o)| corrected_camera(c, correction, o))
+                .collect(),
+            view_centres: given
+                .iter()
+                .map(|c| c.center_world().map(|v| v as f32))
+                .collect(),
+            twists: offsets
+                .iter()
+                .map(|&o| (twist_at(correction, o), o))
+                .collect(),
+        }
+    }
+
+    /// The passes' cameras: rasterized from the corrected camera, viewed from the given one.
+    pub fn pass_cameras(&self) -> Vec<PassCamera<'_>> {
+        self.cameras
+            .iter()
+            .zip(&self.view_centres)
+            .map(|(raster, &view_centre)| PassCamera {
+                raster,
+                view_centre,
+            })
+            .collect()
+    }
+
+    /// Adds ∂L/∂(this frame's correction) ([`CAMERA_CORRECTION_VALUES`] values) to `grad` from pass
+    /// `pass`'s rasterizer inputs (`means`, `covariances`, world) and their gradients `posed`.
+    pub fn add_gradient(
+        &self,
+        pass: usize,
+        means: &[[f32; 3]],
+        covariances: &[[[f32; 3]; 3]],
+        posed: &PosedGradients,
+        grad: &mut [f64],
+    ) -> Result<(), TrainError> {
+        let d_left = camera_pose_gradient(
+            &self.cameras[pass],
+            means,
+            covariances,
+            &posed.means,
+            &posed.covariances,
+        )?;
+        let (twist, offset) = self.twists[pass];
+        correction_backward(&twist_backward(&d_left, &twist), offset, grad);
+        Ok(())
+    }
+}
+
+/// The camera corrections' gradient of one step: every training frame's row (zero but for the
+/// step's frames) and the rows to step.
+pub(super) struct CameraGradient {
+    /// ∂L/∂ every camera correction (the model's `camera_corrections` layout).
+    pub values: Vec<f32>,
+    /// The training slots whose corrections the step moves.
+    pub slots: Vec<usize>,
+    /// The prior's value on the step's frames.
+    pub prior: f32,
+}
+
+impl CameraGradient {
+    /// The gradient of the frames `frames` (slot, ∂L/∂ its correction), with the prior's terms of
+    /// each (weights of `config`).
+    pub fn of(model: &Model, config: &TrainConfig, frames: &[(usize, Vec<f64>)]) -> Self {
+        let n = CAMERA_CORRECTION_VALUES;
+        let mut values = vec![0.0f32; model.camera_corrections.len()];
+        let mut slots = Vec::new();
+        let prior = CorrectionPrior {
+            zero: config.camera_correction_zero_weight,
+            smooth: config.camera_correction_smooth_weight,
+        };
+        let mut prior_value = 0.0;
+        for (slot, g) in frames {
+            let row = &mut values[slot * n..(slot + 1) * n];
+            for (r, &v) in row.iter_mut().zip(g) {
+                *r += v as f32;
+            }
+            if !slots.contains(slot) {
+                prior_value += knot_prior_terms(&model.camera_corrections, n, *slot, prior, row);
+                slots.push(*slot);
+            }
+        }
+        if !config.camera_correction_change {
+            for row in values.chunks_mut(n) {
+                row[n / 2..].fill(0.0);
+            }
+        }
+        Self {
+            values,
+            slots,
+            prior: prior_value,
+        }
+    }
+
+    /// True when every value is finite.
+    pub fn all_finite(&self) -> bool {
+        self.values.iter().all(|v| v.is_finite()) && self.prior.is_finite()
+    }
+}

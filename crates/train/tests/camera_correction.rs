@@ -1,0 +1,130 @@
+//! Learned camera correction on the tiny fixture: a correction that cannot move leaves the run's
+//! bits alone, a learning one moves the cameras (the change over the exposure too) whatever the
+//! thread count, resumes bit for bit, and held-out frames are rendered from the camera
+//! interpolated between their neighbours' corrections.
+#![allow(clippy::unwrap_used)]
+
+use train::config::TrainConfig;
+use train::pose::camera_correction::{CAMERA_CORRECTION_VALUES, TWIST_VALUES};
+use train::trainer::Trainer;
+
+mod common;
+use common::*;
+
+/// Camera correction from step 2 on the exposure model's three renders per frame.
+fn camera_config(steps: usize) -> TrainConfig {
+    TrainConfig {
+        camera_correction: true,
+        camera_correction_from: 2,
+        ..exposure_events_config(steps)
+    }
+}
+
+#[test]
+fn a_correction_that_cannot_move_changes_no_bit() {
+    let ctx = context();
+    let run = |config: TrainConfig| {
+        let mut t = Trainer::new(&ctx, config).unwrap();
+        t.run(&ctx, 8, |_, _| Ok(())).unwrap();
+        let mut b = bits(&t);
+        b.truncate(b.len() - t.model.camera_corrections.len());
+        (b, t.model.camera_corrections.clone())
+    };
+    let (off, none) = run(tiny_config(8));
+    assert!(none.is_empty());
+    let (frozen, corrections) = run(TrainConfig {
+        camera_correction: true,
+        camera_correction_from: 2,
+        lr_camera_rotation: 0.0,
+        lr_camera_translation: 0.0,
+        ..tiny_config(8)
+    });
+    assert_eq!(
+        corrections.len(),
+        ctx.frames.len() * CAMERA_CORRECTION_VALUES
+    );
+    assert!(corrections.iter().all(|&v| v == 0.0));
+    assert_same_bits(&off, &frozen);
+}
+
+#[test]
+fn a_learning_correction_moves_the_trained_frames_cameras_whatever_the_thread_count() {
+    let config = camera_config(12);
+    let ctx = exposure_context(&config);
+    let run = |threads: usize| {
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+            t.run(&ctx, 12, |_, _| Ok(())).unwrap();
+            t
+        })
+    };
+    let (one, two) = (run(1), run(2));
+    assert_same_bits(&bits(&one), &bits(&two));
+    let c = &one.model.camera_corrections;
+    assert!(c.iter().all(|v| v.is_finite()));
+    let moved: Vec<bool> = c
+        .chunks(CAMERA_CORRECTION_VALUES)
+        .map(|row| row.iter().any(|&v| v != 0.0))
+        .collect();
+    // Steps 2..12 train ten frames (of the fixture's training frames): those moved, from the
+    // mid-exposure twist to its change over the exposure.
+    assert!(moved.iter().filter(|&&m| m).count() >= 2, "{moved:?}");
+    assert!(c
+        .chunks(CAMERA_CORRECTION_VALUES)
+        .any(|row| row[TWIST_VALUES..].iter().any(|&v| v != 0.0)));
+    // Without the change: only the mid-exposure twists move.
+    let mut t = Trainer::new(
+        &ctx,
+        TrainConfig {
+            camera_correction_change: false,
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    t.run(&ctx, 12, |_, _| Ok(())).unwrap();
+    let rows = t.model.camera_corrections.chunks(CAMERA_CORRECTION_VALUES);
+    assert!(rows
+        .clone()
+        .all(|row| row[TWIST_VALUES..].iter().all(|&v| v == 0.0)));
+    assert!(rows
+        .clone()
+        .any(|row| row[..TWIST_VALUES].iter().any(|&v| v != 0.0)));
+}
+
+#[test]
+fn camera_correction_resumes_bit_identically() {
+    let config = camera_config(16);
+    resume_is_bit_identical(&exposure_context(&config), config);
+}
+
+#[test]
+fn held_out_frames_take_the_camera_between_their_neighbours() {
+    let ctx = context();
+    let mut t = Trainer::new(&ctx, camera_config(4)).unwrap();
+    let n = CAMERA_CORRECTION_VALUES;
+    for (slot, row) in t.model.camera_corrections.chunks_mut(n).enumerate() {
+        row[3] = 0.01 * slot as f32; // mid-exposure shift along x (m)
+        row[TWIST_VALUES + 3] = 5.0; // a change over the exposure: never applied to a held-out frame
+    }
+    let frames = t.model.frame_indices.clone();
+    let (a, b) = (frames[0], frames[1]);
+    let given = ctx.camera.clone();
+    let at = |index: u32| t.model.corrected_camera(index, &given).world_to_camera[0][3];
+    let shift = |index: u32| at(index) - given.world_to_camera[0][3];
+    assert!((shift(a) - 0.0).abs() < 1e-7);
+    assert!((shift(b) - 0.01).abs() < 1e-7, "{}", shift(b));
+    if b > a + 1 {
+        let between = a + (b - a) / 2;
+        let u = f64::from(between - a) / f64::from(b - a);
+        assert!((shift(between) - 0.01 * u).abs() < 1e-6);
+    }
+    // Rendering a frame applies its correction: a shifted camera renders another image.
+    let pose = ctx.body.prepare(&ctx.frames[1].pose.params).unwrap();
+    let latent = t.model.latent(1).to_vec();
+    let corrected = t.model.render_frame(b, &given, &pose, &latent).unwrap();
+    let plain = t.model.render(&given, &pose, &latent).unwrap();
+    assert_ne!(corrected.rgb, plain.rgb);
+    t.model.camera_corrections.fill(0.0);
+    let zero = t.model.render_frame(b, &given, &pose, &latent).unwrap();
+    assert_eq!(zero.rgb, plain.rgb);
+}
