@@ -39,6 +39,7 @@ pub fn run(args: Args) -> Result<()> {
     });
     let model = &loaded.model;
     let human = model.human_count();
+    let camera_error = crate::outputs::camera_report::camera_report(&data, model)?;
     write_evaluation(
         model,
         &loaded.body,
@@ -49,7 +50,15 @@ pub fn run(args: Args) -> Result<()> {
             steps: loaded.manifest.steps,
             gaussians_human: human,
             gaussians_scene: model.set.len() - human,
-            extra: json!({ "model": args.model.display().to_string(), "data": data_dir.display().to_string() }),
+            extra: json!({
+                "model": args.model.display().to_string(),
+                "data": data_dir.display().to_string(),
+                "camera_error": camera_error,
+            }),
         },
-    )
+    )?;
+    if let Some(report) = &camera_error {
+        println!("{}", crate::outputs::camera_report::summary_line(report));
+    }
+    Ok(())
 }

@@ -344,6 +344,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let breakdown = mean_times(&recent);
     let pose_error = crate::outputs::pose_report::pose_report(&data, model, &ctx.body)?;
+    let camera_error = crate::outputs::camera_report::camera_report(&data, model)?;
     let summary = EvalSummary {
         train_seconds,
         steps: trainer.step,
@@ -374,6 +375,8 @@ pub fn run(args: Args) -> Result<()> {
             "lpips_weight": config.lpips_weight,
             "pose_correction": config.pose_correction,
             "pose_error": pose_error,
+            "camera_correction": config.camera_correction,
+            "camera_error": camera_error,
             "seed": config.seed,
             "threads": rayon::current_num_threads(),
             "step_seconds_breakdown": breakdown
@@ -399,6 +402,9 @@ pub fn run(args: Args) -> Result<()> {
     write_evaluation(model, &ctx.body, &data, &out, &summary)?;
     if let Some(report) = &pose_error {
         println!("{}", crate::outputs::pose_report::summary_line(report));
+    }
+    if let Some(report) = &camera_error {
+        println!("{}", crate::outputs::camera_report::summary_line(report));
     }
     println!("model: {}", model_dir.display());
     println!(
