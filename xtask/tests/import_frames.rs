@@ -341,3 +341,92 @@ fn xtask_import_with_cameras(out: &Path, poses: &Path, cameras: &Path) -> Output
     extra.push(cameras);
     import(out, poses, &extra)
 }
+
+/// A COLMAP text model of cameras turned every which way (rotations up to 2.5 rad, written as
+/// COLMAP's world-to-camera quaternions and translations) imports to the same cameras within 1e-9:
+/// the rotation from the quaternion matches Rodrigues' formula of the same axis and angle.
+#[test]
+fn a_colmap_model_of_turned_cameras_imports_them_within_1e_9() {
+    let dir = tempfile::tempdir().unwrap();
+    let poses = common::import_fixtures().join("frames").join("poses.json");
+    let camera = scene::load(&fixture()).unwrap().camera;
+    let mut names: Vec<String> = std::fs::read_dir(fixture().join("sharp"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    // Per image an axis, an angle and a translation, varied deterministically.
+    let truth: Vec<([f64; 3], f64, [f64; 3])> = (0..names.len())
+        .map(|k| {
+            let a = k as f64;
+            let axis = [
+                (1.3 * a).sin(),
+                (0.7 * a + 1.0).cos(),
+                0.4 + (2.1 * a).sin(),
+            ];
+            let n = axis.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let angle = 0.1 + 2.4 * (0.5 + 0.5 * (0.9 * a).sin());
+            (
+                axis.map(|v| v / n),
+                angle,
+                [0.1 * a - 0.5, 0.3 - 0.05 * a, 2.0 + 0.1 * a],
+            )
+        })
+        .collect();
+    let colmap = dir.path().join("colmap");
+    std::fs::create_dir_all(&colmap).unwrap();
+    std::fs::write(
+        colmap.join("cameras.txt"),
+        format!(
+            "7 PINHOLE {} {} {} {} {} {}\n",
+            camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy
+        ),
+    )
+    .unwrap();
+    let mut images = String::new();
+    for (k, (name, (axis, angle, t))) in names.iter().zip(&truth).enumerate() {
+        let (s, w) = ((angle / 2.0).sin(), (angle / 2.0).cos());
+        images.push_str(&format!(
+            "{} {w} {} {} {} {} {} {} 7 {name}\n\n",
+            k + 1,
+            s * axis[0],
+            s * axis[1],
+            s * axis[2],
+            t[0],
+            t[1],
+            t[2]
+        ));
+    }
+    std::fs::write(colmap.join("images.txt"), images).unwrap();
+    let out = dir.path().join("turned");
+    let o = import(&out, &poses, &["--cameras", colmap.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = scene::load(&out).unwrap();
+    assert_eq!(s.frames.len(), names.len());
+    for (f, (axis, angle, t)) in s.frames.iter().zip(&truth) {
+        let k = [
+            [0.0, -axis[2], axis[1]],
+            [axis[2], 0.0, -axis[0]],
+            [-axis[1], axis[0], 0.0],
+        ];
+        let k2 = |i: usize, j: usize| (0..3).map(|l| k[i][l] * k[l][j]).sum::<f64>();
+        let got = f.world_to_camera.unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let want = f64::from(u8::from(i == j))
+                    + angle.sin() * k[i][j]
+                    + (1.0 - angle.cos()) * k2(i, j);
+                assert!(
+                    (got[i][j] - want).abs() < 1e-9,
+                    "frame {}: {got:?}",
+                    f.index
+                );
+            }
+            assert!(
+                (got[i][3] - t[i]).abs() < 1e-9,
+                "frame {}: {got:?}",
+                f.index
+            );
+        }
+    }
+}
