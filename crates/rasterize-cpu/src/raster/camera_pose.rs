@@ -41,6 +41,9 @@ pub fn camera_pose_gradient<T: Real>(
             d_covariances.len()
         )));
     }
+    // Summed in world coordinates and rotated once: with R a rotation, p_c × g_c =
+    // R(p × g) + t × (R g), and M_c = R (Σ Gᵀ − Gᵀ Σ) Rᵀ, whose spin vector is R times the world
+    // one's.
     const CHUNK: usize = 4096;
     let partials: Vec<[f64; 6]> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
@@ -48,13 +51,8 @@ pub fn camera_pose_gradient<T: Real>(
             let range = c * CHUNK..((c + 1) * CHUNK).min(n);
             let mut out = [0.0f64; 6];
             for i in range {
-                let g = gaussian_twist_gradient(
-                    &camera.world_to_camera,
-                    &means[i],
-                    &covariances[i],
-                    &d_means[i],
-                    &d_covariances[i],
-                );
+                let g =
+                    world_twist_terms(&means[i], &covariances[i], &d_means[i], &d_covariances[i]);
                 for (o, v) in out.iter_mut().zip(g) {
                     *o += v;
                 }
@@ -62,18 +60,30 @@ pub fn camera_pose_gradient<T: Real>(
             out
         })
         .collect();
-    let mut out = [0.0f64; 6];
+    let mut sum = [0.0f64; 6];
     for p in partials {
-        for (o, v) in out.iter_mut().zip(p) {
+        for (o, v) in sum.iter_mut().zip(p) {
             *o += v;
         }
     }
-    Ok(out)
+    let w = &camera.world_to_camera;
+    let rotate =
+        |v: &[f64]| -> [f64; 3] { std::array::from_fn(|i| (0..3).map(|j| w[i][j] * v[j]).sum()) };
+    let (turn, shift) = (rotate(&sum[..3]), rotate(&sum[3..]));
+    let t = [w[0][3], w[1][3], w[2][3]];
+    Ok([
+        turn[0] + t[1] * shift[2] - t[2] * shift[1],
+        turn[1] + t[2] * shift[0] - t[0] * shift[2],
+        turn[2] + t[0] * shift[1] - t[1] * shift[0],
+        shift[0],
+        shift[1],
+        shift[2],
+    ])
 }
 
-/// One Gaussian's share of [`camera_pose_gradient`] (zero when its gradients are).
-fn gaussian_twist_gradient<T: Real>(
-    w: &[[f64; 4]; 4],
+/// One Gaussian's world-coordinate terms of [`camera_pose_gradient`]: `p × g` plus the spin
+/// vector of `M = Σ Gᵀ − Gᵀ Σ`, then `g` (zero when its gradients are).
+fn world_twist_terms<T: Real>(
     mean: &[T; 3],
     covariance: &Mat3<T>,
     d_mean: &[T; 3],
@@ -87,41 +97,20 @@ fn gaussian_twist_gradient<T: Real>(
     {
         return [0.0; 6];
     }
-    let r = |i: usize, j: usize| w[i][j];
-    let rotate =
-        |v: [f64; 3]| -> [f64; 3] { std::array::from_fn(|i| (0..3).map(|j| r(i, j) * v[j]).sum()) };
-    let p = mean.map(f);
-    let pc: [f64; 3] = std::array::from_fn(|a| rotate(p)[a] + w[a][3]);
-    let gc = rotate(d_mean.map(f));
-    let cross = [
-        pc[1] * gc[2] - pc[2] * gc[1],
-        pc[2] * gc[0] - pc[0] * gc[2],
-        pc[0] * gc[1] - pc[1] * gc[0],
-    ];
-    // Σ_c = R Σ Rᵀ and G_c = R G Rᵀ.
-    let conj = |m: &Mat3<T>| -> [[f64; 3]; 3] {
-        std::array::from_fn(|a| {
-            std::array::from_fn(|b| {
-                (0..3)
-                    .map(|k| (0..3).map(|l| r(a, k) * f(m[k][l]) * r(b, l)).sum::<f64>())
-                    .sum()
-            })
-        })
+    let (p, g) = (mean.map(f), d_mean.map(f));
+    let (sigma, grad) = (covariance.map(|r| r.map(f)), d_covariance.map(|r| r.map(f)));
+    // M = Σ Gᵀ − Gᵀ Σ: (Σ Gᵀ)_ab = Σ_k Σ_ak G_bk, (Gᵀ Σ)_ab = Σ_k G_ka Σ_kb.
+    let m = |a: usize, b: usize| -> f64 {
+        (0..3)
+            .map(|k| sigma[a][k] * grad[b][k] - grad[k][a] * sigma[k][b])
+            .sum()
     };
-    let (sc, gcov) = (conj(covariance), conj(d_covariance));
-    // M = Σ_c G_cᵀ − G_cᵀ Σ_c.
-    let m: [[f64; 3]; 3] = std::array::from_fn(|a| {
-        std::array::from_fn(|b| {
-            (0..3)
-                .map(|k| sc[a][k] * gcov[b][k] - gcov[k][a] * sc[k][b])
-                .sum()
-        })
-    });
-    let spin = [m[1][2] - m[2][1], m[2][0] - m[0][2], m[0][1] - m[1][0]];
-    let mut out = [0.0; 6];
-    for a in 0..3 {
-        out[a] = cross[a] + spin[a];
-        out[3 + a] = gc[a];
-    }
-    out
+    [
+        p[1] * g[2] - p[2] * g[1] + m(1, 2) - m(2, 1),
+        p[2] * g[0] - p[0] * g[2] + m(2, 0) - m(0, 2),
+        p[0] * g[1] - p[1] * g[0] + m(0, 1) - m(1, 0),
+        g[0],
+        g[1],
+        g[2],
+    ]
 }
