@@ -56,7 +56,24 @@ pub fn prepare_training_data(
     };
     let done = ctx.prepare(data, config, networks)?;
     report_preparation(&done, config, &flow_path, ctx.frames.len());
+    report_cameras(data, config);
     Ok(())
+}
+
+/// Says how a moving camera's poses are used: corrected (`--camera-correction on`) or taken as
+/// given, which only exact cameras deserve.
+fn report_cameras(data: &train::data::Dataset, config: &TrainConfig) {
+    if config.camera_correction {
+        println!(
+            "camera correction: each training frame's camera and its motion over the exposure are              learned from step {} (rotation rate {}, shift rate {})",
+            config.camera_correction_from, config.lr_camera_rotation, config.lr_camera_translation
+        );
+    } else if data.camera_moves {
+        eprintln!(
+            "note: the camera moves and its poses are taken as given; with poses from a tracker \
+             (SLAM, SfM, COLMAP) add --camera-correction on (docs/BENCHMARKS.md, \"A moving camera\")"
+        );
+    }
 }
 
 /// Prints what [`prepare_training_data`] set up.

@@ -52,6 +52,10 @@ fn camera_correction_trains_on_estimated_cameras_and_reports_their_error() {
         .arg(&out)
         .arg("--config")
         .arg(common::tiny_config(dir.path())));
+    assert!(
+        stdout.contains("camera correction: each training frame's camera"),
+        "{stdout}"
+    );
     let line = stdout
         .lines()
         .find(|l| l.starts_with("camera error (RMS rotation / centre"))
