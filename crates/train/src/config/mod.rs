@@ -440,7 +440,10 @@ training_options! {
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction: bool = false,
     /// Adam learning rate of the camera corrections' rotations (radians per step of a frame; a
-    /// frame's correction steps only when that frame trains).
+    /// frame's correction steps only when that frame trains). On the `handheld` benchmark
+    /// (`quick`), 3e-3 for both rates scores +0.32 dB full frame over 1e-3 with estimated cameras
+    /// (0.5°, 1 cm) but −0.87 dB with exact ones, whose corrections it only shakes
+    /// (`docs/BENCHMARKS.md`, "A moving camera").
     lr_camera_rotation: f32 = 1e-3,
     /// Adam learning rate of the camera corrections' shifts (metres per step of a frame).
     lr_camera_translation: f32 = 1e-3,
