@@ -14,9 +14,7 @@ use crate::checkpoint::{CheckpointReader, CheckpointWriter};
 use crate::colour::{ColourNet, ColourNetConfig};
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
-use crate::pose::correction::{
-    corrected_params, interpolated_correction, knot_slots, KnotSpan, CORRECTION_VALUES,
-};
+use crate::pose::correction::{knot_slots, CORRECTION_VALUES};
 use crate::pose::posing::{
     pose_frame_backward_with, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
     GaussianParams, ModelGradients, ModelNets, PosedFrame,
@@ -26,6 +24,7 @@ use crate::TrainError;
 
 mod camera;
 mod config;
+mod correction;
 mod pass;
 pub use camera::{corrected_camera, PassCamera};
 pub use config::ModelConfig;
@@ -36,7 +35,6 @@ use rasterize_cpu::{
 };
 use smpl_deform::deform_net::{NonRigidNet, SkinningField};
 use smpl_deform::math::Affine;
-use smpl_deform::SmplParams;
 use std::time::Instant;
 
 /// Number of rendered channels: linear RGB and the human probability.
@@ -366,48 +364,6 @@ impl Model {
             .min_by_key(|(_, &f)| (i64::from(f) - i64::from(index)).abs())
             .map_or(0, |(s, _)| s);
         self.latent(slot)
-    }
-
-    /// The frame numbers of the pose corrections' knots (`pose_correction_knot_every`; one row of
-    /// [`Model::pose_corrections`] each).
-    pub fn correction_knot_frames(&self) -> Vec<u32> {
-        knot_slots(
-            self.frame_indices.len(),
-            self.config.pose_correction_knot_every,
-        )
-        .into_iter()
-        .map(|slot| self.frame_indices[slot])
-        .collect()
-    }
-
-    /// The pose correction of frame `index` at mid exposure ([`CORRECTION_VALUES`] values, the
-    /// change over the exposure zero; empty when pose correction is off), interpolated between the
-    /// knots around it (`train::pose::correction::interpolated_correction`).
-    pub fn pose_correction_for(&self, index: u32) -> Vec<f32> {
-        interpolated_correction(
-            &self.correction_knot_frames(),
-            &self.pose_corrections,
-            index,
-        )
-    }
-
-    /// Training slot `slot`'s whole correction (mid exposure and change; [`CORRECTION_VALUES`]
-    /// values) and where it sits among the knots (for the backward). Pose correction must be on.
-    pub fn training_correction(&self, slot: usize) -> (Vec<f32>, KnotSpan) {
-        let span = KnotSpan::of(&self.correction_knot_frames(), self.frame_indices[slot]);
-        let values = span.blend(&self.pose_corrections, CORRECTION_VALUES, CORRECTION_VALUES);
-        (values, span)
-    }
-
-    /// SMPL parameters of frame `index` with its pose correction applied at mid exposure (`params`
-    /// unchanged when pose correction is off): what evaluation renders a scene's frame with.
-    pub fn corrected_params(&self, index: u32, params: &SmplParams) -> SmplParams {
-        let correction = self.pose_correction_for(index);
-        if correction.is_empty() {
-            params.clone()
-        } else {
-            corrected_params(params, &correction, 0.0)
-        }
     }
 
     /// The stored per-Gaussian parameters as the posing functions take them.
