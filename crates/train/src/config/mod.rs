@@ -436,7 +436,9 @@ training_options! {
     /// coordinates) and, with `blur_model = exposure`, its change over the exposure (the camera's
     /// path inside the exposure, which the frames' cameras sample too coarsely to follow a hand's
     /// tremor), regularised towards zero and towards the neighbouring frames'. Held-out frames take
-    /// the twist interpolated from their neighbouring training frames. Off by default.
+    /// the twist interpolated from their neighbouring training frames. Off by default: on the
+    /// `handheld` benchmark (`quick`) it recovers 6.7 dB full frame of a tracker's 0.5° / 1 cm camera
+    /// error but costs exact cameras 0.35 dB in the human box (`docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction: bool = false,
     /// Adam learning rate of the camera corrections' rotations (radians per step of a frame; a
