@@ -184,9 +184,16 @@ mod tests {
         // A quarter turn about z maps x to y.
         let r = exp_so3([0.0, 0.0, std::f64::consts::FRAC_PI_2]);
         assert!((r[1][0] - 1.0).abs() < 1e-12 && r[0][0].abs() < 1e-12);
-        // Just above and below the series' switch: the same rotation to rounding.
-        let (a, b) = (exp_so3([0.0, 0.0, 0.99e-4]), exp_so3([0.0, 0.0, 1.01e-4]));
-        assert!((a[1][0] - 0.99e-4).abs() < 1e-15 && (b[1][0] - 1.01e-4).abs() < 1e-15);
+        // Just below and above the series' switch: sin θ to rounding (the series' first dropped
+        // term is θ⁵/120 ≈ 1e-22).
+        for angle in [0.99e-4f64, 1.01e-4] {
+            let r = exp_so3([0.0, 0.0, angle]);
+            assert!(
+                (r[1][0] - angle.sin()).abs() < 1e-18,
+                "{angle}: {}",
+                r[1][0]
+            );
+        }
     }
 
     #[test]
