@@ -39,7 +39,7 @@ impl CorrectedCameras {
                 .collect(),
             view_centres: given
                 .iter()
-                .map(|c| c.center_world().map(|v| v as f32))
+                .map(|c| PassCamera::of(c).view_centre)
                 .collect(),
             twists: offsets
                 .iter()

@@ -552,7 +552,7 @@ fn frame_passes<'a>(
     // needs each pass's own, so no tiles are shared.
     let plan = PassPlan {
         reposed: poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once,
-        share_static_tiles: config.share_static_tiles && cameras_unchanged(config),
+        share_static_tiles: config.share_static_tiles && !config.camera_correction,
     };
     let ExposurePasses { passes, sharing } =
         model.forward_passes(&cameras, &poses, mid, model.latent(slot), plan)?;
@@ -646,11 +646,6 @@ fn frame_losses(
         prediction: photo.prediction,
         d_images,
     })
-}
-
-/// Whether the step renders from the given cameras (no camera correction).
-fn cameras_unchanged(config: &TrainConfig) -> bool {
-    !config.camera_correction
 }
 
 /// Frame k+1's pass (at its corrected pose and camera when `corrected` and `camera` are given)
