@@ -1,11 +1,13 @@
-//! The scene format (versions 1 and 2): the on-disk dataset layout (`scene.json` + images, masks,
+//! The scene format (versions 1, 2 and 3): the on-disk dataset layout (`scene.json` + images, masks,
 //! flows, events) written by `synth` and read, with validation, by `train`.
 //!
 //! A scene is a directory holding `scene.json` and the files it names by relative path
 //! (forward slashes, no `..`): blurred input images, optional sharp references, optional human
 //! masks, optional flow fields to the next frame (`.flo`, with an optional validity mask), optional
-//! raw events (`.npz`). The full specification is `docs/FORMATS.md`, section "Scene format
-//! (versions 1 and 2)".
+//! raw events (`.npz`); version 2 adds a camera pose per frame (a moving camera), version 3 several
+//! people (a stable id, a shape and a pose per frame each, and an image of which person each pixel
+//! shows). The full specification is `docs/FORMATS.md`, section "Scene format (versions 1, 2 and
+//! 3)".
 //!
 //! [`load`] validates everything (JSON structure, value ranges, time order, every referenced file's
 //! existence, size and pixel format) and reports *every* problem with its JSON path or file path,
@@ -26,8 +28,8 @@ pub mod validate;
 pub use error::{Problem, Result, SceneError};
 pub use image_io::{read_mask, read_rgb, write_mask, write_rgb, Rgb};
 pub use types::{
-    camera_json, BodySpec, Camera, Distortion, FlowKind, FlowRef, Frame, ImageEncoding,
-    RawEventsFormat, Scene, Split, Transfer, FORMAT_VERSION, FORMAT_VERSION_MOVING_CAMERA,
-    NUM_JOINTS, SCENE_FILE,
+    camera_json, BodySpec, Camera, Distortion, FlowKind, FlowRef, Frame, ImageEncoding, PersonPose,
+    PersonSpec, RawEventsFormat, Scene, Split, Transfer, FORMAT_VERSION,
+    FORMAT_VERSION_MOVING_CAMERA, FORMAT_VERSION_PEOPLE, NUM_JOINTS, SCENE_FILE,
 };
 pub use validate::{load, validate_dir};

@@ -1,4 +1,4 @@
-//! The typed contents of `scene.json` (format versions 1 and 2) and the writer.
+//! The typed contents of `scene.json` (format versions 1, 2 and 3) and the writer.
 //!
 //! Conventions (DESIGN.md §3): metres, seconds, radians; OpenCV pinhole camera (x right, y down,
 //! z forward, pixel (i, j) centred at (i + 0.5, j + 0.5)); SMPL pose as 24 axis-angle triples with
@@ -16,6 +16,10 @@ pub const FORMAT_VERSION: u32 = 1;
 /// The format version of a scene whose frames may carry their own camera pose (a moving camera,
 /// [`Frame::world_to_camera`]); it reads every version-1 scene unchanged.
 pub const FORMAT_VERSION_MOVING_CAMERA: u32 = 2;
+/// The format version of a scene with several people ([`Scene::people`], [`Frame::people`]); its
+/// frames may carry their own camera pose as in version 2, and it reads every version-1 and -2 scene
+/// unchanged.
+pub const FORMAT_VERSION_PEOPLE: u32 = 3;
 /// Name of the description file inside a scene directory.
 pub const SCENE_FILE: &str = "scene.json";
 /// Number of SMPL joints (pose entries per frame).
@@ -25,14 +29,20 @@ pub const NUM_JOINTS: usize = 24;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
-    /// [`FORMAT_VERSION`], or [`FORMAT_VERSION_MOVING_CAMERA`] when a frame has its own camera
-    /// pose ([`Scene::format_version_needed`]).
+    /// [`FORMAT_VERSION`], [`FORMAT_VERSION_MOVING_CAMERA`] when a frame has its own camera pose, or
+    /// [`FORMAT_VERSION_PEOPLE`] when the scene has several people
+    /// ([`Scene::format_version_needed`]).
     pub format_version: u32,
     /// The camera: its intrinsics, and its pose for every frame without one of its own.
     #[serde(with = "camera_json")]
     pub camera: Camera,
-    /// The body model and its shape.
+    /// The body model and the shape of the first person (the one of [`Frame::pose`]).
     pub body: BodySpec,
+    /// The other people of a scene with several (version 3): each with a stable id and its own
+    /// shape, posed by the same body model; every frame lists their poses in this order
+    /// ([`Frame::people`]). Empty: the scene has one person. Use [`Scene::person_count`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub people: Vec<PersonSpec>,
     /// Nominal frame rate (frames per second).
     pub fps: f64,
     /// Exposure time of every frame (seconds), `0 < exposure_s <= 1 / fps`; frame `k` integrates
@@ -144,7 +154,7 @@ pub mod camera_json {
     }
 }
 
-/// Body model reference and shape.
+/// Body model reference and the first person's shape.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BodySpec {
@@ -153,6 +163,37 @@ pub struct BodySpec {
     pub model: String,
     /// Shape coefficients (may be empty; models without shape blend shapes ignore them).
     pub betas: Vec<f32>,
+    /// The first person's stable id in a scene with several people (version 3; 0 when absent, and
+    /// not written when 0).
+    #[serde(default, skip_serializing_if = "is_zero_u32")]
+    pub id: u32,
+}
+
+fn is_zero_u32(v: &u32) -> bool {
+    *v == 0
+}
+
+/// One of the other people of a scene with several ([`Scene::people`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PersonSpec {
+    /// Stable id (unique in the scene, the first person's [`BodySpec::id`] included): what a
+    /// tracker or EasyMocap calls this person.
+    pub id: u32,
+    /// Shape coefficients of this person (same meaning as [`BodySpec::betas`]).
+    pub betas: Vec<f32>,
+}
+
+/// One of the other people's pose in a frame ([`Frame::people`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PersonPose {
+    /// The person's id ([`PersonSpec::id`]).
+    pub id: u32,
+    /// SMPL pose at mid exposure, as [`Frame::pose`].
+    pub pose: Vec<[f32; 3]>,
+    /// SMPL global translation (metres, world frame), as [`Frame::transl`].
+    pub transl: [f32; 3],
 }
 
 /// On-disk encoding of the frames (inputs and sharp references).
@@ -277,13 +318,22 @@ pub struct Frame {
     /// Sharp reference RGB image at mid exposure (evaluation only; real data has none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sharp: Option<String>,
-    /// Human mask at mid exposure: single-channel PNG, non-zero = human.
+    /// Human mask at mid exposure: single-channel PNG, non-zero = human (any person).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask: Option<String>,
-    /// SMPL pose at mid exposure: 24 axis-angle rotations (radians), joint 0 = global orientation.
+    /// Which person each pixel shows at mid exposure (version 3): single-channel PNG, 0 = scene,
+    /// `p + 1` = person `p` in [`Scene::person_ids`] order (1 = the first person).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub person_ids: Option<String>,
+    /// SMPL pose of the first person at mid exposure: 24 axis-angle rotations (radians), joint 0 =
+    /// global orientation.
     pub pose: Vec<[f32; 3]>,
-    /// SMPL global translation (metres, world frame).
+    /// SMPL global translation of the first person (metres, world frame).
     pub transl: [f32; 3],
+    /// The other people's poses at mid exposure (version 3): one entry per [`Scene::people`], in
+    /// that order. Use [`Frame::pose_of`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub people: Vec<PersonPose>,
     /// Flow fields to the next frame (at most one per kind; none on the last frame).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub flow_to_next: Vec<FlowRef>,
@@ -317,6 +367,18 @@ impl Frame {
     pub fn pose_flat(&self) -> Vec<f32> {
         self.pose.iter().flatten().copied().collect()
     }
+
+    /// Person `p`'s pose (24 axis-angle triples) and translation in this frame, `p` in
+    /// [`Scene::person_ids`] order (0 = the first person); `None` past the frame's people.
+    pub fn pose_of(&self, p: usize) -> Option<(&[[f32; 3]], [f32; 3])> {
+        match p {
+            0 => Some((&self.pose, self.transl)),
+            _ => self
+                .people
+                .get(p - 1)
+                .map(|o| (o.pose.as_slice(), o.transl)),
+        }
+    }
 }
 
 impl Scene {
@@ -345,10 +407,39 @@ impl Scene {
         })
     }
 
-    /// The lowest format version that can describe this scene: [`FORMAT_VERSION_MOVING_CAMERA`]
+    /// How many people the scene has: 1 plus [`Scene::people`].
+    pub fn person_count(&self) -> usize {
+        1 + self.people.len()
+    }
+
+    /// The people's stable ids, the first person's ([`BodySpec::id`]) first.
+    pub fn person_ids(&self) -> Vec<u32> {
+        std::iter::once(self.body.id)
+            .chain(self.people.iter().map(|p| p.id))
+            .collect()
+    }
+
+    /// Person `p`'s shape coefficients, `p` in [`Scene::person_ids`] order.
+    pub fn betas_of(&self, p: usize) -> Option<&[f32]> {
+        match p {
+            0 => Some(&self.body.betas),
+            _ => self.people.get(p - 1).map(|o| o.betas.as_slice()),
+        }
+    }
+
+    /// The lowest format version that can describe this scene: [`FORMAT_VERSION_PEOPLE`] when it
+    /// has several people (or a first person's id other than 0), [`FORMAT_VERSION_MOVING_CAMERA`]
     /// when a frame has its own camera pose, else [`FORMAT_VERSION`].
     pub fn format_version_needed(&self) -> u32 {
-        if self.frames.iter().any(|f| f.world_to_camera.is_some()) {
+        let people = !self.people.is_empty()
+            || self.body.id != 0
+            || self
+                .frames
+                .iter()
+                .any(|f| !f.people.is_empty() || f.person_ids.is_some());
+        if people {
+            FORMAT_VERSION_PEOPLE
+        } else if self.frames.iter().any(|f| f.world_to_camera.is_some()) {
             FORMAT_VERSION_MOVING_CAMERA
         } else {
             FORMAT_VERSION

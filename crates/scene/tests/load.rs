@@ -5,8 +5,8 @@ use std::path::Path;
 
 use scene::{
     read_mask, read_rgb, write_mask, write_rgb, BodySpec, Camera, FlowKind, FlowRef, Frame,
-    ImageEncoding, Rgb, Scene, SceneError, Split, Transfer, FORMAT_VERSION,
-    FORMAT_VERSION_MOVING_CAMERA,
+    ImageEncoding, PersonPose, PersonSpec, Rgb, Scene, SceneError, Split, Transfer, FORMAT_VERSION,
+    FORMAT_VERSION_MOVING_CAMERA, FORMAT_VERSION_PEOPLE,
 };
 
 const W: u32 = 6;
@@ -51,6 +51,8 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
             });
         }
         out.push(Frame {
+            people: Vec::new(),
+            person_ids: None,
             index: k as u32,
             time_s: k as f64 / 30.0,
             exposure_s: None,
@@ -70,6 +72,7 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
         });
     }
     let s = Scene {
+        people: Vec::new(),
         events_raw_format: None,
         events_recorded_s: None,
         format_version: FORMAT_VERSION,
@@ -88,6 +91,7 @@ fn make_scene(dir: &Path, frames: usize) -> Scene {
             ],
         },
         body: BodySpec {
+            id: 0,
             model: "builtin:makehuman".into(),
             betas: vec![0.0; 10],
         },
@@ -330,15 +334,94 @@ fn per_frame_camera_poses_need_version_2_and_a_rotation() {
     let path = tmp.path().join("scene.json");
     let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
     v["frames"][1]["world_to_camera"][0][0] = serde_json::json!(2.0);
-    v["format_version"] = serde_json::json!(3);
+    v["format_version"] = serde_json::json!(4);
     std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
     let err = scene::load(tmp.path()).unwrap_err().to_string();
-    assert!(err.contains("format_version: 3 is not supported"), "{err}");
+    assert!(err.contains("format_version: 4 is not supported"), "{err}");
     v["format_version"] = serde_json::json!(2);
     std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
     let err = scene::load(tmp.path()).unwrap_err().to_string();
     assert!(
         err.contains("frames[1].world_to_camera") && err.contains("not a rotation"),
+        "{err}"
+    );
+}
+
+/// Format version 3: a scene with two people (ids 4 and 9, their own betas, a pose each per frame,
+/// an id image) round-trips; a one-person scene keeps its bytes; every refusal names its field.
+#[test]
+fn several_people_need_version_3_a_pose_per_frame_and_unique_ids() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut s = make_scene(tmp.path(), 3);
+    s.write(tmp.path()).unwrap();
+    let one_person = std::fs::read_to_string(tmp.path().join("scene.json")).unwrap();
+    assert!(!one_person.contains("people") && !one_person.contains("\"id\""));
+    assert_eq!((s.person_count(), s.person_ids()), (1, vec![0]));
+    s.body.id = 4;
+    s.people = vec![PersonSpec {
+        id: 9,
+        betas: vec![0.5; 10],
+    }];
+    for (k, f) in s.frames.iter_mut().enumerate() {
+        f.people = vec![PersonPose {
+            id: 9,
+            pose: vec![[0.0, 0.1 * k as f32, 0.0]; 24],
+            transl: [1.0, 0.9, k as f32],
+        }];
+        f.person_ids = f.mask.clone();
+    }
+    assert_eq!(s.format_version_needed(), FORMAT_VERSION_PEOPLE);
+    let err = s.write(tmp.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("people: several people need format_version 3")
+            && err.contains("frames[0].people")
+            && err.contains("body.id"),
+        "{err}"
+    );
+    s.format_version = FORMAT_VERSION_PEOPLE;
+    s.write(tmp.path()).unwrap();
+    let read = scene::load(tmp.path()).unwrap();
+    assert_eq!(read, s);
+    assert_eq!((read.person_count(), read.person_ids()), (2, vec![4, 9]));
+    assert_eq!(read.betas_of(1), Some(&[0.5f32; 10][..]));
+    assert_eq!(read.frames[2].pose_of(1).unwrap().1, [1.0, 0.9, 2.0]);
+    assert_eq!(read.frames[2].pose_of(0).unwrap().1, [0.0, 0.9, 0.0]);
+    assert!(read.frames[2].pose_of(2).is_none());
+
+    let path = tmp.path().join("scene.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let refused = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        edit(&mut v);
+        std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+        scene::load(tmp.path()).unwrap_err().to_string()
+    };
+    let err = refused(&|v| v["people"][0]["id"] = serde_json::json!(4));
+    assert!(err.contains("people[0].id: 4 is already"), "{err}");
+    let err = refused(&|v| v["frames"][1]["people"] = serde_json::json!([]));
+    assert!(err.contains("frames[1].people: 0 entries"), "{err}");
+    let err = refused(&|v| {
+        v["frames"][1].as_object_mut().unwrap().remove("people");
+    });
+    assert!(
+        err.contains("frames[1]: missing required key \"people\""),
+        "{err}"
+    );
+    let err = refused(&|v| v["frames"][2]["people"][0]["id"] = serde_json::json!(5));
+    assert!(err.contains("frames[2].people[0].id: 5"), "{err}");
+    let err = refused(&|v| v["frames"][0]["people"][0]["pose"] = serde_json::json!([[0, 0, 0]]));
+    assert!(
+        err.contains("frames[0].people[0].pose: expected 24"),
+        "{err}"
+    );
+    let err = refused(&|v| v["frames"][0]["person_ids"] = serde_json::json!("masks/none.png"));
+    assert!(
+        err.contains("frames[0].person_ids") && err.contains("does not exist"),
+        "{err}"
+    );
+    let err = refused(&|v| v["format_version"] = serde_json::json!(2));
+    assert!(
+        err.contains("people: several people need format_version 3"),
         "{err}"
     );
 }

@@ -264,6 +264,8 @@ pub fn write_scene_from_frames(
         samples += 1;
         if slot == half {
             let mut f = Frame {
+                people: Vec::new(),
+                person_ids: None,
                 index: j as u32,
                 time_s: time_of(j) as f64 * 1e-6,
                 exposure_s: None,
@@ -313,6 +315,7 @@ pub fn write_scene_from_frames(
         splitter.finish(&mut report)?;
     }
     let mut scene = Scene {
+        people: Vec::new(),
         format_version: scene::FORMAT_VERSION,
         camera,
         body,

@@ -622,6 +622,8 @@ pub fn generate_with_body(
         }
         let (pose, transl) = motion.at(tk);
         scene_frames.push(scene::Frame {
+            people: Vec::new(),
+            person_ids: None,
             index: k as u32,
             time_s: tk,
             exposure_s: None,
@@ -704,9 +706,11 @@ pub fn generate_with_body(
     let mut sc = scene::Scene {
         events_raw_format: None,
         events_recorded_s: None,
+        people: Vec::new(),
         format_version: scene::FORMAT_VERSION,
         camera: cam.to_scene(),
         body: scene::BodySpec {
+            id: 0,
             model: cfg.body.clone(),
             betas,
         },

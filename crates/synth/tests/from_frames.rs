@@ -26,6 +26,7 @@ fn camera() -> scene::Camera {
 
 fn body() -> scene::BodySpec {
     scene::BodySpec {
+        id: 0,
         model: "builtin:makehuman".into(),
         betas: vec![],
     }

@@ -26,6 +26,8 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
         let mrel = format!("masks/{k:04}.png");
         scene::write_mask(&dir.join(&mrel), w, h, &mask).unwrap();
         list.push(Frame {
+            people: Vec::new(),
+            person_ids: None,
             index: k as u32,
             time_s: k as f64 / 30.0,
             exposure_s: None,
@@ -45,6 +47,7 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
         });
     }
     let s = Scene {
+        people: Vec::new(),
         events_raw_format: None,
         events_recorded_s: None,
         format_version: 1,
@@ -63,6 +66,7 @@ fn write_scene(dir: &Path, frames: usize) -> Scene {
             ],
         },
         body: BodySpec {
+            id: 0,
             model: "builtin:makehuman".into(),
             betas: vec![],
         },
@@ -126,5 +130,31 @@ fn a_moving_camera_gives_every_frame_its_own_camera() {
     assert_eq!(
         (data.frames[1].camera.width, data.frames[1].camera.fx),
         (data.camera.width, data.camera.fx)
+    );
+}
+
+#[test]
+fn a_scene_with_several_people_is_refused_naming_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = write_scene(dir.path(), 2);
+    s.format_version = scene::FORMAT_VERSION_PEOPLE;
+    s.people = vec![scene::PersonSpec {
+        id: 3,
+        betas: vec![],
+    }];
+    for f in &mut s.frames {
+        f.people = vec![scene::PersonPose {
+            id: 3,
+            pose: f.pose.clone(),
+            transl: [0.5, 0.0, 0.0],
+        }];
+    }
+    s.write(dir.path()).unwrap();
+    let err = train::data::load_dataset(dir.path())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("scene.json") && err.contains("2 people") && err.contains("[0, 3]"),
+        "{err}"
     );
 }

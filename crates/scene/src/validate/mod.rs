@@ -14,9 +14,14 @@ use image::ImageDecoder;
 use serde_json::{Map, Value};
 
 mod files;
+mod people;
 
 use crate::error::{Problem, Result, SceneError};
-use crate::types::{Scene, FORMAT_VERSION, FORMAT_VERSION_MOVING_CAMERA, NUM_JOINTS, SCENE_FILE};
+use crate::types::{
+    Scene, FORMAT_VERSION, FORMAT_VERSION_MOVING_CAMERA, FORMAT_VERSION_PEOPLE, NUM_JOINTS,
+    SCENE_FILE,
+};
+use people::PeopleSpec;
 
 /// Largest accepted image side (pixels).
 pub const MAX_SIDE: u64 = 65_536;
@@ -40,7 +45,7 @@ pub fn load(dir: &Path) -> Result<Scene> {
         dir: dir.to_path_buf(),
         problems: vec![Problem {
             path: SCENE_FILE.into(),
-            message: format!("does not match the v1 schema: {e}"),
+            message: format!("does not match the scene schema: {e}"),
         }],
     })
 }
@@ -74,6 +79,21 @@ pub(crate) fn check_value(v: &Value, dir: Option<&Path>) -> Vec<Problem> {
 struct Checker<'a> {
     problems: Vec<Problem>,
     dir: Option<&'a Path>,
+}
+
+/// What every frame's checks need of the scene's camera, images and version.
+#[derive(Clone, Copy)]
+struct Sensor {
+    /// The camera's (width, height), when valid.
+    size: Option<(u32, u32)>,
+    /// Bits per channel of the RGB images, when valid.
+    bits: Option<u8>,
+    /// Grey frames (`images.channels = 1`).
+    grey: bool,
+    /// The frame interval 1/fps (seconds), when valid.
+    max_exposure: Option<f64>,
+    /// Whether frames may carry their own camera pose (version 2 or 3).
+    moving_camera: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -256,7 +276,12 @@ impl Checker<'_> {
                 "images",
                 "frames",
             ],
-            &["generator", "events_raw_format", "events_recorded_s"],
+            &[
+                "generator",
+                "events_raw_format",
+                "events_recorded_s",
+                "people",
+            ],
         ) else {
             return;
         };
@@ -277,18 +302,23 @@ impl Checker<'_> {
             .get("format_version")
             .and_then(|fv| self.uint(fv, "format_version", u64::from(u32::MAX)));
         if let Some(x) = version {
-            if x != u64::from(FORMAT_VERSION) && x != u64::from(FORMAT_VERSION_MOVING_CAMERA) {
+            let known = [
+                FORMAT_VERSION,
+                FORMAT_VERSION_MOVING_CAMERA,
+                FORMAT_VERSION_PEOPLE,
+            ];
+            if !known.iter().any(|&k| x == u64::from(k)) {
                 self.bad(
                     "format_version",
                     format!(
-                        "{x} is not supported (this reader knows {FORMAT_VERSION} and {FORMAT_VERSION_MOVING_CAMERA})"
+                        "{x} is not supported (this reader knows {FORMAT_VERSION}, {FORMAT_VERSION_MOVING_CAMERA} and {FORMAT_VERSION_PEOPLE})"
                     ),
                 );
             }
         }
         let size = m.get("camera").and_then(|c| self.camera(c));
         if let Some(b) = m.get("body") {
-            if let Some(bm) = self.obj(b, "body", &["model", "betas"], &[]) {
+            if let Some(bm) = self.obj(b, "body", &["model", "betas"], &["id"]) {
                 if let Some(s) = bm.get("model").and_then(|s| self.string(s, "body.model")) {
                     if s.is_empty() {
                         self.bad("body.model", "is empty");
@@ -348,10 +378,20 @@ impl Checker<'_> {
                 }
             }
         }
+        let several_people = version == Some(u64::from(FORMAT_VERSION_PEOPLE));
+        let people = self.people(m, several_people);
         if let Some(frames) = m.get("frames") {
             let max_exposure = fps.filter(|f| *f > 0.0).map(|f| 1.0 / f);
-            let moving_camera = version == Some(u64::from(FORMAT_VERSION_MOVING_CAMERA));
-            self.frames(frames, size, bits, grey, max_exposure, moving_camera);
+            let moving_camera =
+                several_people || version == Some(u64::from(FORMAT_VERSION_MOVING_CAMERA));
+            let sensor = Sensor {
+                size,
+                bits,
+                grey,
+                max_exposure,
+                moving_camera,
+            };
+            self.frames(frames, &sensor, &people);
         }
     }
 
@@ -431,15 +471,14 @@ impl Checker<'_> {
         }
     }
 
-    fn frames(
-        &mut self,
-        v: &Value,
-        size: Option<(u32, u32)>,
-        bits: Option<u8>,
-        grey: bool,
-        max_exposure: Option<f64>,
-        moving_camera: bool,
-    ) {
+    fn frames(&mut self, v: &Value, sensor: &Sensor, people: &PeopleSpec) {
+        let Sensor {
+            size,
+            bits,
+            grey,
+            max_exposure,
+            moving_camera,
+        } = *sensor;
         let Some(a) = v.as_array() else {
             self.bad(
                 "frames",
@@ -467,6 +506,8 @@ impl Checker<'_> {
                     "events",
                     "exposure_s",
                     "world_to_camera",
+                    "people",
+                    "person_ids",
                 ],
             ) else {
                 continue;
@@ -478,7 +519,7 @@ impl Checker<'_> {
                 } else {
                     self.bad(
                         &path,
-                        format!("a camera pose per frame needs format_version {FORMAT_VERSION_MOVING_CAMERA}"),
+                        format!("a camera pose per frame needs format_version {FORMAT_VERSION_MOVING_CAMERA} or {FORMAT_VERSION_PEOPLE}"),
                     );
                 }
             }
@@ -546,22 +587,9 @@ impl Checker<'_> {
                 self.rel_file(x, &format!("{p}.events"));
             }
             if let Some(pose) = m.get("pose") {
-                let pp = format!("{p}.pose");
-                match pose.as_array() {
-                    Some(rows) if rows.len() == NUM_JOINTS => {
-                        for (j, r) in rows.iter().enumerate() {
-                            self.floats(r, &format!("{pp}[{j}]"), Some(3));
-                        }
-                    }
-                    _ => self.bad(
-                        &pp,
-                        format!(
-                            "expected {NUM_JOINTS} axis-angle triples, found {}",
-                            describe(pose)
-                        ),
-                    ),
-                }
+                self.pose(pose, &format!("{p}.pose"));
             }
+            self.frame_people(m, &p, people, size);
             if let Some(t) = m.get("transl") {
                 self.floats(t, &format!("{p}.transl"), Some(3));
             }

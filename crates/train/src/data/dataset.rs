@@ -78,9 +78,19 @@ impl Dataset {
     }
 }
 
-/// Loads and validates `dir` (see `scene::load`) and decodes every frame.
+/// Loads and validates `dir` (see `scene::load`) and decodes every frame. A scene with several
+/// people (format version 3) is refused: the model reconstructs one person.
 pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
     let scene = scene::load(dir)?;
+    if scene.person_count() > 1 {
+        return Err(TrainError::Config(format!(
+            "{}: the scene has {} people (scene.json `people`, ids {:?}); the model reconstructs \
+             one person, so several people cannot be trained yet",
+            dir.join(scene::SCENE_FILE).display(),
+            scene.person_count(),
+            scene.person_ids()
+        )));
+    }
     scene.camera.validate()?;
     let camera = scene.camera.clone();
     let (w, h) = (scene.camera.width, scene.camera.height);

@@ -244,6 +244,8 @@ pub fn run(args: Args) -> Result<()> {
         };
         let (pose, transl) = poses[k].clone();
         scene_frames.push(scene::Frame {
+            people: Vec::new(),
+            person_ids: None,
             index: k as u32,
             time_s: mid_us[k] as f64 * 1e-6,
             exposure_s: ((exposures[k] - median).abs() > 0.5e-6).then_some(exposures[k]),
@@ -275,9 +277,11 @@ pub fn run(args: Args) -> Result<()> {
     note_exposures_outside_events(&split, &exposure_us);
 
     let s = scene::Scene {
+        people: Vec::new(),
         format_version: scene::FORMAT_VERSION,
         camera,
         body: scene::BodySpec {
+            id: 0,
             model,
             betas: betas.unwrap_or_default(),
         },

@@ -212,6 +212,7 @@ pub fn run(args: Args) -> Result<()> {
     cfg.check(images.len())?;
     check_out_is_free(&args.out)?;
     let spec = scene::BodySpec {
+        id: 0,
         model,
         betas: betas.unwrap_or_default(),
     };

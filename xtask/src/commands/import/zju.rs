@@ -194,6 +194,7 @@ pub fn run(args: Args) -> Result<()> {
     let cfg = args.synthesis.config(args.fps / step as f64, None);
     cfg.check(chosen.len())?;
     let spec = scene::BodySpec {
+        id: 0,
         model,
         betas: first_model.betas.clone().unwrap_or_default(),
     };
