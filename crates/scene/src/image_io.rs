@@ -330,3 +330,43 @@ pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
     };
     Ok((w, h, data))
 }
+
+/// Writes a person-id image (`frames[].person_ids`): an 8-bit single-channel PNG, row-major, 0 =
+/// scene, `p + 1` = person `p`.
+pub fn write_person_ids(path: &Path, width: u32, height: u32, ids: &[u8]) -> Result<()> {
+    if ids.len() != width as usize * height as usize {
+        return Err(SceneError::Arg {
+            name: "person_ids".into(),
+            message: format!("{} values for a {width}x{height} image", ids.len()),
+        });
+    }
+    write_png(path, ids, width, height, ExtendedColorType::L8)
+}
+
+/// Reads a person-id image (8 or 16 bit single channel): `(width, height, row-major values)`, 0 =
+/// scene, `p + 1` = person `p`; a value above 255 is refused, naming the file.
+pub fn read_person_ids(path: &Path) -> Result<(u32, u32, Vec<u8>)> {
+    let img = image::ImageReader::open(path)
+        .map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .decode()
+        .map_err(|e| img_err(path, e.to_string()))?;
+    let (w, h) = (img.width(), img.height());
+    let data = match &img {
+        DynamicImage::ImageLuma8(b) => b.pixels().map(|p| p.0[0]).collect(),
+        DynamicImage::ImageLuma16(b) => b
+            .pixels()
+            .map(|p| u8::try_from(p.0[0]))
+            .collect::<std::result::Result<Vec<u8>, _>>()
+            .map_err(|_| img_err(path, "a person id above 255"))?,
+        other => {
+            return Err(img_err(
+                path,
+                format!("pixel format {:?}, expected single-channel", other.color()),
+            ))
+        }
+    };
+    Ok((w, h, data))
+}

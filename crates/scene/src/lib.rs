@@ -26,7 +26,9 @@ pub mod types;
 pub mod validate;
 
 pub use error::{Problem, Result, SceneError};
-pub use image_io::{read_mask, read_rgb, write_mask, write_rgb, Rgb};
+pub use image_io::{
+    read_mask, read_person_ids, read_rgb, write_mask, write_person_ids, write_rgb, Rgb,
+};
 pub use types::{
     camera_json, BodySpec, Camera, Distortion, FlowKind, FlowRef, Frame, ImageEncoding, PersonPose,
     PersonSpec, RawEventsFormat, Scene, Split, Transfer, FORMAT_VERSION,

@@ -171,18 +171,30 @@ impl DressedBody {
     /// The clothing materials, in [`Region`] order, from `seed`.
     pub fn materials(seed: u32) -> Vec<Material> {
         let h = |k: i32| texture::hashf(seed ^ 0xB0D1, k, 0);
-        let size = 256;
         let shirt_a = Vec3::new(0.6 + 0.3 * h(1), 0.15 + 0.2 * h(2), 0.1);
+        let trousers_a = Vec3::new(0.08, 0.14, 0.35 + 0.1 * h(3));
+        Self::materials_in(seed, shirt_a, trousers_a)
+    }
+
+    /// The materials of an extra person of a benchmark (`crate::cast`): [`DressedBody::materials`]
+    /// with the shirt and trousers of palette `palette` (1, 2, 3: green and grey, blue and brown,
+    /// purple and olive), so that people are told apart by their clothes.
+    pub fn materials_of_palette(seed: u32, palette: u32) -> Vec<Material> {
+        let (shirt_a, trousers_a) = match palette % 3 {
+            1 => (Vec3::new(0.1, 0.55, 0.2), Vec3::new(0.3, 0.3, 0.32)),
+            2 => (Vec3::new(0.15, 0.3, 0.75), Vec3::new(0.35, 0.2, 0.08)),
+            _ => (Vec3::new(0.5, 0.12, 0.6), Vec3::new(0.3, 0.35, 0.1)),
+        };
+        Self::materials_in(seed, shirt_a, trousers_a)
+    }
+
+    /// The five materials with the given main shirt and trouser colours.
+    fn materials_in(seed: u32, shirt_a: Vec3, trousers_a: Vec3) -> Vec<Material> {
+        let size = 256;
         let shirt_b = Vec3::new(0.85, 0.82, 0.7);
         let mats = [
             texture::plaid(seed ^ 1, size, shirt_a, shirt_b, 6),
-            texture::plaid(
-                seed ^ 2,
-                size,
-                Vec3::new(0.08, 0.14, 0.35 + 0.1 * h(3)),
-                Vec3::new(0.8, 0.74, 0.55),
-                8,
-            ),
+            texture::plaid(seed ^ 2, size, trousers_a, Vec3::new(0.8, 0.74, 0.55), 8),
             texture::mottled(seed ^ 3, size, Vec3::new(0.62, 0.42, 0.32), 0.12, false),
             texture::mottled(seed ^ 4, size, Vec3::new(0.12, 0.07, 0.04), 0.4, true),
             texture::checker(seed ^ 5, size, Vec3::splat(0.06), Vec3::splat(0.5), 8),

@@ -117,6 +117,19 @@ pub struct SynthConfig {
     /// RMS error (cm) of the written camera centres (see `camera_error_deg`).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub camera_error_cm: f64,
+    /// People in the scene (1..=4, `crate::cast`): the first dances on the spot, the others cross
+    /// in front of and behind it. 1 by default, and then not serialised, so settings without it
+    /// keep their bytes.
+    #[serde(default = "one_person", skip_serializing_if = "is_one_person")]
+    pub people: u32,
+}
+
+fn one_person() -> u32 {
+    1
+}
+
+fn is_one_person(v: &u32) -> bool {
+    *v == 1
 }
 
 impl SynthConfig {
@@ -148,6 +161,7 @@ impl SynthConfig {
             camera_motion: CameraMotion::Static,
             camera_error_deg: 0.0,
             camera_error_cm: 0.0,
+            people: 1,
         };
         match p {
             Preset::Tiny => Self {
@@ -309,6 +323,16 @@ impl SynthConfig {
                 "camera-error-cm",
                 self.camera_error_cm.to_string(),
                 "must be in [0, 100] cm",
+            );
+        }
+        if !(1..=crate::cast::MAX_PEOPLE).contains(&self.people) {
+            return knob("people", self.people.to_string(), "must be in 1..=4");
+        }
+        if self.people > 1 && !self.pose_error.is_off() {
+            return knob(
+                "people",
+                self.people.to_string(),
+                "a pose error is simulated for one person only (drop --pose-error or the realistic preset)",
             );
         }
         self.pose_error.validate()

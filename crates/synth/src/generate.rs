@@ -25,6 +25,7 @@ use smpl_deform::{BodyModel, BodyRef};
 use crate::body::DressedBody;
 use crate::camera::PinholeCamera;
 use crate::camera_motion::CameraPath;
+use crate::cast::{self, Person};
 use crate::config::SynthConfig;
 use crate::error::{Result, SynthError};
 use crate::flow::{ground_truth_flow, warp_error};
@@ -217,6 +218,8 @@ struct Sharp {
     gbuf: GBuffer,
     positions: Vec<Vec3>,
     mask: Vec<bool>,
+    /// Which person each pixel shows (0 = scene, p + 1 = person p); empty with one person.
+    ids: Vec<u8>,
 }
 
 /// What a frame's preview row shows.
@@ -258,6 +261,7 @@ fn motion_from(cfg: &SynthConfig, body: &DressedBody, rng: &mut ChaCha8Rng) -> R
         speed: cfg.speed,
         phases,
         base: [0.0, 0.0],
+        walk: [0.0, 0.0],
         floor_offset: body.floor_offset,
         arm_rest_elevation: Motion::arm_rest_elevation(&rest_joints),
     })
@@ -273,7 +277,11 @@ pub fn generate_with_body(
     cfg.validate()?;
     let (w, h) = (cfg.width as usize, cfg.height as usize);
     let n = w * h;
-    for sub in ["images", "sharp", "masks", "flow", "events"] {
+    let several_dirs: &[&str] = if cfg.people > 1 { &["person_ids"] } else { &[] };
+    for sub in ["images", "sharp", "masks", "flow", "events"]
+        .iter()
+        .chain(several_dirs)
+    {
         let d = out.join(sub);
         std::fs::create_dir_all(&d).map_err(io_err(&d))?;
     }
@@ -308,6 +316,22 @@ pub fn generate_with_body(
     let body_base = room.materials.len() as u16;
     let mut materials = room.materials.clone();
     materials.extend(DressedBody::materials(tex_seed));
+    let first = Person {
+        body,
+        motion,
+        material_base: body_base,
+    };
+    let duration_s = f64::from(cfg.frames - 1) / cfg.fps;
+    let others = cast::extra_people(
+        &first,
+        cfg.people,
+        (cfg.seed, tex_seed),
+        duration_s,
+        &mut materials,
+    )?;
+    let people: Vec<Person> = std::iter::once(first).chain(others).collect();
+    let several = people.len() > 1;
+    let person_of_material = cast::person_of_material(materials.len(), &people);
     let human: Vec<bool> = materials.iter().map(|m| m.human).collect();
     let ss = cfg.supersample as usize;
 
@@ -418,7 +442,7 @@ pub fn generate_with_body(
         }
     };
 
-    let all_tris = room_and_body_tris(&room.mesh, &body);
+    let all_tris = room_and_body_tris(&room.mesh, &people);
     // With a static camera the room's samples are rasterized and shaded once, and every render
     // below re-rasterizes only the body over them (bit-identical to a full render); a moving
     // camera sees the room anew at every render time.
@@ -446,10 +470,10 @@ pub fn generate_with_body(
         let mut blur_sum = vec![0.0f32; 3 * n];
         let mut sharp: Option<Sharp> = None;
         for &(t, is_sharp) in &times {
-            let (pose, transl) = motion.at(t);
-            let verts = body.posed_vertices(&pose, transl)?;
             let mut mesh = room.mesh.clone();
-            mesh.append(&body.mesh(verts, body_base));
+            for person in &people {
+                mesh.append(&person.mesh_at(t)?);
+            }
             let cam_t = camera_path.at(t);
             let r = match &room_samples {
                 Some(room_samples) => {
@@ -483,7 +507,13 @@ pub fn generate_with_body(
             }
             if is_sharp {
                 let mask = human_mask(&r.gbuf, &mesh, &human);
+                let ids = if several {
+                    cast::person_ids(&r.gbuf, &mesh, &person_of_material)
+                } else {
+                    Vec::new()
+                };
                 sharp = Some(Sharp {
+                    ids,
                     camera: cam_t,
                     rgb: r.rgb,
                     gbuf: r.gbuf,
@@ -512,6 +542,10 @@ pub fn generate_with_body(
         scene::write_rgb(&out.join(&image), &blurred_img, enc)?;
         scene::write_rgb(&out.join(&sharp_rel), &rgb(sharp.rgb.clone()), enc)?;
         scene::write_mask(&out.join(&mask_rel), cfg.width, cfg.height, &sharp.mask)?;
+        let ids_rel = several.then(|| format!("person_ids/{k:06}.png"));
+        if let Some(rel) = &ids_rel {
+            scene::write_person_ids(&out.join(rel), cfg.width, cfg.height, &sharp.ids)?;
+        }
 
         // Blur statistics.
         let full = psnr(&blurred_img.data, &sharp.rgb, n, |_| true).unwrap_or(PSNR_CAP_DB);
@@ -620,10 +654,22 @@ pub fn generate_with_body(
                 });
             }
         }
-        let (pose, transl) = motion.at(tk);
+        let (pose, transl) = people[0].at(tk);
+        let others: Vec<scene::PersonPose> = people[1..]
+            .iter()
+            .zip(1u32..)
+            .map(|(person, id)| {
+                let (pose, transl) = person.at(tk);
+                scene::PersonPose {
+                    id,
+                    pose: pose.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                    transl,
+                }
+            })
+            .collect();
         scene_frames.push(scene::Frame {
-            people: Vec::new(),
-            person_ids: None,
+            people: others,
+            person_ids: ids_rel,
             index: k as u32,
             time_s: tk,
             exposure_s: None,
@@ -683,7 +729,7 @@ pub fn generate_with_body(
     } else {
         stats.pose_error = Some(crate::pose_error::apply(
             cfg,
-            &body,
+            &people[0].body,
             cam.centre_world(),
             &mut scene_frames,
             out,
@@ -706,7 +752,14 @@ pub fn generate_with_body(
     let mut sc = scene::Scene {
         events_raw_format: None,
         events_recorded_s: None,
-        people: Vec::new(),
+        people: people[1..]
+            .iter()
+            .zip(1u32..)
+            .map(|(person, id)| scene::PersonSpec {
+                id,
+                betas: person.body.betas.clone(),
+            })
+            .collect(),
         format_version: scene::FORMAT_VERSION,
         camera: cam.to_scene(),
         body: scene::BodySpec {
@@ -789,10 +842,16 @@ impl CmJob {
     }
 }
 
-fn room_and_body_tris(room: &Mesh, body: &DressedBody) -> Vec<[u32; 3]> {
-    let base = room.positions.len() as u32;
+/// The triangles of the room and every person's body, as the frame's mesh holds them (the room's
+/// vertices first, then each person's in order).
+fn room_and_body_tris(room: &Mesh, people: &[Person]) -> Vec<[u32; 3]> {
+    let mut base = room.positions.len() as u32;
     let mut t = room.tris.clone();
-    t.extend(body.model.faces.iter().map(|f| f.map(|i| i + base)));
+    for person in people {
+        let faces = &person.body.model.faces;
+        t.extend(faces.iter().map(|f| f.map(|i| i + base)));
+        base += person.body.model.v_template.len() as u32;
+    }
     t
 }
 

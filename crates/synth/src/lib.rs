@@ -12,6 +12,7 @@ pub mod body;
 pub mod camera;
 pub mod camera_error;
 pub mod camera_motion;
+pub mod cast;
 pub mod config;
 pub mod error;
 pub mod flow;

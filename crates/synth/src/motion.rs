@@ -51,8 +51,11 @@ pub struct Motion {
     pub speed: Speed,
     /// Phase offsets (radians) drawn from the seed: turn, arms, legs, head.
     pub phases: [f32; 4],
-    /// Root position on the floor (metres, world x and z).
+    /// Root position on the floor at time 0 (metres, world x and z).
     pub base: [f32; 2],
+    /// Walking velocity along the floor (metres per second, world x and z; zero: dancing on the
+    /// spot, the first person's).
+    pub walk: [f32; 2],
     /// Added to the translation's y so the feet touch the floor (metres).
     pub floor_offset: f32,
     /// Elevation of the rest-pose upper arms below horizontal (radians, see
@@ -117,7 +120,12 @@ impl Motion {
             aa(Quat::from_rotation_x(0.15 * head.sin()) * Quat::from_rotation_y(0.3 * head.cos()));
         // Bobbing with the steps.
         let bob = -0.02 * (lift_l + lift_r);
-        let transl = Vec3::new(self.base[0] + sway, self.floor_offset + bob, self.base[1]);
+        let walked = [self.walk[0] * t as f32, self.walk[1] * t as f32];
+        let transl = Vec3::new(
+            self.base[0] + sway + walked[0],
+            self.floor_offset + bob,
+            self.base[1] + walked[1],
+        );
         (pose.into_iter().flatten().collect(), transl.to_array())
     }
 }

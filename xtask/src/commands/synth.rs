@@ -161,6 +161,12 @@ pub struct Args {
     /// RMS error of the written camera centres (cm, 0..=100); see --camera-error-deg.
     #[arg(long, value_name = "CM")]
     pub camera_error_cm: Option<f64>,
+    /// People in the scene (1..=4): the first dances on the spot as in the one-person benchmark,
+    /// the others, each in its own clothes and motion, cross the room in front of and behind it
+    /// so that they occlude each other. With more than one, scene.json lists every person's pose
+    /// per frame and person_ids/ holds which person each pixel shows (scene format version 3).
+    #[arg(long, value_name = "N")]
+    pub people: Option<u32>,
 }
 
 /// Builds the generator settings from the preset and the flags.
@@ -190,7 +196,8 @@ pub fn config(args: &Args) -> ::synth::SynthConfig {
         event_flow,
         body,
         camera_error_deg,
-        camera_error_cm
+        camera_error_cm,
+        people
     );
     if let Some(neg) = args.event_threshold_neg {
         c.event_threshold_neg = Some(neg);
