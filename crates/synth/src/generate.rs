@@ -157,6 +157,11 @@ pub struct Stats {
     /// (and not written) when the pose error is off.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_error: Option<PoseErrorStats>,
+    /// With several people: per person (the scene's order), the blurred input's PSNR (dB) against
+    /// the sharp frame in that person's own box (the bounding box of its pixels in the person-id
+    /// image), averaged over the frames that show it; empty (and not written) with one person.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub person_box_db: Vec<f64>,
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SynthError + '_ {
@@ -450,6 +455,8 @@ pub fn generate_with_body(
         .then(|| StaticSamples::new(&room.mesh, &materials, &cam, &light, ss));
     let mut prev: Option<Sharp> = None;
     let mut scene_frames = Vec::with_capacity(frames);
+    // Per person with several: (sum of box PSNRs, frames that show it).
+    let mut person_box = vec![(0.0f64, 0usize); if several { people.len() } else { 0 }];
     for k in 0..frames {
         let tk = t_of(k);
         // Render times in order; `None` marks the sharp render.
@@ -563,6 +570,21 @@ pub fn generate_with_body(
             if let Some(p) = psnr(&blurred_img.data, &sharp.rgb, n, |i| !inside(i)) {
                 sum_out += p;
                 n_out += 1;
+            }
+        }
+
+        for (p, acc) in person_box.iter_mut().enumerate() {
+            let id = (p + 1) as u8;
+            let own: Vec<bool> = sharp.ids.iter().map(|&v| v == id).collect();
+            if let Some((x0, y0, x1, y1)) = mask_bbox(&own, w) {
+                let inside = |i: usize| {
+                    let (x, y) = (i % w, i / w);
+                    x >= x0 && x <= x1 && y >= y0 && y <= y1
+                };
+                if let Some(db) = psnr(&blurred_img.data, &sharp.rgb, n, inside) {
+                    acc.0 += db;
+                    acc.1 += 1;
+                }
             }
         }
 
@@ -796,6 +818,16 @@ pub fn generate_with_body(
             PSNR_CAP_DB
         },
     };
+    stats.person_box_db = person_box
+        .iter()
+        .map(|&(sum, count)| {
+            if count > 0 {
+                sum / count as f64
+            } else {
+                PSNR_CAP_DB
+            }
+        })
+        .collect();
     let div = |a: f64, b: usize| if b > 0 { a / b as f64 } else { 0.0 };
     stats.flow = FlowStats {
         pairs: frames - 1,

@@ -34,14 +34,21 @@ fn project(camera: &scene::Camera, p: [f64; 3]) -> (usize, usize) {
 #[test]
 fn three_people_are_posed_masked_and_occlude_each_other() {
     let dir = tempfile::tempdir().unwrap();
-    generate_with_body(&small(3), capsule_body(), dir.path(), &mut |_, _| {}).unwrap();
+    let stats = generate_with_body(&small(3), capsule_body(), dir.path(), &mut |_, _| {}).unwrap();
+    // Each person's own box is blurred: finite PSNRs below the cap.
+    assert_eq!(stats.person_box_db.len(), 3);
+    assert!(
+        stats.person_box_db.iter().all(|&db| db > 5.0 && db < 60.0),
+        "{:?}",
+        stats.person_box_db
+    );
     let s = scene::load(dir.path()).unwrap();
     assert_eq!(s.format_version, scene::FORMAT_VERSION_PEOPLE);
     assert_eq!(s.person_ids(), vec![0, 1, 2]);
     let mut seen = [0usize; 4];
     for f in &s.frames {
-        let (w, h, ids) = scene::read_person_ids(&dir.path().join(f.person_ids.as_ref().unwrap()))
-            .unwrap();
+        let (w, h, ids) =
+            scene::read_person_ids(&dir.path().join(f.person_ids.as_ref().unwrap())).unwrap();
         let (_, _, mask) = scene::read_mask(&dir.path().join(f.mask.as_ref().unwrap())).unwrap();
         assert_eq!((w, h), (64, 48));
         for (&id, &m) in ids.iter().zip(&mask) {
@@ -49,7 +56,10 @@ fn three_people_are_posed_masked_and_occlude_each_other() {
             seen[usize::from(id.min(3))] += 1;
         }
     }
-    assert!(seen[1..].iter().all(|&n| n > 0), "every person is seen: {seen:?}");
+    assert!(
+        seen[1..].iter().all(|&n| n > 0),
+        "every person is seen: {seen:?}"
+    );
     // The people walk: person 1 crosses from one side to the other.
     let x_of = |k: usize| s.frames[k].pose_of(1).unwrap().1[0];
     assert!(x_of(8) - x_of(0) > 1.0, "{} -> {}", x_of(0), x_of(8));
@@ -57,10 +67,17 @@ fn three_people_are_posed_masked_and_occlude_each_other() {
     // the pixel of the first person's pelvis shows person 1.
     let mid = &s.frames[4];
     let t = mid.transl;
-    let (u, v) = project(&s.camera, [f64::from(t[0]), f64::from(t[1]), f64::from(t[2])]);
-    let (_, _, ids) = scene::read_person_ids(&dir.path().join(mid.person_ids.as_ref().unwrap()))
-        .unwrap();
-    assert_eq!(ids[v * 64 + u], 2, "person 1 hides the first person at ({u}, {v})");
+    let (u, v) = project(
+        &s.camera,
+        [f64::from(t[0]), f64::from(t[1]), f64::from(t[2])],
+    );
+    let (_, _, ids) =
+        scene::read_person_ids(&dir.path().join(mid.person_ids.as_ref().unwrap())).unwrap();
+    assert_eq!(
+        ids[v * 64 + u],
+        2,
+        "person 1 hides the first person at ({u}, {v})"
+    );
 }
 
 #[test]

@@ -262,6 +262,18 @@ pub fn run(args: Args) -> Result<()> {
         "blurred vs sharp PSNR: full {:.2} dB, human box {:.2} dB (min {:.2}), outside box {:.2} dB",
         p.full_frame_db, p.human_box_db, p.human_box_min_db, p.outside_human_box_db
     );
+    if !stats.person_box_db.is_empty() {
+        let boxes: Vec<String> = stats
+            .person_box_db
+            .iter()
+            .enumerate()
+            .map(|(p, db)| format!("person {p} {db:.2} dB"))
+            .collect();
+        println!(
+            "blurred vs sharp PSNR in each person's own box: {}",
+            boxes.join(", ")
+        );
+    }
     println!(
         "GT flow: valid {:.1}%, > 1 px {:.1}% of pixels ({:.1}% of human pixels), human mean {:.2} px, max {:.1} px",
         100.0 * f.valid_fraction,
