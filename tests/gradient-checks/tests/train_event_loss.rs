@@ -1,7 +1,8 @@
 //! Finite-difference check of the event-generation loss (`train::loss::event::pair_event_loss_with`)
 //! w.r.t. both renders, with the squared penalty and with the bound penalty (counts as lower
 //! bounds, a dead zone without events, a weighted overshoot past the count), and with the bound
-//! penalty capped (each pixel's cost at most w·τ²; a kink at |r| = τ like the others); about a
+//! penalty capped (each pixel's cost at most w·τ²; a kink at |r| = τ like the others) and capped
+//! in the Huber form (linear beyond τ: continuous first derivative at the kink); about a
 //! fifth of the pixels are unconstrained (their events fired both polarities) and cost nothing. The loss is smooth where the luma is positive (log of a
 //! positive value, squared residual); renders are drawn in [0.05, 1] so no probe reaches the clamp
 //! at 0. The bound penalty's residual is continuous and piecewise linear in ΔL, so r² has a
@@ -25,6 +26,7 @@ const BOUND: EventPenalty = EventPenalty::Bound {
     dead_zone: 1.0,
     overshoot: 0.3,
     cap: f64::INFINITY,
+    huber: false,
 };
 
 /// [`BOUND`] with each pixel's cost capped at τ = 1: random renders in [0.05, 1] give changes of
@@ -36,6 +38,18 @@ const CAPPED: EventPenalty = EventPenalty::Bound {
     dead_zone: 1.0,
     overshoot: 0.3,
     cap: 1.0,
+    huber: false,
+};
+
+/// [`CAPPED`] in the Huber form: beyond τ the cost grows linearly.
+const HUBER: EventPenalty = EventPenalty::Bound {
+    c_pos: 0.2,
+    c_neg: 0.25,
+    margin: 0.5,
+    dead_zone: 1.0,
+    overshoot: 0.3,
+    cap: 1.0,
+    huber: true,
 };
 
 proptest! {
@@ -45,13 +59,14 @@ proptest! {
     fn event_loss_gradient_matches(
         images in prop::collection::vec(0.05f64..1.0, 2 * 3 * N),
         counts in prop::collection::vec(-3i32..4, N),
-        which in 0u8..3,
+        which in 0u8..4,
         silent in prop::collection::vec(prop::bool::weighted(0.2), N),
     ) {
         let (bound, penalty) = match which {
             0 => (false, EventPenalty::Squared),
             1 => (true, BOUND),
-            _ => (true, CAPPED),
+            2 => (true, CAPPED),
+            _ => (true, HUBER),
         };
         // About a fifth of the pixels are unconstrained (fired both polarities).
         let held: Vec<f64> = counts
@@ -90,7 +105,7 @@ proptest! {
             prop_assert!(!compare("squared for bound", &numeric, &other, TOL).passed());
             // The overshoot term is there: where a pixel overshoots (the losses differ), the
             // gradient of the pure bound fails it.
-            let pure = EventPenalty::Bound { c_pos: 0.2, c_neg: 0.25, margin: 0.5, dead_zone: 1.0, overshoot: 0.0, cap: f64::INFINITY };
+            let pure = EventPenalty::Bound { c_pos: 0.2, c_neg: 0.25, margin: 0.5, dead_zone: 1.0, overshoot: 0.0, cap: f64::INFINITY, huber: false };
             let pure = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, pure);
             if pure.loss != out.loss && which == 1 {
                 let other: Vec<f64> = pure.d_first.iter().chain(&pure.d_second).copied().collect();
@@ -98,11 +113,20 @@ proptest! {
             }
             // The cap is there: where a pixel is capped (the losses differ), the uncapped
             // gradient fails it.
-            if which == 2 {
+            if which >= 2 {
                 let uncapped = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, BOUND);
                 if uncapped.loss != out.loss {
                     let other: Vec<f64> = uncapped.d_first.iter().chain(&uncapped.d_second).copied().collect();
                     prop_assert!(!compare("uncapped for capped", &numeric, &other, TOL).passed());
+                }
+            }
+            // The Huber form is not the truncation: where a pixel is past the cap (the losses
+            // differ), the truncated gradient (no pull there) fails it.
+            if which == 3 {
+                let cut = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, CAPPED);
+                if cut.loss != out.loss {
+                    let other: Vec<f64> = cut.d_first.iter().chain(&cut.d_second).copied().collect();
+                    prop_assert!(!compare("truncated for huber", &numeric, &other, TOL).passed());
                 }
             }
         }

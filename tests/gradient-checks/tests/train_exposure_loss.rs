@@ -34,6 +34,7 @@ const BOUND: EventPenalty = EventPenalty::Bound {
     dead_zone: 1.0,
     overshoot: 0.3,
     cap: f64::INFINITY,
+    huber: false,
 };
 
 /// The terms' value for S renders laid out one after the other in `x` (PLANES × HW each).

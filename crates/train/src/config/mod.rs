@@ -101,6 +101,7 @@ macro_rules! training_options {
                 } else {
                     f64::INFINITY
                 },
+                huber: self.event_residual_cap_huber,
             },
         }
     }
@@ -354,6 +355,11 @@ training_options! {
     /// truncated quadratic; `train::loss::event`). The default, one threshold, gains 0.40 dB in
     /// the human box at `quick` (1.27 dB with `--subframes 9`; `docs/BENCHMARKS.md`).
     event_residual_cap: f32 = 1.0,
+    /// The cap's Huber form: beyond the cap a pixel's event cost grows linearly (it keeps a constant
+    /// pull towards its bound) instead of staying flat (no pull); `train::loss::event`. Off: the
+    /// truncated quadratic.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    event_residual_cap_huber: bool = false,
     /// A pixel that fired events of both polarities within an interval says nothing about its net
     /// change there: on a sensor with a refractory period, texture crossing the pixel both ways
     /// drops crossings of either sign, so the net count's sign and size are arbitrary. On: such a

@@ -28,7 +28,8 @@
 //! pixel can cost: on a sensor with a refractory period a pixel crossed by texture in both
 //! directions within one interval reports a net count whose sign and size are arbitrary, and
 //! without a cap those few pixels hold a sharp model's changes to them (measured:
-//! `docs/notes/2026-11-28-what-holds-the-blur.md`). An expected change of [`UNCONSTRAINED`] (NaN:
+//! `docs/notes/2026-11-28-what-holds-the-blur.md`); in its Huber form the cost beyond τ grows
+//! linearly, w·(2τ|r| − τ²), so such a pixel keeps a bounded pull instead of none. An expected change of [`UNCONSTRAINED`] (NaN:
 //! the events say nothing of the net change, e.g. a pixel that fired both polarities) costs
 //! nothing under either penalty, and a sum of intervals that holds one stays unconstrained.
 
@@ -57,6 +58,10 @@ pub enum EventPenalty {
         /// whose residual exceeds τ — a count the sensor's dropped crossings turned into the
         /// wrong sign or size — stops pulling (a truncated quadratic, robust to such outliers).
         cap: f64,
+        /// Beyond τ the cost grows linearly, w·(2τ|r| − τ²), instead of staying at w·τ² (the Huber
+        /// form: a pixel past the cap keeps the constant pull 2wτ towards its bound instead of
+        /// none).
+        huber: bool,
     },
 }
 
@@ -67,6 +72,11 @@ impl EventPenalty {
             EventPenalty::Bound { cap, .. } if cap.is_finite() => Some(cap),
             _ => None,
         }
+    }
+
+    /// Whether the cost beyond the cap grows linearly (the Huber form) rather than staying flat.
+    pub fn huber(&self) -> bool {
+        matches!(*self, EventPenalty::Bound { huber: true, .. })
     }
 }
 
@@ -158,7 +168,9 @@ pub fn pair_event_loss_with<T: Real>(
         |img: &[T], i: usize| luma[0] * img[i] + luma[1] * img[n + i] + luma[2] * img[2 * n + i];
     let inv = T::one() / T::of(n.max(1) as f64);
     let two = T::of(2.0);
-    let cap = penalty.cap().map(|tau| T::of(tau * tau));
+    // τ² rounded once from f64 (the truncated form's bits), and τ for the Huber form's pull.
+    let cap = penalty.cap().map(|tau| (T::of(tau * tau), T::of(tau)));
+    let huber = penalty.huber();
     let mut loss = T::zero();
     let mut d_first = vec![T::zero(); 3 * n];
     let mut d_second = vec![T::zero(); 3 * n];
@@ -168,7 +180,12 @@ pub fn pair_event_loss_with<T: Real>(
         let change = (cb + log_eps).ln() - (ca + log_eps).ln();
         let (r, w) = event_residual(change, expected[i], penalty);
         let g = match cap {
-            Some(cap) if r * r > cap => {
+            Some((cap, tau)) if r * r > cap && huber => {
+                let pull = if r > T::zero() { tau } else { -tau };
+                loss = loss + w * (two * pull * r - cap) * inv;
+                two * w * pull * inv
+            }
+            Some((cap, _)) if r * r > cap => {
                 loss = loss + w * cap * inv;
                 T::zero()
             }
@@ -230,6 +247,7 @@ mod tests {
             dead_zone: 1.0,
             overshoot: 0.0,
             cap: f64::INFINITY,
+            huber: false,
         };
         let r = |change: f64, expected: f64, penalty| event_residual(change, expected, penalty).0;
         // Two positive events (0.4): any change above 0.3 is free, a smaller one costs.
@@ -259,6 +277,7 @@ mod tests {
             dead_zone: 1.0,
             overshoot: 0.1,
             cap: f64::INFINITY,
+            huber: false,
         };
         // Two positive events: free in [0.3, 0.5]; 0.9 overshoots by 0.4 at weight 0.1.
         let (r, w) = event_residual(0.9f64, 0.4, bound);
@@ -273,14 +292,16 @@ mod tests {
 
     #[test]
     fn a_capped_pixel_costs_its_cap_and_pulls_no_more() {
-        let capped = |cap| EventPenalty::Bound {
+        let capped_as = |cap, huber| EventPenalty::Bound {
             c_pos: 0.2,
             c_neg: 0.2,
             margin: 0.5,
             dead_zone: 1.0,
             overshoot: 0.0,
             cap,
+            huber,
         };
+        let capped = |cap| capped_as(cap, false);
         let eps = 1e-3f64;
         let grey = |y: f64| vec![y, y, y];
         let (y0, y1) = (0.2, (0.2 + eps) * 0.5f64.exp() - eps);
@@ -295,6 +316,15 @@ mod tests {
         assert_eq!(near.loss, free.loss);
         assert_eq!(near.d_second, free.d_second);
         assert_eq!(capped(f64::INFINITY).cap(), None);
+        // The Huber form: past the cap the cost grows linearly, 2τ|r| − τ² = 0.6·0.8 − 0.09, and
+        // the pixel keeps pulling with 2τ (the uncapped pull times τ/|r|).
+        let lin = pair_event_loss_with(&grey(y0), &grey(y1), &[-0.4], eps, capped_as(0.3, true));
+        assert!((lin.loss - (0.48 - 0.09)).abs() < 1e-12, "{}", lin.loss);
+        let ratio = lin.d_second[0] / free.d_second[0];
+        assert!((ratio - 0.3 / 0.8).abs() < 1e-12, "{ratio}");
+        let near_lin =
+            pair_event_loss_with(&grey(y0), &grey(y1), &[-0.4], eps, capped_as(0.9, true));
+        assert_eq!(near_lin.loss, free.loss);
     }
 
     #[test]
@@ -312,6 +342,7 @@ mod tests {
             dead_zone: 1.0,
             overshoot: 0.0,
             cap: f64::INFINITY,
+            huber: false,
         };
         for penalty in [EventPenalty::Squared, bound] {
             let free = pair_event_loss_with(&first, &second, &[nan, 0.0], eps, penalty);
