@@ -1,0 +1,119 @@
+//! Checks of the camera's gradients through the rasterizer: `camera_pose_gradient` (a left twist
+//! of the camera) and the learned camera correction chained through it, against central
+//! differences of `render_cov`. Tolerances and probe validation as in `rasterize.rs`.
+
+mod raster_support;
+
+use proptest::prelude::*;
+use rand::Rng;
+use raster_support::*;
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// `camera_pose_gradient` (dL/dξ of the camera, from `render_cov_backward`'s world gradients)
+    /// against central differences of `render_cov` from the camera moved by ±h along each of the
+    /// six twist components (h = FD_H in radians or metres; the scene is 1-6 m away, so a probe
+    /// moves a splat by ≤ 6·h relative, as a mean probe does: the FD_TOL argument above holds).
+    /// Probes whose ± steps flip any discrete decision of the oracle are discarded.
+    #[test]
+    fn camera_pose_gradient_matches_finite_differences(
+        seed in any::<u64>(),
+        kinds in kinds_strategy(6),
+        c in 1usize..4,
+    ) {
+        let (s, covs, cot, g) = cov_scene_and_gradients(seed, &kinds, c);
+        let ana = camera_pose_gradient(&s.cam, &s.means, &covs, &g.means, &g.covariances)
+            .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
+        let base = oracle(&s, None).decisions;
+        let (mut probes, mut valid) = (0usize, 0usize);
+        let (mut num, mut kept) = (Vec::new(), Vec::new());
+        for k in 0..6 {
+            probes += 1;
+            let moved = |t: f64| {
+                let mut xi = [0.0; 6];
+                xi[k] = t;
+                let mut s2 = s.clone();
+                s2.cam = moved_camera(&s.cam, xi);
+                s2
+            };
+            if oracle(&moved(FD_H), None).decisions != base
+                || oracle(&moved(-FD_H), None).decisions != base
+            {
+                continue;
+            }
+            valid += 1;
+            num.push(central_differences(|t| cov_loss(&moved(t[0]), &cot), &[0.0], FD_H)[0]);
+            kept.push(ana[k]);
+        }
+        let mut checker = GradientChecker::new();
+        checker.check("camera twist (ω, v) vs FD", &num, &kept, FD_TOL);
+        static TALLY: ProbeTally = ProbeTally::new(30);
+        let tally = TALLY.add(probes, valid);
+        prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
+        checker.finish();
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// A frame's learned camera correction (`train::pose::camera_correction`: twist
+    /// ξ = mid + o·change, camera [Exp(ω) | v]·T) through the render: `camera_pose_gradient`
+    /// chained by `twist_backward` and `correction_backward`, against central differences of
+    /// `render_cov` over the 12 correction values. The corrections are large (ω up to 0.3 rad,
+    /// v up to 0.2 m) so that the left Jacobian and the v × g_v term matter; the base camera is
+    /// chosen so that the corrected one is the scene's (its Gaussians stay in view). A probe
+    /// moves the camera by at most h (radians, metres), as in the twist check above: FD_TOL holds.
+    /// Probes whose ± steps flip any discrete decision of the oracle are discarded.
+    #[test]
+    fn camera_correction_gradient_matches_finite_differences(
+        seed in any::<u64>(),
+        kinds in kinds_strategy(6),
+        c in 1usize..4,
+    ) {
+        let (s, covs, cot, _) = cov_scene_and_gradients(seed, &kinds, c);
+        let mut r = rng(seed ^ 0x00ca_3e7a);
+        let limits = [0.3, 0.3, 0.3, 0.2, 0.2, 0.2, 0.2, 0.2, 0.2, 0.1, 0.1, 0.1];
+        let correction: Vec<f64> = limits.iter().map(|&l| r.gen_range(-l..l)).collect();
+        let offset = f64::from(r.gen_range(-0.5f32..0.5));
+        let twist = |c: &[f64]| -> [f64; 6] { std::array::from_fn(|k| c[k] + offset * c[6 + k]) };
+        let base = uncorrected(&s.cam.world_to_camera, &twist(&correction));
+        let scene_at = |c: &[f64]| {
+            let mut s2 = s.clone();
+            s2.cam.world_to_camera = corrected_world_to_camera(&base, &twist(c));
+            s2
+        };
+        let s0 = scene_at(&correction);
+        let g = cov_gradients(&s0, &covs, &cot);
+        let d_left = camera_pose_gradient(&s0.cam, &s0.means, &covs, &g.means, &g.covariances)
+            .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
+        let mut ana = vec![0.0; 12];
+        correction_backward(&twist_backward(&d_left, &twist(&correction)), offset as f32, &mut ana);
+        let base_decisions = oracle(&s0, None).decisions;
+        let (mut probes, mut valid) = (0usize, 0usize);
+        let (mut num, mut kept) = (Vec::new(), Vec::new());
+        for k in 0..12 {
+            probes += 1;
+            let moved = |t: f64| {
+                let mut c = correction.clone();
+                c[k] += t;
+                scene_at(&c)
+            };
+            if oracle(&moved(FD_H), None).decisions != base_decisions
+                || oracle(&moved(-FD_H), None).decisions != base_decisions
+            {
+                continue;
+            }
+            valid += 1;
+            num.push(central_differences(|t| cov_loss(&moved(t[0]), &cot), &[0.0], FD_H)[0]);
+            kept.push(ana[k]);
+        }
+        let mut checker = GradientChecker::new();
+        checker.check("camera correction (mid ω, v; change ω, v) vs FD", &num, &kept, FD_TOL);
+        static TALLY: ProbeTally = ProbeTally::new(60);
+        let tally = TALLY.add(probes, valid);
+        prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
+        checker.finish();
+    }
+}

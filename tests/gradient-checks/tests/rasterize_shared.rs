@@ -1,0 +1,232 @@
+//! Checks of renders that share their static Gaussians (`render_cov_shared`): the backward
+//! against central differences, and the outputs against separate renders. Tolerances and probe
+//! validation as in `rasterize.rs`.
+
+mod raster_support;
+
+use proptest::prelude::*;
+use raster_support::*;
+
+// ---------------------------------------------------------------------------------------------
+// Renders that share their static Gaussians (`render_cov_shared`).
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    /// `render_cov_shared_backward` against central differences of L = Σ_r cot_r · render_r over
+    /// three renders from one camera: a static Gaussian's parameter is perturbed in every render at
+    /// once and compared with the sum of the renders' gradients (its shared tiles' share reaches
+    /// only the owner's); a moving Gaussian's in one render, against that render's gradient.
+    /// Probes flipping a discrete decision of the oracle in any render are discarded (≥ 90% must
+    /// remain); tolerance FD_TOL, as for one render (the loss is a sum of three such losses).
+    #[test]
+    fn shared_render_gradients_match_finite_differences(
+        seed in any::<u64>(),
+        kinds in kinds_strategy(6),
+        c in 1usize..4,
+    ) {
+        let mut s = random_scene(seed, &kinds, c);
+        s.covs = Some((0..s.n()).map(|i| covariance_3d(s.log_scales[i], s.quats[i])).collect());
+        let (scenes, moving) = moving_renders(&s, 3);
+        let cots: Vec<_> = (0..3).map(|r| random_cotangent(&s, seed ^ (r as u64 + 1))).collect();
+        let settings = s.settings();
+        let covs = s.covs.clone().unwrap_or_default();
+        let splats: Vec<CovSplats<'_, f64>> = scenes.iter().map(|sc| cov_splats(sc, &covs)).collect();
+        let fwd = render_cov_shared(&s.cam, &splats, &moving, 1, &settings)
+            .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
+        let cot_refs: Vec<Cotangents<'_, f64>> = cots
+            .iter()
+            .map(|c| Cotangents { image: &c.0, alpha: Some(&c.1), depth: Some(&c.2) })
+            .collect();
+        let outs: Vec<_> = fwd.outputs.iter().collect();
+        let g = render_cov_shared_backward(&s.cam, &splats, &settings, &outs, &fwd.sharing, &cot_refs)
+            .unwrap_or_else(|e| panic!("render_cov_shared_backward: {e}"));
+        let base: Vec<_> = scenes.iter().map(|sc| oracle(sc, None).decisions).collect();
+        let total = |sc: &[Scene]| -> f64 { sc.iter().zip(&cots).map(|(x, c)| cov_loss(x, c)).sum() };
+        let mut checker = GradientChecker::new();
+        let (mut probes, mut valid) = (0usize, 0usize);
+        for i in 0..s.n() {
+            // Σ (one slice for every render, so every render's gradient counts), relative step.
+            let scale = covs[i][0][0].max(covs[i][1][1]).max(covs[i][2][2]);
+            let (mut num, mut ana) = (Vec::new(), Vec::new());
+            for kl in 0..9 {
+                let (k, l) = (kl / 3, kl % 3);
+                probes += 1;
+                let perturbed = |t: f64| -> Vec<Scene> {
+                    let mut sc = scenes.clone();
+                    for x2 in &mut sc {
+                        if let Some(cv) = x2.covs.as_mut() {
+                            cv[i][k][l] = covs[i][k][l] + t * scale;
+                        }
+                    }
+                    sc
+                };
+                let flips = |t: f64| {
+                    perturbed(t).iter().zip(&base).any(|(sc, b)| &oracle(sc, None).decisions != b)
+                };
+                if flips(FD_H) || flips(-FD_H) {
+                    continue;
+                }
+                valid += 1;
+                num.push(central_differences(|t| total(&perturbed(t[0])), &[0.0], FD_H)[0]);
+                ana.push(scale * g.iter().map(|gr| gr.covariances[i][k][l]).sum::<f64>());
+            }
+            checker.check(&format!("gaussian {i} (kind {}) s*dL/dSigma", kind_of(&kinds, i)), &num, &ana, FD_TOL);
+            for r in 0..3 {
+                if !moving[i] && r > 0 {
+                    continue;
+                }
+                let x = scenes[r].params(i);
+                let (mut num, mut ana) = (Vec::new(), Vec::new());
+                for k in [0usize, 1, 2, 10].into_iter().chain(11..11 + c) {
+                    probes += 1;
+                    let perturbed = |v: f64| -> Vec<Scene> {
+                        let mut sc = scenes.clone();
+                        for (q, x2) in sc.iter_mut().enumerate() {
+                            if moving[i] && q != r {
+                                continue;
+                            }
+                            let mut p = x2.params(i);
+                            p[k] = v;
+                            x2.set_params(i, &p);
+                        }
+                        sc
+                    };
+                    let flips = |v: f64| {
+                        perturbed(v).iter().zip(&base).any(|(sc, b)| &oracle(sc, None).decisions != b)
+                    };
+                    if flips(x[k] + FD_H) || flips(x[k] - FD_H) {
+                        continue;
+                    }
+                    valid += 1;
+                    num.push(central_differences(|v| total(&perturbed(v[0])), &[x[k]], FD_H)[0]);
+                    let sum = |f: &dyn Fn(&rasterize_cpu::Gradients<f64>) -> f64| -> f64 {
+                        if moving[i] { f(&g[r]) } else { g.iter().map(f).sum() }
+                    };
+                    ana.push(match k {
+                        0..=2 => sum(&|gr| gr.means[i][k]),
+                        10 => sum(&|gr| gr.opacity_logits[i]),
+                        _ => sum(&|gr| gr.channels[i * c + k - 11]),
+                    });
+                }
+                checker.check(
+                    &format!("gaussian {i} (kind {}, moving {}) render {r}", kind_of(&kinds, i), moving[i]),
+                    &num,
+                    &ana,
+                    FD_TOL,
+                );
+            }
+        }
+        static TALLY: ProbeTally = ProbeTally::new(200);
+        let tally = TALLY.add(probes, valid);
+        prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
+        checker.finish();
+    }
+}
+
+#[test]
+fn shared_renders_equal_separate_renders_and_share_tiles() {
+    // f32 scene large enough for static tiles and moving tiles: the outputs are bit-identical to
+    // rendering each alone, the moving Gaussians' gradients bit-identical per render, and the
+    // static ones' summed gradients equal the separate sum up to rounding.
+    let (cam, m, ls, q, op, ch) = f32_scene(3000, 100, 76, 7);
+    let covs: Vec<Mat3<f32>> = ls
+        .iter()
+        .zip(&q)
+        .map(|(l, r)| covariance_3d(*l, *r))
+        .collect();
+    let moving: Vec<bool> = m.iter().map(|p| p[0] < -0.3).collect();
+    let means: Vec<Vec<[f32; 3]>> = (0..3)
+        .map(|r| {
+            m.iter()
+                .zip(&moving)
+                .map(|(p, &mv)| {
+                    if mv {
+                        [p[0] + 0.01 * r as f32, p[1], p[2]]
+                    } else {
+                        *p
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let splats: Vec<CovSplats<'_, f32>> = means
+        .iter()
+        .map(|mm| CovSplats {
+            means: mm,
+            covariances: &covs,
+            opacity_logits: &op,
+            channels: &ch,
+            num_channels: 3,
+        })
+        .collect();
+    let settings = RenderSettings {
+        near_plane: NEAR,
+        background: vec![0.1, 0.2, 0.3],
+    };
+    let shared = render_cov_shared(&cam, &splats, &moving, 1, &settings)
+        .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
+    let fraction = shared.sharing.shared_fraction();
+    assert!(
+        fraction > 0.1 && fraction < 0.9,
+        "shared fraction {fraction}"
+    );
+    let hw = (cam.width * cam.height) as usize;
+    let cots: Vec<Vec<f32>> = (0..3)
+        .map(|r| {
+            (0..3 * hw)
+                .map(|p| ((p * 7 + r * 13) % 17) as f32 / 17.0 - 0.5)
+                .collect()
+        })
+        .collect();
+    let cot_refs: Vec<Cotangents<'_, f32>> = cots
+        .iter()
+        .map(|c| Cotangents {
+            image: c,
+            alpha: None,
+            depth: None,
+        })
+        .collect();
+    let outs: Vec<_> = shared.outputs.iter().collect();
+    let g = render_cov_shared_backward(&cam, &splats, &settings, &outs, &shared.sharing, &cot_refs)
+        .unwrap_or_else(|e| panic!("render_cov_shared_backward: {e}"));
+    let mut sum_shared = vec![0.0f64; m.len()];
+    let mut sum_separate = vec![0.0f64; m.len()];
+    for r in 0..3 {
+        let alone = render_cov(&cam, &splats[r], &settings).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(alone.image, shared.outputs[r].image, "render {r} image");
+        assert_eq!(alone.alpha, shared.outputs[r].alpha, "render {r} alpha");
+        let ga = render_cov_backward(&cam, &splats[r], &settings, &alone, &cot_refs[r])
+            .unwrap_or_else(|e| panic!("{e}"));
+        for i in 0..m.len() {
+            if moving[i] {
+                assert_eq!(
+                    ga.means[i], g[r].means[i],
+                    "moving Gaussian {i}, render {r}"
+                );
+            }
+            sum_shared[i] += f64::from(g[r].means[i][0]);
+            sum_separate[i] += f64::from(ga.means[i][0]);
+        }
+    }
+    let scale = sum_separate.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    for i in 0..m.len() {
+        let err = (sum_shared[i] - sum_separate[i]).abs();
+        assert!(
+            err <= 1e-4 * scale,
+            "Gaussian {i}: {} vs {}",
+            sum_shared[i],
+            sum_separate[i]
+        );
+    }
+    // A static Gaussian whose inputs change between renders is refused, naming it.
+    let mut bad = means[2].clone();
+    let victim = moving.iter().position(|&mv| !mv).unwrap_or(0);
+    bad[victim][2] += 0.5;
+    let mut splats_bad = splats.clone();
+    splats_bad[2].means = &bad;
+    let err = render_cov_shared(&cam, &splats_bad, &moving, 1, &settings).map(|_| ());
+    assert!(
+        matches!(&err, Err(RasterError::InvalidSettings(m)) if m.contains(&format!("Gaussian {victim} "))),
+        "{err:?}"
+    );
+}
