@@ -241,7 +241,9 @@ training_options! {
     /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure). `quick`
     /// takes 9: with the events' cap and mixed pixels unconstrained, 35.81 / 31.47 dB (full frame /
     /// human box) against 34.79 / 30.38 with 5, in 8 min 28 s of wall time against 5 min 12 s
-    /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` keeps 5 for its 90-minute budget.
+    /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` keeps 5 for its 90-minute budget
+    /// (with 9 and `--deform-hidden 64`: 38.25 / 33.62 dB against 37.18 / 32.54, in 117 instead
+    /// of 92 min).
     subframes: usize = 9,
     /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,
     /// skinning weights and both colours are evaluated at the mid-exposure pose and each
@@ -498,7 +500,8 @@ impl TrainConfig {
                 densify_until: 4000,
                 opacity_reset_every: 3000,
                 checkpoint_every: 1000,
-                // 9 renders per exposure would take ~1.6x the 90-minute budget.
+                // 9 renders per exposure (with the deformation at quick's width, 64) took 117
+                // minutes for +1.08 dB in the box (2026-12-01): over the 90-minute budget.
                 subframes: 5,
                 ..quick
             },
