@@ -219,3 +219,44 @@ fn synth_refuses_bad_pose_errors_and_documents_the_flag() {
         assert!(text.contains(needle), "--help lacks {needle}: {text}");
     }
 }
+
+/// `synth --people 2` writes a version-3 scene whose terminal report gives each person's blurred
+/// box, and `reconstruct` refuses it naming its people (the model reconstructs one person); five
+/// people are refused naming the knob.
+#[test]
+fn two_people_are_generated_and_reconstruct_refuses_them_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("people");
+    let args = tiny_args(&out, &[("--people", "2"), ("--frames", "4")]);
+    let o = xtask(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains("each person's own box: person 0"),
+        "{stdout}"
+    );
+    let scene: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    assert_eq!(scene["format_version"], 3);
+    assert_eq!(scene["frames"][0]["people"][0]["id"], 1);
+    let o = xtask(&[
+        "reconstruct",
+        "--data",
+        out.to_str().unwrap(),
+        "--steps",
+        "1",
+    ]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        stderr.contains("the scene has 2 people") && stderr.contains("ids [0, 1]"),
+        "{stderr}"
+    );
+    let args = tiny_args(&out, &[("--people", "5")]);
+    let o = xtask(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && stderr.contains("invalid setting people = 5"),
+        "{stderr}"
+    );
+}
