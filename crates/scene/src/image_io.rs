@@ -310,6 +310,13 @@ pub fn write_mask(path: &Path, width: u32, height: u32, mask: &[bool]) -> Result
 /// Reads a single-channel mask PNG (8 or 16 bit): `(width, height, row-major set flags)`, a pixel
 /// being set when its value is non-zero.
 pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
+    let (w, h, values) = read_grey(path)?;
+    Ok((w, h, values.into_iter().map(|v| v != 0).collect()))
+}
+
+/// A single-channel PNG (8 or 16 bit) as `(width, height, row-major values)`; other pixel formats
+/// are refused, naming the file.
+fn read_grey(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
     let img = image::ImageReader::open(path)
         .map_err(|source| SceneError::Io {
             path: path.to_path_buf(),
@@ -319,8 +326,8 @@ pub fn read_mask(path: &Path) -> Result<(u32, u32, Vec<bool>)> {
         .map_err(|e| img_err(path, e.to_string()))?;
     let (w, h) = (img.width(), img.height());
     let data = match &img {
-        DynamicImage::ImageLuma8(b) => b.pixels().map(|p| p.0[0] != 0).collect(),
-        DynamicImage::ImageLuma16(b) => b.pixels().map(|p| p.0[0] != 0).collect(),
+        DynamicImage::ImageLuma8(b) => b.pixels().map(|p| u16::from(p.0[0])).collect(),
+        DynamicImage::ImageLuma16(b) => b.pixels().map(|p| p.0[0]).collect(),
         other => {
             return Err(img_err(
                 path,
@@ -346,27 +353,11 @@ pub fn write_person_ids(path: &Path, width: u32, height: u32, ids: &[u8]) -> Res
 /// Reads a person-id image (8 or 16 bit single channel): `(width, height, row-major values)`, 0 =
 /// scene, `p + 1` = person `p`; a value above 255 is refused, naming the file.
 pub fn read_person_ids(path: &Path) -> Result<(u32, u32, Vec<u8>)> {
-    let img = image::ImageReader::open(path)
-        .map_err(|source| SceneError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
-        .decode()
-        .map_err(|e| img_err(path, e.to_string()))?;
-    let (w, h) = (img.width(), img.height());
-    let data = match &img {
-        DynamicImage::ImageLuma8(b) => b.pixels().map(|p| p.0[0]).collect(),
-        DynamicImage::ImageLuma16(b) => b
-            .pixels()
-            .map(|p| u8::try_from(p.0[0]))
-            .collect::<std::result::Result<Vec<u8>, _>>()
-            .map_err(|_| img_err(path, "a person id above 255"))?,
-        other => {
-            return Err(img_err(
-                path,
-                format!("pixel format {:?}, expected single-channel", other.color()),
-            ))
-        }
-    };
-    Ok((w, h, data))
+    let (w, h, values) = read_grey(path)?;
+    let ids = values
+        .into_iter()
+        .map(u8::try_from)
+        .collect::<std::result::Result<Vec<u8>, _>>()
+        .map_err(|_| img_err(path, "a person id above 255"))?;
+    Ok((w, h, ids))
 }

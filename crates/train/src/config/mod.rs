@@ -241,9 +241,8 @@ training_options! {
     /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure). `quick`
     /// takes 9: with the events' cap and mixed pixels unconstrained, 35.81 / 31.47 dB (full frame /
     /// human box) against 34.79 / 30.38 with 5, in 8 min 28 s of wall time against 5 min 12 s
-    /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` keeps 5 for its 90-minute budget
-    /// (with 9 and `--deform-hidden 64`: 38.25 / 33.62 dB against 37.18 / 32.54, in 117 instead
-    /// of 92 min).
+    /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` keeps 5 for its 90-minute budget (9 with
+    /// `--deform-hidden 64`: 38.25 / 33.62 dB against 37.18 / 32.54, in 117 instead of 92 min).
     subframes: usize = 9,
     /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,
     /// skinning weights and both colours are evaluated at the mid-exposure pose and each
@@ -357,10 +356,9 @@ training_options! {
     /// truncated quadratic; `train::loss::event`). The default, one threshold, gains 0.40 dB in
     /// the human box at `quick` (1.27 dB with `--subframes 9`; `docs/BENCHMARKS.md`).
     event_residual_cap: f32 = 1.0,
-    /// The cap's Huber form: beyond the cap a pixel's event cost grows linearly (it keeps a constant
-    /// pull towards its bound) instead of staying flat (no pull); `train::loss::event`. Off (the
-    /// default): the truncated quadratic. On, `quick`: −0.52 dB in the human box on the default
-    /// benchmark (31.14 dB), −0.66 with ideal events (30.72; `docs/BENCHMARKS.md`).
+    /// The cap's Huber form: beyond the cap a pixel's event cost grows linearly (a constant pull)
+    /// instead of staying flat; off, the default: on costs 0.52 / 0.66 dB in the box at `quick` on
+    /// the default benchmark / with ideal events (`docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_residual_cap_huber: bool = false,
     /// A pixel that fired events of both polarities within an interval says nothing about its net
@@ -501,8 +499,7 @@ impl TrainConfig {
                 densify_until: 4000,
                 opacity_reset_every: 3000,
                 checkpoint_every: 1000,
-                // 9 renders per exposure (with the deformation at quick's width, 64) took 117
-                // minutes for +1.08 dB in the box (2026-12-01): over the 90-minute budget.
+                // 9 renders (width 64) took 117 min for +1.08 dB in the box (2026-12-01).
                 subframes: 5,
                 ..quick
             },
