@@ -25,7 +25,7 @@ pub use pinhole::{Camera, CameraError, MAX_IMAGE_SIDE};
 pub use raster::{
     camera_pose_gradient, render, render_backward, render_cov, render_cov_backward,
     render_cov_shared, render_cov_shared_backward, Cotangents, CovSplats, Gradients, RenderOutput,
-    RenderSettings, SharedRenders, Splats, TileSharing, DEFAULT_NEAR_PLANE,
+    RenderSettings, SharedOutputs, SharedRenders, Splats, TileSharing, DEFAULT_NEAR_PLANE,
 };
 pub use sh::{render_sh, render_sh_backward, ShGradients, ShRender, ShSplats};
 

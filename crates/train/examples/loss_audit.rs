@@ -166,6 +166,7 @@ fn audit(
         let plan = PassPlan {
             reposed: true,
             share_static_tiles: false,
+            joint_backward_only: false,
         };
         let passes =
             model.forward_passes(&cameras, &poses, poses.len() / 2, model.latent(slot), plan)?;

@@ -31,7 +31,7 @@ proptest! {
         let settings = s.settings();
         let covs = s.covs.clone().unwrap_or_default();
         let splats: Vec<CovSplats<'_, f64>> = scenes.iter().map(|sc| cov_splats(sc, &covs)).collect();
-        let fwd = render_cov_shared(&s.cam, &splats, &moving, 1, &settings)
+        let fwd = render_cov_shared(&s.cam, &splats, &moving, 1, &settings, SharedOutputs::OwnerLists)
             .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
         let cot_refs: Vec<Cotangents<'_, f64>> = cots
             .iter()
@@ -163,8 +163,15 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
         near_plane: NEAR,
         background: vec![0.1, 0.2, 0.3],
     };
-    let shared = render_cov_shared(&cam, &splats, &moving, 1, &settings)
-        .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
+    let shared = render_cov_shared(
+        &cam,
+        &splats,
+        &moving,
+        1,
+        &settings,
+        SharedOutputs::Complete,
+    )
+    .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
     let fraction = shared.sharing.shared_fraction();
     assert!(
         fraction > 0.1 && fraction < 0.9,
@@ -189,6 +196,58 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
     let outs: Vec<_> = shared.outputs.iter().collect();
     let g = render_cov_shared_backward(&cam, &splats, &settings, &outs, &shared.sharing, &cot_refs)
         .unwrap_or_else(|e| panic!("render_cov_shared_backward: {e}"));
+    // Binning the shared tiles only in the owner gives the same images and gradients, bit for bit,
+    // from fewer pairs.
+    let lean = render_cov_shared(
+        &cam,
+        &splats,
+        &moving,
+        1,
+        &settings,
+        SharedOutputs::OwnerLists,
+    )
+    .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
+    assert_eq!(lean.sharing, shared.sharing);
+    let lean_outs: Vec<_> = lean.outputs.iter().collect();
+    let g_lean = render_cov_shared_backward(
+        &cam,
+        &splats,
+        &settings,
+        &lean_outs,
+        &lean.sharing,
+        &cot_refs,
+    )
+    .unwrap_or_else(|e| panic!("render_cov_shared_backward: {e}"));
+    for r in 0..3 {
+        assert_eq!(lean.outputs[r].image, shared.outputs[r].image, "render {r}");
+        let bits = |g: &rasterize_cpu::Gradients<f32>| {
+            let mut v: Vec<u32> = g.means.as_flattened().iter().map(|x| x.to_bits()).collect();
+            v.extend(g.opacity_logits.iter().map(|x| x.to_bits()));
+            v.extend(g.channels.iter().map(|x| x.to_bits()));
+            v.extend(g.means_2d.as_flattened().iter().map(|x| x.to_bits()));
+            v.extend(
+                g.covariances
+                    .iter()
+                    .flat_map(|c| c.as_flattened())
+                    .map(|x| x.to_bits()),
+            );
+            v
+        };
+        assert_eq!(bits(&g_lean[r]), bits(&g[r]), "render {r}'s gradients");
+        if r != 1 {
+            assert!(
+                lean.outputs[r].num_pairs < shared.outputs[r].num_pairs,
+                "render {r}"
+            );
+            // A render without the shared tiles' lists cannot be differentiated alone.
+            let alone =
+                render_cov_backward(&cam, &splats[r], &settings, &lean.outputs[r], &cot_refs[r]);
+            assert!(
+                matches!(alone, Err(RasterError::ForwardMismatch(_))),
+                "render {r}"
+            );
+        }
+    }
     let mut sum_shared = vec![0.0f64; m.len()];
     let mut sum_separate = vec![0.0f64; m.len()];
     for r in 0..3 {
@@ -224,7 +283,15 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
     bad[victim][2] += 0.5;
     let mut splats_bad = splats.clone();
     splats_bad[2].means = &bad;
-    let err = render_cov_shared(&cam, &splats_bad, &moving, 1, &settings).map(|_| ());
+    let err = render_cov_shared(
+        &cam,
+        &splats_bad,
+        &moving,
+        1,
+        &settings,
+        SharedOutputs::OwnerLists,
+    )
+    .map(|_| ());
     assert!(
         matches!(&err, Err(RasterError::InvalidSettings(m)) if m.contains(&format!("Gaussian {victim} "))),
         "{err:?}"

@@ -117,6 +117,13 @@ pub(super) fn backward_inputs<'a, T: Real>(
             splats.len()
         )));
     }
+    if st.partial_lists && matches!(tiles, SharedTiles::None) {
+        return Err(RasterError::ForwardMismatch(
+            "this render's shared tiles were binned by another render of its exposure \
+             (SharedOutputs::OwnerLists): differentiate it with render_cov_shared_backward"
+                .into(),
+        ));
+    }
     let (width, height) = (camera.width as usize, camera.height as usize);
     let hw = width * height;
     let check = |field, got: usize, expected: usize| {

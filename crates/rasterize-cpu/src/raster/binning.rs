@@ -53,12 +53,15 @@ pub(super) fn trim_rect<T: Real>(p: &mut Projected<T>, width: usize, height: usi
 ///
 /// Parallel: jobs over contiguous chunks of `visible` bin their Gaussians by tile (a local counting
 /// sort); every tile then gathers its entries from the jobs and sorts them. The key (depth, index)
-/// is a total order, so the lists are the same for any chunking and thread count.
+/// is a total order, so the lists are the same for any chunking and thread count. The tiles flagged
+/// in `skip` get empty lists (the others' lists are unchanged).
 pub(super) fn bin_and_sort<T: Real>(
     visible: &[Projected<T>],
     gx: usize,
     n_tiles: usize,
+    skip: Option<&[bool]>,
 ) -> (Vec<usize>, Vec<u32>) {
+    let listed = |t: usize| skip.is_none_or(|s| !s[t]);
     let max_jobs = (BIN_COUNTER_BUDGET / (n_tiles + 1)).clamp(1, MAX_BIN_JOBS);
     let chunk = BIN_CHUNK.max(visible.len().div_ceil(max_jobs));
     // 1. Per job: its entries grouped by tile, and where each tile's group starts.
@@ -71,7 +74,10 @@ pub(super) fn bin_and_sort<T: Real>(
                 for ty in p.rect[1]..p.rect[3] {
                     let row = ty as usize * gx;
                     for tx in p.rect[0]..p.rect[2] {
-                        starts[row + tx as usize + 1] += 1;
+                        let t = row + tx as usize;
+                        if listed(t) {
+                            starts[t + 1] += 1;
+                        }
                     }
                 }
             }
@@ -87,8 +93,10 @@ pub(super) fn bin_and_sort<T: Real>(
                     let row = ty as usize * gx;
                     for tx in p.rect[0]..p.rect[2] {
                         let t = row + tx as usize;
-                        entries[cursor[t]] = key;
-                        cursor[t] += 1;
+                        if listed(t) {
+                            entries[cursor[t]] = key;
+                            cursor[t] += 1;
+                        }
                     }
                 }
             }
@@ -193,9 +201,19 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .expect("thread pool");
-            let got = pool.install(|| super::bin_and_sort(&visible, gx, n_tiles));
+            let got = pool.install(|| super::bin_and_sort(&visible, gx, n_tiles, None));
             assert_eq!(got, expected, "{threads} threads");
         }
+        // Skipped tiles get empty lists; every other tile keeps its list.
+        let skip: Vec<bool> = (0..n_tiles).map(|t| t % 3 == 1).collect();
+        let (offsets, list) = super::bin_and_sort(&visible, gx, n_tiles, Some(&skip));
+        let (all_offsets, all_list) = &expected;
+        for t in 0..n_tiles {
+            let got = &list[offsets[t]..offsets[t + 1]];
+            let full = &all_list[all_offsets[t]..all_offsets[t + 1]];
+            assert_eq!(got, if skip[t] { &[][..] } else { full }, "tile {t}");
+        }
+        assert!(list.len() < all_list.len(), "some pairs skipped");
     }
 
     /// A tile leaves a Gaussian's rectangle exactly when the tile kernels would skip the pair

@@ -39,6 +39,9 @@ pub(super) struct ForwardState<T> {
     pub(super) background: Vec<T>,
     /// Number of input Gaussians.
     pub(super) n: usize,
+    /// The tiles another render of the same camera blended have no list here: only the renders'
+    /// joint backward (`super::shared`) may differentiate this output.
+    pub(super) partial_lists: bool,
 }
 
 /// Renders the Gaussians `splats` from `camera` (see the module docs for the rules and outputs).
@@ -79,17 +82,25 @@ pub(super) struct Binned<T> {
     gx: usize,
     /// Channels C.
     c: usize,
-    radii: Vec<u32>,
-    visible: Vec<Projected<T>>,
-    visible_ids: Vec<u32>,
-    /// The visible Gaussians' INRIA tile rectangles, before [`trim_rect`].
-    inria_rects: Vec<[u32; 4]>,
+    projection: Projection<T>,
     pub(super) tile_offsets: Vec<usize>,
     tile_list: Vec<u32>,
     pair_splats: Vec<PairSplat<T>>,
     pair_channels: Vec<T>,
     background: Vec<T>,
     n: usize,
+    /// Some tiles were skipped (see [`ForwardState::partial_lists`]).
+    partial_lists: bool,
+}
+
+/// Every Gaussian of a request projected: its INRIA radius (0 when culled) and the visible ones in
+/// increasing input order (their compact order).
+pub(super) struct Projection<T> {
+    radii: Vec<u32>,
+    visible: Vec<Projected<T>>,
+    visible_ids: Vec<u32>,
+    /// The visible Gaussians' INRIA tile rectangles, before [`trim_rect`].
+    inria_rects: Vec<[u32; 4]>,
 }
 
 /// Tiles whose blend is copied from another render of the same camera instead of recomputed.
@@ -101,6 +112,15 @@ pub(super) struct ReusedTiles<'a, T> {
     pub(super) used: &'a [u32],
 }
 
+/// A render whose Gaussians not flagged `moving` have bitwise the inputs they have in `reference`
+/// (another render of the same camera), so their projections are copied from it.
+pub(super) struct ReusedProjection<'a, T> {
+    pub(super) reference: &'a Binned<T>,
+    /// Per input Gaussian: its compact index in `reference` (`u32::MAX`: culled there).
+    pub(super) reference_compact: &'a [u32],
+    pub(super) moving: &'a [bool],
+}
+
 /// Validates the request, projects every Gaussian (parallel, order-preserving), bins the visible
 /// ones into tiles and gathers each pair's data in list order.
 pub(super) fn bin_pass<T: Real>(
@@ -108,41 +128,122 @@ pub(super) fn bin_pass<T: Real>(
     splats: &Inputs<'_, T>,
     settings: &RenderSettings,
 ) -> Result<Binned<T>, RasterError> {
+    Ok(project_pass(camera, splats, settings, None)?.bin(camera, splats, None))
+}
+
+/// A request checked and projected, not yet binned.
+pub(super) struct ProjectedPass<T> {
+    cam: CameraParams<T>,
+    background: Vec<T>,
+    pub(super) projection: Projection<T>,
+}
+
+/// Checks the request (image size, inputs, background) and projects every Gaussian (parallel,
+/// order-preserving) — or with `reused` only the moving ones, the others' projections copied from
+/// the reference render bit for bit.
+pub(super) fn project_pass<T: Real>(
+    camera: &Camera,
+    splats: &Inputs<'_, T>,
+    settings: &RenderSettings,
+    reused: Option<&ReusedProjection<'_, T>>,
+) -> Result<ProjectedPass<T>, RasterError> {
     pinhole::check_image_size(camera.width.into(), camera.height.into())?;
     validate(splats)?;
-    let c = splats.num_channels;
-    let background = background::<T>(settings, c)?;
+    let background = background::<T>(settings, splats.num_channels)?;
     let cam = CameraParams::<T>::new(camera, settings.near_plane);
     let n = splats.len();
-    let [gx, gy] = cam.grid;
-    let (gx, gy) = (gx as usize, gy as usize);
-
     let (width, height) = (camera.width as usize, camera.height as usize);
     let projected: Vec<Option<(Projected<T>, [u32; 4])>> = (0..n)
         .into_par_iter()
         .map(|i| {
+            if let Some(r) = reused.filter(|r| !r.moving[i]) {
+                let ci = r.reference_compact[i] as usize;
+                let p = &r.reference.projection;
+                return p.visible.get(ci).map(|&v| (v, p.inria_rects[ci]));
+            }
             let mut p = splats.project(&cam, i)?;
             let inria_rect = p.rect;
             trim_rect(&mut p, width, height);
             Some((p, inria_rect))
         })
         .collect();
-    let mut radii = vec![0u32; n];
-    let mut visible = Vec::new();
-    let mut visible_ids = Vec::new();
-    let mut inria_rects = Vec::new();
+    let mut projection = Projection {
+        radii: vec![0u32; n],
+        visible: Vec::new(),
+        visible_ids: Vec::new(),
+        inria_rects: Vec::new(),
+    };
     for (i, p) in projected.into_iter().enumerate() {
         if let Some((p, inria_rect)) = p {
-            radii[i] = p.radius;
-            visible.push(p);
-            visible_ids.push(i as u32);
-            inria_rects.push(inria_rect);
+            projection.radii[i] = p.radius;
+            projection.visible.push(p);
+            projection.visible_ids.push(i as u32);
+            projection.inria_rects.push(inria_rect);
         }
     }
+    Ok(ProjectedPass {
+        cam,
+        background,
+        projection,
+    })
+}
 
+impl<T: Real> ProjectedPass<T> {
+    /// Bins the projection into tiles (no list for the tiles flagged in `skip`: another render
+    /// blends and differentiates them) and gathers each pair's data in list order.
+    pub(super) fn bin(
+        self,
+        camera: &Camera,
+        splats: &Inputs<'_, T>,
+        skip: Option<&[bool]>,
+    ) -> Binned<T> {
+        bin_projected(
+            camera,
+            &self.cam,
+            splats,
+            self.projection,
+            self.background,
+            skip,
+        )
+    }
+}
+
+impl<T> Projection<T> {
+    /// The visible Gaussians' input indices and their INRIA tile rectangles `[x0, y0, x1, y1)`.
+    pub(super) fn visible_rects(&self) -> impl Iterator<Item = (u32, [u32; 4])> + '_ {
+        self.visible_ids
+            .iter()
+            .zip(&self.inria_rects)
+            .map(|(&id, &rect)| (id, rect))
+    }
+
+    /// Per input Gaussian (`n` of them): its compact index (`u32::MAX` where culled).
+    pub(super) fn compact_indices(&self, n: usize) -> Vec<u32> {
+        let mut compact = vec![u32::MAX; n];
+        for (ci, &id) in self.visible_ids.iter().enumerate() {
+            compact[id as usize] = ci as u32;
+        }
+        compact
+    }
+}
+
+/// Bins a projection into tiles (no list for the tiles flagged in `skip`) and gathers each pair's
+/// data in list order.
+fn bin_projected<T: Real>(
+    camera: &Camera,
+    cam: &CameraParams<T>,
+    splats: &Inputs<'_, T>,
+    projection: Projection<T>,
+    background: Vec<T>,
+    skip: Option<&[bool]>,
+) -> Binned<T> {
+    let c = splats.num_channels;
+    let [gx, gy] = cam.grid;
+    let (gx, gy) = (gx as usize, gy as usize);
     // Counting sort by tile (stable in input order), then each tile by (depth, input index),
     // which equals INRIA's stable radix sort on (tile, depth).
-    let (tile_offsets, tile_list) = bin_and_sort(&visible, gx, gx * gy);
+    let (tile_offsets, tile_list) = bin_and_sort(&projection.visible, gx, gx * gy, skip);
+    let visible = &projection.visible;
     let pair_splats: Vec<PairSplat<T>> = tile_list
         .par_iter()
         .map(|&ci| {
@@ -158,30 +259,29 @@ pub(super) fn bin_pass<T: Real>(
         .collect();
     let mut pair_channels = vec![T::zero(); tile_list.len() * c];
     if c > 0 {
+        let ids = &projection.visible_ids;
         pair_channels
             .par_chunks_mut(c)
             .zip(tile_list.par_iter())
             .for_each(|(dst, &ci)| {
-                let g = visible_ids[ci as usize] as usize;
+                let g = ids[ci as usize] as usize;
                 dst.copy_from_slice(&splats.channels[g * c..(g + 1) * c]);
             });
     }
-    Ok(Binned {
+    Binned {
         width: camera.width as usize,
         height: camera.height as usize,
         gx,
         c,
-        radii,
-        visible,
-        visible_ids,
-        inria_rects,
+        projection,
         tile_offsets,
         tile_list,
         pair_splats,
         pair_channels,
         background,
-        n,
-    })
+        n: splats.len(),
+        partial_lists: skip.is_some(),
+    }
 }
 
 impl<T> Binned<T> {
@@ -189,10 +289,12 @@ impl<T> Binned<T> {
     /// (untrimmed: the tiles shared between renders keep INRIA's rule, so the order in which a
     /// static Gaussian's gradients are summed does not depend on the trim).
     pub(super) fn visible_rects(&self) -> impl Iterator<Item = (u32, [u32; 4])> + '_ {
-        self.visible_ids
-            .iter()
-            .zip(&self.inria_rects)
-            .map(|(&id, &rect)| (id, rect))
+        self.projection.visible_rects()
+    }
+
+    /// Per input Gaussian: its compact index in this render (`u32::MAX` where culled).
+    pub(super) fn compact_indices(&self) -> Vec<u32> {
+        self.projection.compact_indices(self.n)
     }
 
     /// Tiles per row and number of tiles.
@@ -284,11 +386,11 @@ impl<T: Real> Binned<T> {
             image,
             alpha,
             depth,
-            radii: self.radii,
+            radii: self.projection.radii,
             num_pairs: self.tile_list.len(),
             state: ForwardState {
-                visible: self.visible,
-                visible_ids: self.visible_ids,
+                visible: self.projection.visible,
+                visible_ids: self.projection.visible_ids,
                 tile_offsets: self.tile_offsets,
                 tile_list: self.tile_list,
                 pair_splats: self.pair_splats,
@@ -297,6 +399,7 @@ impl<T: Real> Binned<T> {
                 used,
                 background: self.background,
                 n: self.n,
+                partial_lists: self.partial_lists,
             },
         }
     }

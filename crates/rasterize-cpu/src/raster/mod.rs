@@ -47,7 +47,9 @@ pub use inputs::{
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats,
     COVARIANCE_SYMMETRY_TOLERANCE, DEFAULT_NEAR_PLANE,
 };
-pub use shared::{render_cov_shared, render_cov_shared_backward, SharedRenders, TileSharing};
+pub use shared::{
+    render_cov_shared, render_cov_shared_backward, SharedOutputs, SharedRenders, TileSharing,
+};
 
 /// A xorshift generator of uniform f32 values in [0, 1) for the raster module's tests
 /// (deterministic from `seed`, no crate).

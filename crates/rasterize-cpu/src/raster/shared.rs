@@ -13,7 +13,7 @@
 use rayon::prelude::*;
 
 use super::backward::{backward_inputs, SharedTiles};
-use super::forward::{bin_pass, blend_tiles, ReusedTiles};
+use super::forward::{bin_pass, blend_tiles, project_pass, ReusedProjection, ReusedTiles};
 use super::inputs::Inputs;
 use super::{Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings};
 use crate::{Camera, RasterError, Real};
@@ -21,7 +21,9 @@ use crate::{Camera, RasterError, Real};
 /// The renders of [`render_cov_shared`].
 #[derive(Clone, Debug)]
 pub struct SharedRenders<T> {
-    /// One output per render, each complete (its own [`super::render_cov_backward`] works).
+    /// One output per render: complete with [`SharedOutputs::Complete`] (its own
+    /// [`super::render_cov_backward`] works); with [`SharedOutputs::OwnerLists`] only the owner's
+    /// is, and the others are differentiated by [`render_cov_shared_backward`] alone.
     pub outputs: Vec<RenderOutput<T>>,
     /// Which tiles were blended once, and by which render.
     pub sharing: TileSharing,
@@ -46,41 +48,74 @@ impl TileSharing {
     }
 }
 
+/// What the renders other than the owner keep of the shared tiles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SharedOutputs {
+    /// Every output is complete, with the shared tiles' lists: each render's own
+    /// [`super::render_cov_backward`] works.
+    Complete,
+    /// The other renders keep no list for the shared tiles (they are binned once, by the owner):
+    /// only [`render_cov_shared_backward`] differentiates them. Same images, same gradients.
+    OwnerLists,
+}
+
 /// Renders `renders` (each as [`super::render_cov`] would) from one camera, where every Gaussian
 /// not flagged in `moving` has bitwise the same inputs in every render; tiles only such Gaussians
-/// reach are blended once, by render `owner`. `moving` has one flag per Gaussian.
+/// reach are blended once, by render `owner`. `moving` has one flag per Gaussian. The static
+/// Gaussians are projected once, by the owner; with [`SharedOutputs::OwnerLists`] the shared tiles
+/// are also binned only by it.
 pub fn render_cov_shared<T: Real>(
     camera: &Camera,
     renders: &[CovSplats<'_, T>],
     moving: &[bool],
     owner: usize,
     settings: &RenderSettings,
+    outputs: SharedOutputs,
 ) -> Result<SharedRenders<T>, RasterError> {
     check_renders(renders, moving, owner)?;
-    let binned = renders
+    let owner_binned = bin_pass(camera, &Inputs::from(&renders[owner]), settings)?;
+    let reused = ReusedProjection {
+        reference: &owner_binned,
+        reference_compact: &owner_binned.compact_indices(),
+        moving,
+    };
+    let projected = renders
         .iter()
-        .map(|r| bin_pass(camera, &Inputs::from(r), settings))
+        .enumerate()
+        .map(|(r, splats)| {
+            (r != owner)
+                .then(|| project_pass(camera, &Inputs::from(splats), settings, Some(&reused)))
+                .transpose()
+        })
         .collect::<Result<Vec<_>, _>>()?;
-    let (gx, n_tiles) = binned[owner].grid();
+    let (gx, n_tiles) = owner_binned.grid();
     let mut shared_tiles = vec![true; n_tiles];
-    for b in &binned {
-        for (id, rect) in b.visible_rects() {
-            if !moving[id as usize] {
-                continue;
-            }
-            for ty in rect[1]..rect[3] {
-                for tx in rect[0]..rect[2] {
-                    shared_tiles[ty as usize * gx + tx as usize] = false;
-                }
+    let rects = projected
+        .iter()
+        .flatten()
+        .flat_map(|p| p.projection.visible_rects())
+        .chain(owner_binned.visible_rects());
+    for (id, rect) in rects {
+        if !moving[id as usize] {
+            continue;
+        }
+        for ty in rect[1]..rect[3] {
+            for tx in rect[0]..rect[2] {
+                shared_tiles[ty as usize * gx + tx as usize] = false;
             }
         }
     }
-    let (owner_buf, owner_used) = blend_tiles(&binned[owner], None);
+    let skip = (outputs == SharedOutputs::OwnerLists).then_some(&shared_tiles[..]);
+    let mut binned: Vec<_> = projected
+        .into_iter()
+        .zip(renders)
+        .map(|(p, splats)| p.map(|p| p.bin(camera, &Inputs::from(splats), skip)))
+        .collect();
+    let (owner_buf, owner_used) = blend_tiles(&owner_binned, None);
     let mut buffers: Vec<_> = binned
         .iter()
-        .enumerate()
-        .map(|(r, b)| {
-            (r != owner).then(|| {
+        .map(|b| {
+            b.as_ref().map(|b| {
                 let reused = ReusedTiles {
                     reuse: &shared_tiles,
                     tile_buf: &owner_buf,
@@ -91,12 +126,14 @@ pub fn render_cov_shared<T: Real>(
         })
         .collect();
     buffers[owner] = Some((owner_buf, owner_used));
+    binned[owner] = Some(owner_binned);
+    // Every entry is `Some` now: the owner's was just put back.
     let outputs = binned
         .into_iter()
         .zip(buffers)
-        .map(|(b, buf)| {
+        .filter_map(|(b, buf)| {
             let (tile_buf, used) = buf.unwrap_or_default();
-            b.into_output(tile_buf, used)
+            b.map(|b| b.into_output(tile_buf, used))
         })
         .collect();
     Ok(SharedRenders {

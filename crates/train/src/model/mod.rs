@@ -31,7 +31,7 @@ pub use config::ModelConfig;
 use gaussians::GaussianSet;
 use rasterize_cpu::{
     render_cov, render_cov_backward, render_cov_shared, render_cov_shared_backward, Camera,
-    Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, TileSharing,
+    Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, SharedOutputs, TileSharing,
 };
 use smpl_deform::deform_net::{NonRigidNet, SkinningField};
 use smpl_deform::math::Affine;
@@ -131,6 +131,10 @@ pub struct PassPlan {
     pub reposed: bool,
     /// Blend the tiles only static Gaussians reach once for every pass.
     pub share_static_tiles: bool,
+    /// With `share_static_tiles`: the passes are differentiated only together
+    /// ([`Model::shared_render_backward`]), so the shared tiles are binned by the reference pass
+    /// alone (`rasterize_cpu::SharedOutputs::OwnerLists`); a pass's own backward is then refused.
+    pub joint_backward_only: bool,
 }
 
 /// One frame's passes, and the tiles they share when rendered together.
@@ -476,7 +480,12 @@ impl Model {
         // Gaussian on the image).
         let one_camera = cameras.iter().all(|c| c.raster == camera.raster);
         if plan.share_static_tiles && posed.len() > 1 && one_camera {
-            return self.rasterize_shared(camera.raster, posed, reference);
+            let outputs = if plan.joint_backward_only {
+                SharedOutputs::OwnerLists
+            } else {
+                SharedOutputs::Complete
+            };
+            return self.rasterize_shared(camera.raster, posed, reference, outputs);
         }
         let passes = posed
             .into_iter()
@@ -538,6 +547,7 @@ impl Model {
         camera: &'a Camera,
         posed: Vec<PosedPass<'a>>,
         owner: usize,
+        outputs: SharedOutputs,
     ) -> Result<ExposurePasses<'a>, TrainError> {
         let t0 = Instant::now();
         let mut moving = vec![false; self.set.len()];
@@ -550,7 +560,8 @@ impl Model {
             .iter()
             .map(|p| splats(self, &p.posed, &p.channels))
             .collect();
-        let renders = render_cov_shared(camera, &splats, &moving, owner, &self.render_settings())?;
+        let settings = self.render_settings();
+        let renders = render_cov_shared(camera, &splats, &moving, owner, &settings, outputs)?;
         let seconds = t0.elapsed().as_secs_f64() / posed.len() as f64;
         let passes = posed
             .into_iter()

@@ -10,7 +10,8 @@ use super::terms::{
 };
 use super::{add_to, all_finite, StageTimes, StepReport, Trainer};
 use crate::config::{
-    BlurModel, DensityGradient, EventPairs, ExposureNetworks, ExposurePairs, TrainConfig,
+    BlurModel, DensityGradient, EventPairs, ExposureNetworks, ExposurePairs, FlowGradient,
+    TrainConfig,
 };
 use crate::data::TrainingData;
 use crate::density::{add_ndc_norms, StepStatistics};
@@ -553,6 +554,7 @@ fn frame_passes<'a>(
     let plan = PassPlan {
         reposed: poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once,
         share_static_tiles: config.share_static_tiles && !config.camera_correction,
+        joint_backward_only: joint_backward_only(config),
     };
     let ExposurePasses { passes, sharing } =
         model.forward_passes(&cameras, &poses, mid, model.latent(slot), plan)?;
@@ -566,6 +568,14 @@ fn frame_passes<'a>(
         reposed: plan.reposed,
         sharing,
     })
+}
+
+/// Whether an exposure's passes are differentiated only together ([`Model::shared_render_backward`]
+/// in `passes_backward`): not when each pass's own screen-space gradients are kept (per-pass
+/// density statistics) or the flow loss's geometric cotangent needs the mid pass's own backward.
+fn joint_backward_only(config: &TrainConfig) -> bool {
+    config.density_gradient != DensityGradient::PerPass
+        && !(config.flow_loss && config.flow_gradient == FlowGradient::Geometry)
 }
 
 /// The photometric loss of the passes' mean (its cotangent reaches every pass scaled by 1/S) with

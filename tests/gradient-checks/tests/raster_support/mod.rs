@@ -15,7 +15,8 @@ pub use rand::Rng;
 pub use rasterize_cpu::{
     camera_pose_gradient, render, render_backward, render_cov, render_cov_backward,
     render_cov_shared, render_cov_shared_backward, render_sh, render_sh_backward, Camera,
-    CameraError, Cotangents, CovSplats, RasterError, RenderSettings, ShSplats, Splats,
+    CameraError, Cotangents, CovSplats, RasterError, RenderSettings, ShSplats, SharedOutputs,
+    Splats,
 };
 pub use train::pose::camera_correction::{
     corrected_world_to_camera, correction_backward, exp_so3, twist_backward,
