@@ -62,11 +62,38 @@ struct Audit {
     capped: [f64; 4],
     /// The event term on [static, moving] pixels.
     by_motion: [f64; 2],
+    /// The bound event term on k×k blocks for k in [`POOLS`]: each block's mean change held to
+    /// the mean of its pixels' bounds, [uncapped, capped at τ = C].
+    pooled: [[f64; 2]; 3],
+    /// The squared event term (mean change − mean C·E)² on 1×1 and the [`POOLS`] blocks
+    /// (NaN-expected pixels left out), uncapped.
+    pooled_squared: [f64; 4],
+}
+
+/// Block sides of the pooled event term.
+const POOLS: [usize; 3] = [2, 4, 8];
+
+/// The interval `[low, high]` the bound penalty holds a pixel's change to (overshoot free, so a
+/// count bounds one side only); NaN-expected pixels are free.
+fn bound_interval(expected: f64, c_pos: f64, c_neg: f64, margin: f64, zone: f64) -> (f64, f64) {
+    if expected.is_nan() {
+        (f64::NEG_INFINITY, f64::INFINITY)
+    } else if expected > 0.0 {
+        (expected - margin * c_pos, f64::INFINITY)
+    } else if expected < 0.0 {
+        (f64::NEG_INFINITY, expected + margin * c_neg)
+    } else {
+        (-zone * 0.5 * (c_pos + c_neg), zone * 0.5 * (c_pos + c_neg))
+    }
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: loss_audit DATA S [dead_zone margin] CHECKPOINT...";
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let usage = "usage: loss_audit [--true-poses] DATA S [dead_zone margin] CHECKPOINT...";
+    // The generator's own sub-frame poses instead of the ones interpolated from the frames' (a
+    // synthetic benchmark only): how much of the event term is the in-exposure motion's error.
+    let true_poses = args.iter().any(|a| a == "--true-poses");
+    args.retain(|a| a != "--true-poses");
     let (Some(dir), Some(s)) = (args.first(), args.get(1)) else {
         return Err(usage.into());
     };
@@ -82,15 +109,42 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let data = load_dataset(&PathBuf::from(dir))?;
+    // The scene's defaults, as `cargo xtask reconstruct` takes them: its thresholds, and a pixel
+    // with both polarities held to its net count on a sensor without a refractory period.
+    if let Some(c) = data.recorded_positive("event_threshold") {
+        config.event_threshold = c as f32;
+    }
+    config.event_threshold_neg = data
+        .recorded_positive("event_threshold_neg")
+        .map(|c| c as f32);
+    config.event_ignore_mixed = data.recorded("refractory_us") != Some(0.0);
     let body = data.body()?;
     let mut blurred = TrainingData::new(&data, body.clone(), 0)?;
     blurred.enable_exposure(&data, subframes)?;
     blurred.enable_exposure_events(&data, &config)?;
+    if true_poses {
+        use_true_sub_frame_poses(&data, &mut blurred, subframes)?;
+    }
     let mut sharp = TrainingData::new(&data, body, 0)?;
     sharp.use_sharp_images(&data)?;
     println!(
-        "S = {subframes}, dead zone {}, margin {}",
-        config.event_dead_zone, config.event_bound_margin
+        "{} sub-frame poses",
+        if true_poses {
+            "the generator's"
+        } else {
+            "interpolated"
+        }
+    );
+    println!(
+        "S = {subframes}, dead zone {}, margin {}, C+ {}, mixed pixels {}",
+        config.event_dead_zone,
+        config.event_bound_margin,
+        config.event_threshold,
+        if config.event_ignore_mixed {
+            "free"
+        } else {
+            "held to their counts"
+        }
     );
     for checkpoint in rest {
         let audit = audit(checkpoint, &data, &blurred, &sharp, &config)?;
@@ -123,12 +177,55 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             audit.by_motion[0] / k,
             audit.by_motion[1] / k
         );
+        let pooled = audit.pooled.map(|v| v.map(|x| x / k));
+        println!("  events pooled on {POOLS:?} blocks [uncapped, capped at C]: {pooled:.6?}");
+        let sq = audit.pooled_squared.map(|v| v / k);
+        println!("  squared event term on 1, {POOLS:?} blocks: {sq:.6?}");
         let capped = audit.capped.map(|v| v / k);
         println!(
             "  events with r capped at {CAPS:?}: {capped:.6?}; without the pixels of both \
              polarities {:.6}",
             (audit.events - audit.by_pixel[3]) / k
         );
+    }
+    Ok(())
+}
+
+/// Replaces the sub-exposure poses of every training frame by the generator's own poses at those
+/// times (the scene's `generator.config` read as the synthetic benchmark's settings).
+fn use_true_sub_frame_poses(
+    data: &Dataset,
+    blurred: &mut TrainingData,
+    subframes: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let config = data
+        .scene
+        .generator
+        .as_ref()
+        .and_then(|g| g.get("config"))
+        .ok_or("--true-poses: the scene records no generator config")?;
+    let cfg: synth::SynthConfig = serde_json::from_value(config.clone())?;
+    let body =
+        synth::body::DressedBody::new(smpl_deform::BodyModel::builtin_makehuman()?, vec![0.0; 10])?;
+    let motion = synth::generate::benchmark_motion(&cfg, &body)?;
+    let training = data
+        .frames
+        .iter()
+        .filter(|f| f.split == scene::Split::Train);
+    for (slot, frame) in training.enumerate() {
+        let times = subframe_times(frame.time_s, frame.exposure_s, subframes);
+        blurred.exposure_poses[slot] = times
+            .iter()
+            .map(|&t| {
+                let (pose, transl) = motion.at(t);
+                let params = smpl_deform::SmplParams {
+                    pose,
+                    betas: vec![],
+                    transl,
+                };
+                blurred.body.given(&params)
+            })
+            .collect::<Result<_, _>>()?;
     }
     Ok(())
 }
@@ -180,6 +277,7 @@ fn audit(
             penalty,
             log_eps: config.event_log_eps,
             all_pairs: false,
+            pool: 1,
             modulation: blurred.exposure_modulation(slot)?,
         };
         let shape = ImageShape {
@@ -231,6 +329,70 @@ fn audit(
             let window = stream.window(us(times[pair]), us(times[pair + 1]));
             let two = events::count_frame(&window, sensor, events::CountMode::TwoChannel);
             let (first, second) = (renders[pair], renders[pair + 1]);
+            let mut intervals = Vec::with_capacity(hw);
+            for i in 0..hw {
+                let (ya, yb) = (luma(first, i), luma(second, i));
+                let change = (yb + eps).ln() - (ya + eps).ln();
+                let (low, high) = bound_interval(
+                    f64::from(count[i]),
+                    f64::from(config.event_threshold),
+                    f64::from(config.event_threshold_neg.unwrap_or(config.event_threshold)),
+                    f64::from(config.event_bound_margin),
+                    f64::from(config.event_dead_zone),
+                );
+                intervals.push((change, low, high));
+            }
+            for (sq, k) in a
+                .pooled_squared
+                .iter_mut()
+                .zip([1].into_iter().chain(POOLS))
+            {
+                for by in (0..h).step_by(k) {
+                    for bx in (0..w).step_by(k) {
+                        let (mut d, mut m) = (0.0, 0.0);
+                        for y in by..(by + k).min(h) {
+                            for x in bx..(bx + k).min(w) {
+                                let e = f64::from(count[y * w + x]);
+                                if e.is_nan() {
+                                    continue;
+                                }
+                                d += intervals[y * w + x].0 - e;
+                                m += 1.0;
+                            }
+                        }
+                        if m > 0.0 {
+                            *sq += d * d / m / hw as f64;
+                        }
+                    }
+                }
+            }
+            let tau = f64::from(config.event_threshold);
+            for (pooled, k) in a.pooled.iter_mut().zip(POOLS) {
+                for by in (0..h).step_by(k) {
+                    for bx in (0..w).step_by(k) {
+                        let (mut c, mut lo, mut hi, mut m) = (0.0, 0.0, 0.0, 0.0);
+                        for y in by..(by + k).min(h) {
+                            for x in bx..(bx + k).min(w) {
+                                let (ci, li, hi_) = intervals[y * w + x];
+                                c += ci;
+                                lo += li;
+                                hi += hi_;
+                                m += 1.0;
+                            }
+                        }
+                        let (c, lo, hi) = (c / m, lo / m, hi / m);
+                        let r = if c < lo {
+                            c - lo
+                        } else if c > hi {
+                            c - hi
+                        } else {
+                            0.0
+                        };
+                        pooled[0] += m * r * r / hw as f64;
+                        pooled[1] += m * (r * r).min(tau * tau) / hw as f64;
+                    }
+                }
+            }
             for i in 0..hw {
                 let (ya, yb) = (luma(first, i), luma(second, i));
                 let change = (yb + eps).ln() - (ya + eps).ln();

@@ -13,7 +13,9 @@
 
 use gradient_checks::{central_differences, compare, GradientChecker, Tolerance};
 use proptest::prelude::*;
-use train::loss::event::{pair_event_loss_with, EventPenalty, UNCONSTRAINED};
+use train::loss::event::{
+    pair_event_loss_pooled, pair_event_loss_with, EventPenalty, UNCONSTRAINED,
+};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;
@@ -130,6 +132,38 @@ proptest! {
                 }
             }
         }
+        checker.finish();
+    }
+
+    /// The squared penalty pooled on blocks (`pair_event_loss_pooled`) on a 6 × 4 image, blocks
+    /// of 2 and 3 pixels (the last column of 3-blocks is partial), about a fifth of the pixels
+    /// unconstrained: the gradient against central differences, failing when negated and when
+    /// the per-pixel penalty's gradient stands in for it. Same tolerance as above (the loss is a
+    /// smooth square of a mean of logs).
+    #[test]
+    fn pooled_event_loss_gradient_matches(
+        images in prop::collection::vec(0.05f64..1.0, 2 * 3 * N),
+        counts in prop::collection::vec(-3i32..4, N),
+        block in 2usize..4,
+        silent in prop::collection::vec(prop::bool::weighted(0.2), N),
+    ) {
+        let expected: Vec<f64> = counts
+            .iter()
+            .zip(&silent)
+            .map(|(&c, &s)| if s { f64::from(UNCONSTRAINED) } else { 0.2 * f64::from(c) })
+            .collect();
+        let width = 6;
+        let loss = |x: &[f64]| pair_event_loss_pooled(&x[..3 * N], &x[3 * N..], &expected, 1e-3, width, block);
+        let out = loss(&images);
+        let analytic: Vec<f64> = out.d_first.iter().chain(&out.d_second).copied().collect();
+        let numeric = central_differences(|x| loss(x).loss, &images, H);
+        let mut checker = GradientChecker::new();
+        checker.check(&format!("pooled event loss, {block} x {block} blocks"), &numeric, &analytic, TOL);
+        let neg: Vec<f64> = analytic.iter().map(|a| -a).collect();
+        prop_assert!(!compare("negated", &numeric, &neg, TOL).passed());
+        let per_pixel = pair_event_loss_with(&images[..3 * N], &images[3 * N..], &expected, 1e-3, EventPenalty::Squared);
+        let other: Vec<f64> = per_pixel.d_first.iter().chain(&per_pixel.d_second).copied().collect();
+        prop_assert!(!compare("per pixel for pooled", &numeric, &other, TOL).passed());
         checker.finish();
     }
 }

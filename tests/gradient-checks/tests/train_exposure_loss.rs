@@ -65,6 +65,7 @@ fn value(
             penalty,
             log_eps: 1e-3,
             all_pairs,
+            pool: 1,
             modulation,
         }),
         PLANES,

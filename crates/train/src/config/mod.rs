@@ -337,9 +337,7 @@ training_options! {
     /// (the default: a count is a lower bound on the change with the events' sign, as on a sensor
     /// with a refractory period; no events, a change within the dead zone) or `squared` ((ΔL −
     /// C·E)², EventNeRF / E-NeRF and the paper's event loss: every crossing fired; the default
-    /// before 2026-11-27, with `--event-weight 0.3`). On the default benchmark's 1 ms sensor,
-    /// `quick`: 34.17 / 29.74 dB (full frame / human box) against 33.38 / 28.91 for the squared
-    /// penalty (`docs/BENCHMARKS.md`).
+    /// before 2026-11-27, with `--event-weight 0.3`; `docs/BENCHMARKS.md`).
     event_penalty: EventPenaltyKind = EventPenaltyKind::Bound,
     /// m of the `bound` penalty: a count of n events bounds the change by (n − m) thresholds.
     event_bound_margin: f32 = 0.5,
@@ -361,6 +359,9 @@ training_options! {
     /// the default benchmark / with ideal events (`docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_residual_cap_huber: bool = false,
+    /// With `event_penalty = squared` between sub-exposure renders: the side of the pixel blocks
+    /// whose mean change is held to their mean C·E (`loss::event::pair_event_loss_pooled`); 1: per pixel.
+    event_pool: u32 = 1,
     /// A pixel that fired events of both polarities within an interval says nothing about its net
     /// change there: on a sensor with a refractory period, texture crossing the pixel both ways
     /// drops crossings of either sign, so the net count's sign and size are arbitrary. On: such a

@@ -96,6 +96,19 @@ impl TrainConfig {
             1.0,
         )?;
         non_negative("event_residual_cap", self.event_residual_cap)?;
+        if !(1..=16).contains(&self.event_pool) {
+            return bad("event_pool", "must be a block side of 1 to 16 pixels");
+        }
+        if self.event_pool > 1
+            && (self.event_penalty != super::EventPenaltyKind::Squared
+                || self.event_pairs != super::EventPairs::Exposure)
+        {
+            return bad(
+                "event_pool",
+                "pools the squared penalty between sub-exposure renders: needs \
+                 `event_penalty = squared` and `event_pairs = exposure`",
+            );
+        }
         if !(self.event_log_eps > 0.0 && self.event_log_eps.is_finite()) {
             return bad("event_log_eps", "must be a finite number > 0");
         }

@@ -14,7 +14,7 @@
 //! one render, so the single-render model is the S = 1 case bit for bit); each event pair —
 //! consecutive renders, or every pair — adds its weighted cotangents to its two renders.
 
-use crate::loss::event::{pair_event_loss_with, EventPenalty};
+use crate::loss::event::{pair_event_loss_pooled, pair_event_loss_with, EventPenalty};
 use crate::loss::image::{l1, ssim, ImageShape};
 use nn::Real;
 use rayon::prelude::*;
@@ -34,6 +34,9 @@ pub struct ExposureEvents<'a, T> {
     /// Every pair of renders (s < s′, against the summed counts of the consecutive intervals
     /// between them, when all of them are covered) instead of consecutive ones.
     pub all_pairs: bool,
+    /// Side of the pixel blocks the squared penalty pools (`train::loss::event::
+    /// pair_event_loss_pooled`); 1: per pixel, with any penalty.
+    pub pool: usize,
     /// Per render s, the events' modulation M_s of its slice of the exposure (H × W: the mean over
     /// the slice of exp(E(t_s → t))), or `None` (M_s = 1, e.g. a slice no events file covers);
     /// empty: no modulation. The prediction is then the mean of (r_s + ε)·M_s − ε, every channel
@@ -137,13 +140,24 @@ pub fn exposure_loss<T: Real>(
             .par_iter()
             .map(|&(s, s2)| {
                 let expected = interval_counts(events.expected, s, s2)?;
-                let el = pair_event_loss_with(
-                    renders[s],
-                    renders[s2],
-                    &expected,
-                    events.log_eps,
-                    events.penalty,
-                );
+                let el = if events.pool > 1 {
+                    pair_event_loss_pooled(
+                        renders[s],
+                        renders[s2],
+                        &expected,
+                        events.log_eps,
+                        shape.width,
+                        events.pool,
+                    )
+                } else {
+                    pair_event_loss_with(
+                        renders[s],
+                        renders[s2],
+                        &expected,
+                        events.log_eps,
+                        events.penalty,
+                    )
+                };
                 Some((s, s2, el))
             })
             .collect();

@@ -611,6 +611,7 @@ fn frame_losses(
             penalty: config.event_penalty(),
             log_eps: config.event_log_eps,
             all_pairs: config.exposure_pairs == ExposurePairs::All,
+            pool: config.event_pool as usize,
             modulation: if modulated {
                 data.exposure_modulation(slot)?
             } else {
