@@ -430,3 +430,75 @@ fn a_colmap_model_of_turned_cameras_imports_them_within_1e_9() {
         }
     }
 }
+
+/// An EasyMocap `smpl/` folder of the fixture's 15 frames with people 4 and 9 in every frame and
+/// person 2 in five: without `--person` the scene holds people 4 and 9 (format 3, each posed in
+/// every frame, person 2 named in a note) and `reconstruct` refuses it naming them; `--person 9`
+/// makes a one-person scene of person 9.
+#[test]
+fn an_easymocap_folder_of_several_people_imports_every_person_seen_throughout() {
+    let dir = tempfile::tempdir().unwrap();
+    let smpl = dir.path().join("smpl");
+    std::fs::create_dir(&smpl).unwrap();
+    let tiny = common::tiny();
+    for (k, f) in tiny.frames.iter().enumerate() {
+        let flat: Vec<f32> = f.pose.iter().flatten().copied().collect();
+        let person = |id: i64, dx: f32| {
+            serde_json::json!({
+                "id": id,
+                "Rh": [[0.0, 0.0, 0.0]],
+                "Th": [[f.transl[0] + dx, f.transl[1], f.transl[2]]],
+                "poses": [flat],
+                "shapes": [vec![0.1 * id as f32; 10]],
+            })
+        };
+        let mut people = vec![person(4, 0.0), person(9, 0.6)];
+        if k < 5 {
+            people.push(person(2, -0.6));
+        }
+        let text = serde_json::Value::Array(people).to_string();
+        std::fs::write(smpl.join(format!("{k:06}.json")), text).unwrap();
+    }
+    let out = dir.path().join("two");
+    let o = import(&out, &smpl, &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("person 2 is in 5 of the frames"), "{err}");
+    assert!(err.contains("2 people in every frame (ids 4, 9)"), "{err}");
+    let s = scene::load(&out).unwrap();
+    assert_eq!(s.format_version, 3);
+    assert_eq!(s.body.id, 4);
+    assert_eq!(s.people.len(), 1);
+    assert_eq!(s.people[0].id, 9);
+    assert_eq!(s.people[0].betas, vec![0.1f32 * 9.0; 10]);
+    for (f, given) in s.frames.iter().zip(&tiny.frames) {
+        assert_eq!(f.people.len(), 1, "frame {}", f.index);
+        assert_eq!(f.people[0].id, 9);
+        let dx = f.people[0].transl[0] - f.transl[0];
+        assert!((dx - 0.6).abs() < 1e-5, "frame {}: {dx}", f.index);
+        assert_eq!(f.people[0].pose[5], f.pose[5], "frame {}", f.index);
+        assert!(given.people.is_empty());
+    }
+    // The model reconstructs one person: the scene is refused, naming its people.
+    let run = dir.path().join("run");
+    let r = xtask()
+        .args(["reconstruct", "--data"])
+        .arg(&out)
+        .arg("--out")
+        .arg(&run)
+        .arg("--config")
+        .arg(tiny_config(dir.path()))
+        .output()
+        .unwrap();
+    let msg = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success());
+    assert!(msg.contains("2 people") && msg.contains("[4, 9]"), "{msg}");
+    // `--person 9` keeps one person: the scene of before.
+    let one = dir.path().join("one");
+    let o = import(&one, &smpl, &["--person", "9"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = scene::load(&one).unwrap();
+    assert!(s.people.is_empty() && s.frames.iter().all(|f| f.people.is_empty()));
+    assert_eq!(s.body.id, 0);
+    assert_eq!(s.body.betas, vec![0.1f32 * 9.0; 10]);
+}

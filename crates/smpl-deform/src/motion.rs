@@ -34,7 +34,7 @@ use crate::npz::NpzReader;
 use crate::skeleton::NUM_JOINTS;
 
 mod easymocap;
-pub use easymocap::read_easymocap;
+pub use easymocap::{read_easymocap, read_easymocap_people, EasyMocapPeople};
 
 /// Upper bound on the frames of one motion file (a 120 fps capture of about 2.3 hours).
 pub const MAX_MOTION_FRAMES: u64 = 1 << 20;
@@ -598,6 +598,29 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("000000.json") && e.contains("id 7"), "{e}");
+    }
+
+    #[test]
+    fn easymocap_people_are_those_in_every_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let person = |id: i64, x: f64| serde_json::json!({"id": id, "Rh": [[0.0, 0.0, 0.0]], "Th": [[x, 0.0, 0.0]], "poses": [vec![0.0; 72]]});
+        let frames = [
+            serde_json::json!([person(5, 1.0), person(3, 0.0), person(1, 2.0)]),
+            serde_json::json!([person(1, 2.5), person(5, 1.5)]),
+        ];
+        for (k, frame) in frames.iter().enumerate() {
+            std::fs::write(dir.path().join(format!("{k:06}.json")), frame.to_string()).unwrap();
+        }
+        let found = read_easymocap_people(dir.path(), [0.0; 3]).unwrap();
+        let ids: Vec<i64> = found.people.iter().map(|(id, _)| *id).collect();
+        assert_eq!(
+            ids,
+            [5, 1],
+            "the first frame's order, people of every frame only"
+        );
+        assert_eq!(found.partial, [(3, 1)]);
+        assert_eq!(found.people[1].1.transl[1][0], 2.5);
+        assert_eq!(found.people[0].1.len(), 2);
     }
 
     #[test]

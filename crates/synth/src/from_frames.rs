@@ -78,6 +78,9 @@ pub struct InputFrame {
     pub pose: Vec<[f32; 3]>,
     /// SMPL translation (metres, camera's world frame).
     pub transl: [f32; 3],
+    /// The other people's poses at this frame, in the order of `write_scene_from_frames`'s
+    /// `people` (empty with one person).
+    pub people: Vec<scene::PersonPose>,
     /// The camera's pose at this frame when the camera moves (`world_to_camera`, rigid 4×4);
     /// `None` = the scene camera's. A written frame takes the pose of the input frame at the
     /// middle of its blur window.
@@ -162,13 +165,15 @@ fn input_time_us(i: usize, fps: f64) -> i64 {
 /// Writes a scene to `out` from `count` input frames, loading frame `i` with `load(i)` in order
 /// (each exactly once) and calling `progress(i)` after each. With `cfg.in_between = M > 0`,
 /// `between` makes the M frames at `t = m / (M + 1)` between consecutive frames ([`Between`]);
-/// they join the events and, inside a window, its mean. `camera` and `body` go into
-/// `scene.json` as given; `generator` is recorded there. Returns what was written; the scene is
+/// they join the events and, inside a window, its mean. `camera`, `body` and the further
+/// `people` (format 3; each frame's `InputFrame::people` poses them) go into `scene.json` as given;
+/// `generator` is recorded there. Returns what was written; the scene is
 /// validated by [`scene::load`] before returning.
 pub fn write_scene_from_frames(
     out: &Path,
     camera: Camera,
     body: BodySpec,
+    people: &[scene::PersonSpec],
     count: usize,
     cfg: &FramesToScene,
     generator: serde_json::Value,
@@ -264,7 +269,7 @@ pub fn write_scene_from_frames(
         samples += 1;
         if slot == half {
             let mut f = Frame {
-                people: Vec::new(),
+                people: frame.people.clone(),
                 person_ids: None,
                 index: j as u32,
                 time_s: time_of(j) as f64 * 1e-6,
@@ -315,7 +320,7 @@ pub fn write_scene_from_frames(
         splitter.finish(&mut report)?;
     }
     let mut scene = Scene {
-        people: Vec::new(),
+        people: people.to_vec(),
         format_version: scene::FORMAT_VERSION,
         camera,
         body,

@@ -72,6 +72,59 @@ fn one_row<'a>(
 /// `person` (default: the first person of the first file), converting to SMPL's root convention with
 /// `root_rest`, the body's rest position of joint 0 (metres; see the module docs).
 pub fn read_easymocap(dir: &Path, root_rest: [f64; 3], person: Option<i64>) -> Result<Motion> {
+    let frames = read_frames(dir)?;
+    let id = match person {
+        Some(id) => id,
+        None => frames
+            .first()
+            .and_then(|(_, f)| f.first())
+            .map_or(0, |p| p.id),
+    };
+    person_motion(&frames, id, DVec3::from_array(root_rest))
+}
+
+/// Everyone an EasyMocap folder follows through all of its frames.
+#[derive(Clone, Debug)]
+pub struct EasyMocapPeople {
+    /// Each person seen in every frame (by `id`, in the first frame's order) with its motion.
+    pub people: Vec<(i64, Motion)>,
+    /// The people seen in some frames only: `(id, frames that show it)`, by id.
+    pub partial: Vec<(i64, usize)>,
+}
+
+/// Reads an EasyMocap `smpl/` folder for every person it follows through all of its frames, as
+/// [`read_easymocap`] reads one.
+pub fn read_easymocap_people(dir: &Path, root_rest: [f64; 3]) -> Result<EasyMocapPeople> {
+    let frames = read_frames(dir)?;
+    let mut seen: std::collections::BTreeMap<i64, usize> = std::collections::BTreeMap::new();
+    for (_, people) in &frames {
+        let ids: std::collections::BTreeSet<i64> = people.iter().map(|p| p.id).collect();
+        for id in ids {
+            *seen.entry(id).or_default() += 1;
+        }
+    }
+    let everywhere = |id: &i64| seen.get(id) == Some(&frames.len());
+    let mut ids: Vec<i64> = Vec::new();
+    for p in frames.first().map_or(&[][..], |(_, f)| f) {
+        if everywhere(&p.id) && !ids.contains(&p.id) {
+            ids.push(p.id);
+        }
+    }
+    let j0 = DVec3::from_array(root_rest);
+    let people = ids
+        .iter()
+        .map(|&id| Ok((id, person_motion(&frames, id, j0)?)))
+        .collect::<Result<Vec<_>>>()?;
+    let partial = seen
+        .iter()
+        .filter(|&(_, &count)| count < frames.len())
+        .map(|(&id, &count)| (id, count))
+        .collect();
+    Ok(EasyMocapPeople { people, partial })
+}
+
+/// Every frame file of `dir` (`*.json`, in name order), parsed.
+fn read_frames(dir: &Path) -> Result<Vec<(std::path::PathBuf, Vec<EasyMocapPerson>)>> {
     let io = |source| SmplDeformError::Io {
         path: dir.to_path_buf(),
         source,
@@ -95,39 +148,50 @@ pub fn read_easymocap(dir: &Path, root_rest: [f64; 3], person: Option<i64>) -> R
             ),
         ));
     }
-    let j0 = DVec3::from_array(root_rest);
-    let (mut poses, mut transl) = (
-        Vec::with_capacity(files.len()),
-        Vec::with_capacity(files.len()),
-    );
-    let mut betas = None;
-    let mut wanted = person;
-    for path in &files {
+    let mut frames = Vec::with_capacity(files.len());
+    for path in files {
         let file_io = |source| SmplDeformError::Io {
             path: path.clone(),
             source,
         };
-        let size = std::fs::metadata(path).map_err(file_io)?.len();
+        let size = std::fs::metadata(&path).map_err(file_io)?.len();
         if size > MAX_JSON_BYTES {
             return Err(json_err(
-                path,
+                &path,
                 "<file>",
                 format!("{size} bytes, more than {MAX_JSON_BYTES}"),
             ));
         }
-        let text = std::fs::read_to_string(path).map_err(file_io)?;
+        let text = std::fs::read_to_string(&path).map_err(file_io)?;
         let people = match serde_json::from_str::<EasyMocapFrame>(&text) {
             Ok(EasyMocapFrame::People(p)) => p,
             Ok(EasyMocapFrame::One(p)) => vec![p],
             Err(e) => {
                 return Err(json_err(
-                    path,
+                    &path,
                     "<file>",
                     format!("not an EasyMocap SMPL file: {e}"),
                 ))
             }
         };
-        let id = *wanted.get_or_insert_with(|| people.first().map_or(0, |p| p.id));
+        frames.push((path, people));
+    }
+    Ok(frames)
+}
+
+/// Person `id`'s motion through `frames`, in SMPL's root convention (`j0` the rest root joint).
+fn person_motion(
+    frames: &[(std::path::PathBuf, Vec<EasyMocapPerson>)],
+    id: i64,
+    j0: DVec3,
+) -> Result<Motion> {
+    let (mut poses, mut transl) = (
+        Vec::with_capacity(frames.len()),
+        Vec::with_capacity(frames.len()),
+    );
+    let mut betas = None;
+    for (path, people) in frames {
+        let path = path.as_path();
         let Some(p) = people.iter().find(|p| p.id == id) else {
             return Err(json_err(path, "id", format!("no person with id {id}")));
         };

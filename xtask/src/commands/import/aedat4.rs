@@ -157,7 +157,15 @@ pub fn run(args: Args) -> Result<()> {
         list,
         times_us,
         betas,
+        id,
+        others,
+        ..
     } = read_poses(&person.poses, &body, person.person)?;
+    if !others.is_empty() {
+        eprintln!(
+            "note: `import aedat4` follows one person: person {id} (--person ID for another)"
+        );
+    }
     let poses = match times_us {
         Some(times) => poses_at_frames(&list, &times, &frames, &person.poses)?,
         None if list.len() != frames.len() => bail!(

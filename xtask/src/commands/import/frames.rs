@@ -178,11 +178,15 @@ pub fn run(args: Args) -> Result<()> {
     let images = image_files(&args.images, "frames")?;
     let masks = person.mask_files(images.len(), &args.images)?;
     let (body, model) = load_body(&person.body)?;
+    let read = read_poses(&person.poses, &body, person.person)?;
+    let (people, several) = (read.people(), !read.others.is_empty());
     let Poses {
         list: poses,
         times_us,
         betas,
-    } = read_poses(&person.poses, &body, person.person)?;
+        id,
+        ..
+    } = &read;
     if times_us.is_some() {
         bail!(
             "{}: poses with `t_us` are for recordings with their own clock (`import aedat4`); \
@@ -212,9 +216,10 @@ pub fn run(args: Args) -> Result<()> {
     cfg.check(images.len())?;
     check_out_is_free(&args.out)?;
     let spec = scene::BodySpec {
-        id: 0,
+        // The first person's id names it among several; one person keeps the default 0.
+        id: if several { *id } else { 0 },
         model,
-        betas: betas.unwrap_or_default(),
+        betas: betas.clone().unwrap_or_default(),
     };
     let generator = serde_json::json!({
         "name": "xtask import frames",
@@ -237,6 +242,7 @@ pub fn run(args: Args) -> Result<()> {
         &args.out,
         camera.clone(),
         spec,
+        &people,
         images.len(),
         &cfg,
         generator,
@@ -264,6 +270,7 @@ pub fn run(args: Args) -> Result<()> {
                 mask,
                 pose,
                 transl,
+                people: read.others_at(i),
                 world_to_camera: frame_cameras.as_ref().map(|c| c[i].world_to_camera),
             })
         },

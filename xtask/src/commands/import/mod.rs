@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Subcommand;
-use smpl_deform::motion::{read_easymocap, read_motion};
+use smpl_deform::motion::{read_easymocap, read_easymocap_people, read_motion};
 
 mod aedat4;
 mod frames;
@@ -37,7 +37,9 @@ pub struct PersonArgs {
     /// (µs): the pose at each frame's exposure midpoint is then interpolated (C¹ spline).
     #[arg(long)]
     pub poses: PathBuf,
-    /// With an EasyMocap folder: the `id` of the person to follow (default the first person).
+    /// With an EasyMocap folder: the `id` of the one person to follow (default: every person seen
+    /// in all frames — a scene with several people, format 3 — and the first one alone for
+    /// `import aedat4`).
     #[arg(long)]
     pub person: Option<i64>,
     /// The camera: the project's camera JSON, a scene's `scene.json`, or an INRIA `cameras.json`
@@ -226,6 +228,44 @@ pub(super) struct Poses {
     pub times_us: Option<Vec<i64>>,
     /// The file's shape parameters, when it has them.
     pub betas: Option<Vec<f32>>,
+    /// The first person's id (an EasyMocap folder's; 0 otherwise).
+    pub id: u32,
+    /// With an EasyMocap folder following several people and no `--person`: everyone after the
+    /// first, in the folder's order.
+    pub others: Vec<OtherPerson>,
+}
+
+/// A further person of an EasyMocap folder: its id, shape and pose in every frame.
+pub(super) struct OtherPerson {
+    pub id: u32,
+    pub betas: Vec<f32>,
+    pub list: Vec<Pose>,
+}
+
+impl Poses {
+    /// The scene's `people` entries and frame `i`'s poses of them (format 3; empty with one
+    /// person).
+    pub(super) fn people(&self) -> Vec<scene::PersonSpec> {
+        self.others
+            .iter()
+            .map(|o| scene::PersonSpec {
+                id: o.id,
+                betas: o.betas.clone(),
+            })
+            .collect()
+    }
+
+    /// Frame `i`'s poses of the people after the first.
+    pub(super) fn others_at(&self, i: usize) -> Vec<scene::PersonPose> {
+        self.others
+            .iter()
+            .map(|o| scene::PersonPose {
+                id: o.id,
+                pose: o.list[i].0.clone(),
+                transl: o.list[i].1,
+            })
+            .collect()
+    }
 }
 
 /// Reads `--poses` (see `import frames --help` for the layouts).
@@ -283,16 +323,15 @@ pub(super) fn read_poses(
             list: poses,
             times_us,
             betas: None,
+            id: 0,
+            others: Vec::new(),
         });
     }
+    if path.is_dir() && person.is_none() {
+        return read_easymocap_everyone(path, body);
+    }
     let motion = if path.is_dir() {
-        let shaped = body.shaped_vertices(&[])?;
-        let root = body
-            .rest_joints(&shaped)
-            .first()
-            .copied()
-            .unwrap_or([0.0; 3]);
-        read_easymocap(path, root.map(f64::from), person)
+        read_easymocap(path, rest_root(body)?, person)
     } else {
         read_motion(path)
     }
@@ -310,6 +349,91 @@ pub(super) fn read_poses(
         list: poses,
         times_us: None,
         betas: motion.betas,
+        id: person.map_or(Ok(0), |id| person_id(path, id))?,
+        others: Vec::new(),
+    })
+}
+
+/// The body's rest position of joint 0 (metres), EasyMocap's rotation centre.
+fn rest_root(body: &smpl_deform::BodyModel) -> Result<[f64; 3]> {
+    let shaped = body.shaped_vertices(&[])?;
+    let root = body
+        .rest_joints(&shaped)
+        .first()
+        .copied()
+        .unwrap_or([0.0; 3]);
+    Ok(root.map(f64::from))
+}
+
+/// An EasyMocap id as a scene's person id (a non-negative 32-bit number).
+fn person_id(path: &Path, id: i64) -> Result<u32> {
+    u32::try_from(id).with_context(|| {
+        format!(
+            "{}: person id {id}: a scene's person ids are 0 to {}",
+            path.display(),
+            u32::MAX
+        )
+    })
+}
+
+/// Every person an EasyMocap folder follows through all of its frames: the first as the scene's
+/// body, the others as its `people` (a note names anyone seen in some frames only).
+fn read_easymocap_everyone(path: &Path, body: &smpl_deform::BodyModel) -> Result<Poses> {
+    let found = read_easymocap_people(path, rest_root(body)?)
+        .with_context(|| format!("reading the poses {}", path.display()))?;
+    for (id, frames) in &found.partial {
+        eprintln!(
+            "note: {}: person {id} is in {frames} of the frames, not all: not imported \
+             (--person {id} to follow it alone)",
+            path.display()
+        );
+    }
+    let triples = |flat: &[f32]| flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let mut people = found.people.into_iter().map(|(id, motion)| {
+        let list: Vec<Pose> = motion
+            .poses
+            .iter()
+            .zip(&motion.transl)
+            .map(|(p, t)| (triples(p), *t))
+            .collect();
+        Ok::<_, anyhow::Error>((person_id(path, id)?, motion.betas, list))
+    });
+    let Some(first) = people.next() else {
+        bail!(
+            "{}: nobody is in every frame (--person ID to follow one person through its frames)",
+            path.display()
+        );
+    };
+    let (id, betas, list) = first?;
+    let others = people
+        .map(|p| {
+            let (id, betas, list) = p?;
+            Ok(OtherPerson {
+                id,
+                betas: betas.unwrap_or_default(),
+                list,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    if !others.is_empty() {
+        eprintln!(
+            "{}: {} people in every frame (ids {}): a scene with several people (--person ID \
+             to keep one)",
+            path.display(),
+            others.len() + 1,
+            std::iter::once(id)
+                .chain(others.iter().map(|o| o.id))
+                .map(|i| i.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(Poses {
+        list,
+        times_us: None,
+        betas,
+        id,
+        others,
     })
 }
 

@@ -219,6 +219,7 @@ pub fn run(args: Args) -> Result<()> {
         &args.out,
         camera.clone(),
         spec,
+        &[],
         chosen.len(),
         &cfg,
         generator,
@@ -259,6 +260,7 @@ pub fn run(args: Args) -> Result<()> {
                     .map(|c| [c[0], c[1], c[2]])
                     .collect(),
                 transl: fit.transl,
+                people: Vec::new(),
                 world_to_camera: None,
             })
         },
