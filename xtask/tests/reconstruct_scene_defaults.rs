@@ -1,6 +1,7 @@
 //! `cargo xtask reconstruct`'s defaults that depend on the scene, on edited copies of the tiny
 //! fixture: a scene without events trains the exposure model alone, and a sensor recorded without
-//! a refractory period holds mixed-polarity pixels to their counts unless the user says otherwise.
+//! a refractory period holds mixed-polarity pixels to their counts and bounds a count of n by n − 1
+//! thresholds unless the user says otherwise.
 #![allow(clippy::unwrap_used)]
 
 mod common;
@@ -44,8 +45,14 @@ fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
     let (stdout, used) = run("default", &[]);
     assert!(stdout.contains("no refractory period"), "{stdout}");
     assert!(used.contains("\"event_ignore_mixed\": false"), "{used}");
-    // The user's choice wins over the scene's default.
+    assert!(stdout.contains("n - 1"), "{stdout}");
+    assert!(used.contains("\"event_bound_margin\": 1.0"), "{used}");
+    // The user's choices win over the scene's defaults, each on its own.
     let (stdout, used) = run("chosen", &["--event-ignore-mixed", "on"]);
     assert!(!stdout.contains("no refractory period"), "{stdout}");
     assert!(used.contains("\"event_ignore_mixed\": true"), "{used}");
+    assert!(used.contains("\"event_bound_margin\": 1.0"), "{used}");
+    let (stdout, used) = run("margin", &["--event-bound-margin", "0.5"]);
+    assert!(!stdout.contains("n - 1"), "{stdout}");
+    assert!(used.contains("\"event_bound_margin\": 0.5"), "{used}");
 }

@@ -135,8 +135,8 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
 }
 
 /// The defaults that depend on the scene, for the settings the user left alone: the contrast
-/// thresholds its generator recorded, mixed-polarity pixels held to their counts when it recorded a
-/// sensor without a refractory period, and the event loss between sub-exposure renders and the
+/// thresholds its generator recorded, mixed-polarity pixels held to their counts and a bound margin
+/// of one threshold when it recorded a sensor without a refractory period, and the event loss between sub-exposure renders and the
 /// events' modulation of each render's slice when the blur model is `exposure` and every frame
 /// has events (a scene without events trains with the exposure
 /// model alone, and says so).
@@ -162,6 +162,15 @@ fn scene_defaults(
         println!(
             "events: the scene's sensor has no refractory period, so a pixel that fired both \
              polarities is held to its net count (--event-ignore-mixed on to leave it free)"
+        );
+    }
+    // Every crossing is reported there, and the pixel's reference level can sit anywhere in its
+    // threshold bin when an interval starts, so n events bound the change by n − 1 thresholds.
+    if data.recorded("refractory_us") == Some(0.0) && !training.sets("event_bound_margin")? {
+        config.event_bound_margin = 1.0;
+        println!(
+            "events: every crossing is reported, so n events bound a pixel's change by n - 1 \
+             thresholds (--event-bound-margin 1; give it to choose)"
         );
     }
     let with_events = data.scene.frames.iter().all(|f| f.events.is_some());

@@ -339,7 +339,8 @@ training_options! {
     /// C·E)², EventNeRF / E-NeRF and the paper's event loss: every crossing fired; the default
     /// before 2026-11-27, with `--event-weight 0.3`; `docs/BENCHMARKS.md`).
     event_penalty: EventPenaltyKind = EventPenaltyKind::Bound,
-    /// m of the `bound` penalty: a count of n events bounds the change by (n − m) thresholds.
+    /// m of the `bound` penalty: a count of n events bounds the change by (n − m) thresholds;
+    /// `reconstruct` takes 1 for a scene recorded without refractory period (`refractory_us = 0`).
     event_bound_margin: f32 = 0.5,
     /// z of the `bound` penalty: a pixel without events changes freely within ±z thresholds.
     event_dead_zone: f32 = 1.0,
@@ -359,8 +360,7 @@ training_options! {
     /// the default benchmark / with ideal events (`docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_residual_cap_huber: bool = false,
-    /// With `event_penalty = squared` between sub-exposure renders: the side of the pixel blocks
-    /// whose mean change is held to their mean C·E (`loss::event::pair_event_loss_pooled`); 1: per pixel.
+    /// With the squared penalty between sub-exposure renders: block side K of its K×K mean (1: per pixel).
     event_pool: u32 = 1,
     /// A pixel that fired events of both polarities within an interval says nothing about its net
     /// change there: on a sensor with a refractory period, texture crossing the pixel both ways
