@@ -194,17 +194,7 @@ pub fn pair_event_loss_with<T: Real>(
                 two * w * r * inv
             }
         };
-        // d/dY of log(max(Y, 0) + ε): 1/(Y + ε) above 0, 0 below (the clamp).
-        let ga = if ya > T::zero() {
-            -g / (ca + log_eps)
-        } else {
-            T::zero()
-        };
-        let gb = if yb > T::zero() {
-            g / (cb + log_eps)
-        } else {
-            T::zero()
-        };
+        let (ga, gb) = change_backward(g, (ya, yb), log_eps);
         for c in 0..3 {
             d_first[c * n + i] = ga * luma[c];
             d_second[c * n + i] = gb * luma[c];
@@ -215,6 +205,15 @@ pub fn pair_event_loss_with<T: Real>(
         d_first,
         d_second,
     }
+}
+
+/// ∂L/∂(Y_k, Y_k+1) of a pixel from g = ∂L/∂ΔL, ΔL = log(max(Y_k+1, 0) + ε) − log(max(Y_k, 0) + ε):
+/// ∓g/(Y + ε) above 0, 0 below (the clamp).
+fn change_backward<T: Real>(g: T, (ya, yb): (T, T), log_eps: T) -> (T, T) {
+    let zero = T::zero();
+    let ga = if ya > zero { -g / (ya + log_eps) } else { zero };
+    let gb = if yb > zero { g / (yb + log_eps) } else { zero };
+    (ga, gb)
 }
 
 /// The squared penalty on `block` × `block` pixel blocks of an image `width` pixels wide (the last
@@ -274,18 +273,7 @@ pub fn pair_event_loss_pooled<T: Real>(
     let mut d_first = vec![T::zero(); 3 * n];
     let mut d_second = vec![T::zero(); 3 * n];
     for i in 0..n {
-        let g = d_change[i];
-        // d/dY of log(max(Y, 0) + ε): 1/(Y + ε) above 0, 0 below (the clamp).
-        let ga = if grey(first, i) > T::zero() {
-            -g / (ya[i] + log_eps)
-        } else {
-            T::zero()
-        };
-        let gb = if grey(second, i) > T::zero() {
-            g / (yb[i] + log_eps)
-        } else {
-            T::zero()
-        };
+        let (ga, gb) = change_backward(d_change[i], (grey(first, i), grey(second, i)), log_eps);
         for c in 0..3 {
             d_first[c * n + i] = ga * luma[c];
             d_second[c * n + i] = gb * luma[c];
