@@ -163,21 +163,16 @@ pub fn pair_event_loss_with<T: Real>(
     penalty: EventPenalty,
 ) -> PairEventLoss<T> {
     let n = expected.len();
-    let luma = LUMA.map(T::of);
-    let grey =
-        |img: &[T], i: usize| luma[0] * img[i] + luma[1] * img[n + i] + luma[2] * img[2 * n + i];
+    let (ya, yb) = (clamped_luma(first, n), clamped_luma(second, n));
     let inv = T::one() / T::of(n.max(1) as f64);
     let two = T::of(2.0);
     // τ² rounded once from f64 (the truncated form's bits), and τ for the Huber form's pull.
     let cap = penalty.cap().map(|tau| (T::of(tau * tau), T::of(tau)));
     let huber = penalty.huber();
     let mut loss = T::zero();
-    let mut d_first = vec![T::zero(); 3 * n];
-    let mut d_second = vec![T::zero(); 3 * n];
+    let mut d_change = vec![T::zero(); n];
     for i in 0..n {
-        let (ya, yb) = (grey(first, i), grey(second, i));
-        let (ca, cb) = (ya.max(T::zero()), yb.max(T::zero()));
-        let change = (cb + log_eps).ln() - (ca + log_eps).ln();
+        let change = (yb[i] + log_eps).ln() - (ya[i] + log_eps).ln();
         let (r, w) = event_residual(change, expected[i], penalty);
         let g = match cap {
             Some((cap, tau)) if r * r > cap && huber => {
@@ -194,12 +189,9 @@ pub fn pair_event_loss_with<T: Real>(
                 two * w * r * inv
             }
         };
-        let (ga, gb) = change_backward(g, (ya, yb), log_eps);
-        for c in 0..3 {
-            d_first[c * n + i] = ga * luma[c];
-            d_second[c * n + i] = gb * luma[c];
-        }
+        d_change[i] = g;
     }
+    let (d_first, d_second) = renders_backward(&d_change, &ya, &yb, log_eps);
     PairEventLoss {
         loss,
         d_first,
@@ -207,13 +199,43 @@ pub fn pair_event_loss_with<T: Real>(
     }
 }
 
-/// ∂L/∂(Y_k, Y_k+1) of a pixel from g = ∂L/∂ΔL, ΔL = log(max(Y_k+1, 0) + ε) − log(max(Y_k, 0) + ε):
-/// ∓g/(Y + ε) above 0, 0 below (the clamp).
-fn change_backward<T: Real>(g: T, (ya, yb): (T, T), log_eps: T) -> (T, T) {
-    let zero = T::zero();
-    let ga = if ya > zero { -g / (ya + log_eps) } else { zero };
-    let gb = if yb > zero { g / (yb + log_eps) } else { zero };
-    (ga, gb)
+/// The Rec. 709 luma of a planar (3, H, W) render of `n` pixels, clamped at 0 (as the simulator
+/// reads it).
+fn clamped_luma<T: Real>(img: &[T], n: usize) -> Vec<T> {
+    let luma = LUMA.map(T::of);
+    (0..n)
+        .map(|i| {
+            (luma[0] * img[i] + luma[1] * img[n + i] + luma[2] * img[2 * n + i]).max(T::zero())
+        })
+        .collect()
+}
+
+/// ∂L/∂(render k, render k+1), planar (3, H, W), from `d_change` = ∂L/∂ΔL per pixel, ΔL =
+/// log(Y_k+1 + ε) − log(Y_k + ε) of the clamped lumas `ya`, `yb`: ∓g/(Y + ε) through the luma
+/// weights, 0 where the luma is clamped.
+fn renders_backward<T: Real>(d_change: &[T], ya: &[T], yb: &[T], log_eps: T) -> (Vec<T>, Vec<T>) {
+    let n = d_change.len();
+    let (luma, zero) = (LUMA.map(T::of), T::zero());
+    let mut d_first = vec![zero; 3 * n];
+    let mut d_second = vec![zero; 3 * n];
+    for i in 0..n {
+        let g = d_change[i];
+        let ga = if ya[i] > zero {
+            -g / (ya[i] + log_eps)
+        } else {
+            zero
+        };
+        let gb = if yb[i] > zero {
+            g / (yb[i] + log_eps)
+        } else {
+            zero
+        };
+        for c in 0..3 {
+            d_first[c * n + i] = ga * luma[c];
+            d_second[c * n + i] = gb * luma[c];
+        }
+    }
+    (d_first, d_second)
 }
 
 /// The squared penalty on `block` × `block` pixel blocks of an image `width` pixels wide (the last
@@ -237,11 +259,7 @@ pub fn pair_event_loss_pooled<T: Real>(
     }
     let n = expected.len();
     let height = n / width;
-    let luma = LUMA.map(T::of);
-    let grey =
-        |img: &[T], i: usize| luma[0] * img[i] + luma[1] * img[n + i] + luma[2] * img[2 * n + i];
-    let clamped = |img: &[T]| -> Vec<T> { (0..n).map(|i| grey(img, i).max(T::zero())).collect() };
-    let (ya, yb) = (clamped(first), clamped(second));
+    let (ya, yb) = (clamped_luma(first, n), clamped_luma(second, n));
     let inv = T::one() / T::of(n.max(1) as f64);
     let two = T::of(2.0);
     let mut loss = T::zero();
@@ -270,15 +288,7 @@ pub fn pair_event_loss_pooled<T: Real>(
             }
         }
     }
-    let mut d_first = vec![T::zero(); 3 * n];
-    let mut d_second = vec![T::zero(); 3 * n];
-    for i in 0..n {
-        let (ga, gb) = change_backward(d_change[i], (grey(first, i), grey(second, i)), log_eps);
-        for c in 0..3 {
-            d_first[c * n + i] = ga * luma[c];
-            d_second[c * n + i] = gb * luma[c];
-        }
-    }
+    let (d_first, d_second) = renders_backward(&d_change, &ya, &yb, log_eps);
     PairEventLoss {
         loss,
         d_first,

@@ -228,7 +228,8 @@ pub(super) struct Poses {
     pub times_us: Option<Vec<i64>>,
     /// The file's shape parameters, when it has them.
     pub betas: Option<Vec<f32>>,
-    /// The first person's id (an EasyMocap folder's; 0 otherwise).
+    /// The first person's EasyMocap id when the folder was read for everyone (0 otherwise); a
+    /// scene names it only among several people.
     pub id: u32,
     /// With an EasyMocap folder following several people and no `--person`: everyone after the
     /// first, in the folder's order.
@@ -349,7 +350,7 @@ pub(super) fn read_poses(
         list: poses,
         times_us: None,
         betas: motion.betas,
-        id: person.map_or(Ok(0), |id| person_id(path, id))?,
+        id: 0,
         others: Vec::new(),
     })
 }
