@@ -65,9 +65,16 @@ pub fn prepare_training_data(
 fn report_cameras(data: &train::data::Dataset, config: &TrainConfig) {
     if config.camera_correction {
         println!(
-            "camera correction: each training frame's camera and its motion over the exposure are              learned from step {} (rotation rate {}, shift rate {})",
+            "camera correction: each training frame's camera and its motion over the exposure are \
+             learned from step {} (rotation rate {}, shift rate {})",
             config.camera_correction_from, config.lr_camera_rotation, config.lr_camera_translation
         );
+        if config.camera_gauge == train::config::CameraGauge::Person {
+            println!(
+                "camera gauge: the offset common to every camera is learned from the person alone \
+                 (the frames' own corrections keep a zero clip mean)"
+            );
+        }
     } else if data.camera_moves {
         eprintln!(
             "note: the camera moves and its poses are taken as given; with poses from a tracker \

@@ -25,10 +25,15 @@ pub struct Optimisers {
     corrections: nn::RowAdam<f32>,
     /// The camera corrections' Adam, one row per training frame, lazy like `corrections`.
     cameras: nn::RowAdam<f32>,
+    /// The clip-wide camera twist's Adam (one row; none without one).
+    camera_gauge: nn::RowAdam<f32>,
 }
 
 /// The prefix of the camera corrections' Adam tensors.
 const CAMERA_ADAM: &str = "camera_correction_adam";
+
+/// The prefix of the clip-wide camera twist's Adam tensors.
+const CAMERA_GAUGE_ADAM: &str = "camera_gauge_adam";
 
 /// The name of the pose-correction group in [`NETWORK_GROUPS`].
 const CORRECTION_GROUP: &str = "pose_correction";
@@ -140,6 +145,7 @@ impl Optimisers {
                 model.camera_corrections.len() / CAMERA_CORRECTION_VALUES,
                 config,
             ),
+            camera_gauge: camera_adam(model.camera_gauge.len() / CAMERA_CORRECTION_VALUES, config),
         }
     }
 
@@ -200,6 +206,21 @@ impl Optimisers {
             .step_rows_scaled(corrections, grads, slots, f64::from(rate_scale))?)
     }
 
+    /// One Adam step of the clip-wide camera twist at `rate_scale` times the camera rates.
+    pub fn step_camera_gauge(
+        &mut self,
+        gauge: &mut [f32],
+        grads: &[f32],
+        rate_scale: f32,
+    ) -> Result<(), TrainError> {
+        if gauge.is_empty() {
+            return Ok(());
+        }
+        Ok(self
+            .camera_gauge
+            .step_rows_scaled(gauge, grads, &[0], f64::from(rate_scale))?)
+    }
+
     /// Adds every moment to `w` (`adam.<group>.{m,v}` and `<group>_adam.{m,v}`; an empty group's
     /// are not stored); returns the step counts for the metadata.
     pub fn save(&self, w: &mut CheckpointWriter) -> OptimiserSteps {
@@ -225,12 +246,17 @@ impl Optimisers {
                 }
             })
             .collect();
-        let (m, v) = self.cameras.moments();
-        if !m.is_empty() {
-            w.push(format!("{CAMERA_ADAM}.m"), m.to_vec());
-            w.push(format!("{CAMERA_ADAM}.v"), v.to_vec());
-            let steps = self.cameras.row_steps().iter().map(|&t| t as f32).collect();
-            w.push(format!("{CAMERA_ADAM}.row_steps"), steps);
+        for (prefix, adam) in [
+            (CAMERA_ADAM, &self.cameras),
+            (CAMERA_GAUGE_ADAM, &self.camera_gauge),
+        ] {
+            let (m, v) = adam.moments();
+            if !m.is_empty() {
+                w.push(format!("{prefix}.m"), m.to_vec());
+                w.push(format!("{prefix}.v"), v.to_vec());
+                let steps = adam.row_steps().iter().map(|&t| t as f32).collect();
+                w.push(format!("{prefix}.row_steps"), steps);
+            }
         }
         OptimiserSteps {
             gaussians,
@@ -274,29 +300,33 @@ impl Optimisers {
             .collect::<Result<_, _>>()?;
         let corrections =
             Self::load_corrections(r, model, config, counts[group_index(CORRECTION_GROUP)?])?;
-        let cameras = Self::load_cameras(r, model, config)?;
+        let cameras = Self::load_cameras(r, CAMERA_ADAM, model.camera_corrections.len(), config)?;
+        let camera_gauge =
+            Self::load_cameras(r, CAMERA_GAUGE_ADAM, model.camera_gauge.len(), config)?;
         Ok(Self {
             gaussians,
             networks,
             corrections,
             cameras,
+            camera_gauge,
         })
     }
 
-    /// The camera corrections' per-frame Adam (none when the model has no camera corrections).
+    /// A per-row camera Adam stored under `prefix` for `len` values (the camera corrections' or
+    /// the clip-wide twist's; none when `len` is 0).
     fn load_cameras(
         r: &CheckpointReader,
-        model: &Model,
+        prefix: &str,
+        len: usize,
         config: &TrainConfig,
     ) -> Result<nn::RowAdam<f32>, TrainError> {
-        let len = model.camera_corrections.len();
         let rows = len / CAMERA_CORRECTION_VALUES;
         if len == 0 {
             return Ok(camera_adam(0, config));
         }
-        let m = r.get_len(&format!("{CAMERA_ADAM}.m"), len)?;
-        let v = r.get_len(&format!("{CAMERA_ADAM}.v"), len)?;
-        let steps = row_steps(r, &format!("{CAMERA_ADAM}.row_steps"), rows)?;
+        let m = r.get_len(&format!("{prefix}.m"), len)?;
+        let v = r.get_len(&format!("{prefix}.v"), len)?;
+        let steps = row_steps(r, &format!("{prefix}.row_steps"), rows)?;
         Ok(camera_rates(
             nn::RowAdam::from_parts(
                 adam_config(config.lr_camera_rotation),

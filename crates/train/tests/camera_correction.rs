@@ -4,7 +4,7 @@
 //! interpolated between their neighbours' corrections.
 #![allow(clippy::unwrap_used)]
 
-use train::config::TrainConfig;
+use train::config::{CameraGauge, TrainConfig};
 use train::pose::camera_correction::{CAMERA_CORRECTION_VALUES, TWIST_VALUES};
 use train::trainer::Trainer;
 
@@ -94,6 +94,67 @@ fn a_learning_correction_moves_the_trained_frames_cameras_whatever_the_thread_co
 #[test]
 fn camera_correction_resumes_bit_identically() {
     let config = camera_config(16);
+    resume_is_bit_identical(&exposure_context(&config), config);
+}
+
+/// The clip-wide twist set by the person (`--camera-gauge person`).
+fn gauge_config(steps: usize) -> TrainConfig {
+    TrainConfig {
+        camera_gauge: CameraGauge::Person,
+        ..camera_config(steps)
+    }
+}
+
+#[test]
+fn a_person_gauge_moves_every_camera_and_keeps_the_frames_twists_centred() {
+    let config = gauge_config(12);
+    let ctx = exposure_context(&config);
+    let run = |threads: usize| {
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+            t.run(&ctx, 12, |_, _| Ok(())).unwrap();
+            t
+        })
+    };
+    let (one, two) = (run(1), run(2));
+    assert_same_bits(&bits(&one), &bits(&two));
+    let (gauge, rows) = (&one.model.camera_gauge, &one.model.camera_corrections);
+    assert_eq!(gauge.len(), CAMERA_CORRECTION_VALUES);
+    // The person's Gaussians pull on the clip-wide twist; its change half never moves.
+    assert!(gauge[..TWIST_VALUES].iter().any(|&v| v != 0.0), "{gauge:?}");
+    assert!(gauge[TWIST_VALUES..].iter().all(|&v| v == 0.0));
+    // The frames' own twists moved, and their clip mean is zero (to f32 rounding of values of
+    // order 1e-3: the mean is removed in f64 and each row rounded once).
+    assert!(rows.iter().any(|&v| v != 0.0));
+    let frames = rows.len() / CAMERA_CORRECTION_VALUES;
+    for k in 0..TWIST_VALUES {
+        let mean: f64 = rows
+            .chunks(CAMERA_CORRECTION_VALUES)
+            .map(|row| f64::from(row[k]))
+            .sum::<f64>()
+            / frames as f64;
+        assert!(mean.abs() < 1e-8, "component {k}: clip mean {mean}");
+    }
+    // Every frame's camera, held-out ones too, carries the clip-wide twist.
+    let given = ctx.camera.clone();
+    let mut centred = one.model.clone();
+    centred.camera_gauge.fill(0.0);
+    for &index in &[one.model.frame_indices[0], one.model.frame_indices[0] + 1] {
+        assert_ne!(
+            one.model.corrected_camera(index, &given).world_to_camera,
+            centred.corrected_camera(index, &given).world_to_camera
+        );
+    }
+    // The free gauge trains other bits.
+    let mut free = Trainer::new(&ctx, camera_config(12)).unwrap();
+    free.run(&ctx, 12, |_, _| Ok(())).unwrap();
+    assert!(free.model.camera_gauge.is_empty());
+    assert_ne!(&free.model.camera_corrections, rows);
+}
+
+#[test]
+fn a_person_gauge_resumes_bit_identically() {
+    let config = gauge_config(16);
     resume_is_bit_identical(&exposure_context(&config), config);
 }
 

@@ -117,3 +117,104 @@ proptest! {
         checker.finish();
     }
 }
+
+/// `world_to_camera⁻¹ · other`: the rigid map that carries a world point seen by `other` to the
+/// point the camera `world_to_camera` sees at the same camera coordinates.
+fn carried_along(world_to_camera: &[[f64; 4]; 4], other: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
+    let r = world_to_camera;
+    let mut out = [[0.0; 4]; 4];
+    out[3][3] = 1.0;
+    for i in 0..3 {
+        for j in 0..4 {
+            // Rᵀ (other_j − t) for the translation column, Rᵀ other_j for the rotation's.
+            let column = |k: usize| other[k][j] - if j == 3 { r[k][3] } else { 0.0 };
+            out[i][j] = (0..3).map(|k| r[k][i] * column(k)).sum();
+        }
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// The camera gradient of a subset of the Gaussians (the person's, for the clip-wide camera
+    /// twist of `train::pose::camera_correction`'s person gauge): `camera_pose_gradient` over the
+    /// subset alone against central differences of `render_cov` with the camera moved by ±h and
+    /// every other Gaussian carried along with it (its camera coordinates, mean and covariance,
+    /// unchanged), so that only the subset moves on the image. The subset is a random non-empty
+    /// proper one: the whole set's gradient fails the check wherever the others are seen.
+    /// Probe size and tolerance as in the twist check above; probes whose ± steps flip any
+    /// discrete decision of the oracle are discarded.
+    #[test]
+    fn a_subsets_camera_gradient_leaves_the_others_with_the_camera(
+        seed in any::<u64>(),
+        kinds in kinds_strategy(6),
+        c in 1usize..4,
+    ) {
+        let (s, covs, cot, g) = cov_scene_and_gradients(seed, &kinds, c);
+        let mut r = rng(seed ^ 0x005a_b5e7);
+        let n = s.n();
+        let mut subset: Vec<usize> = (0..n).filter(|_| r.gen_bool(0.5)).collect();
+        if subset.is_empty() {
+            subset.push(0);
+        }
+        if subset.len() == n && n > 1 {
+            subset.pop();
+        }
+        let pick = |v: &[[f64; 3]]| subset.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let pick_cov = |v: &[Mat3<f64>]| subset.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let ana = camera_pose_gradient(
+            &s.cam,
+            &pick(&s.means),
+            &pick_cov(&covs),
+            &pick(&g.means),
+            &pick_cov(&g.covariances),
+        )
+        .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
+        let moved = |k: usize, t: f64| {
+            let mut xi = [0.0; 6];
+            xi[k] = t;
+            let mut s2 = s.clone();
+            s2.cam = moved_camera(&s.cam, xi);
+            let m = carried_along(&s2.cam.world_to_camera, &s.cam.world_to_camera);
+            let mut moved_covs = covs.clone();
+            for i in (0..n).filter(|i| !subset.contains(i)) {
+                let p = s.means[i];
+                s2.means[i] = std::array::from_fn(|a| {
+                    (0..3).map(|b| m[a][b] * p[b]).sum::<f64>() + m[a][3]
+                });
+                let cov = &covs[i];
+                moved_covs[i] = std::array::from_fn(|a| {
+                    std::array::from_fn(|b| {
+                        (0..3)
+                            .flat_map(|x| (0..3).map(move |y| (x, y)))
+                            .map(|(x, y)| m[a][x] * cov[x][y] * m[b][y])
+                            .sum()
+                    })
+                });
+            }
+            s2.covs = Some(moved_covs);
+            s2
+        };
+        let base = oracle(&s, None).decisions;
+        let (mut probes, mut valid) = (0usize, 0usize);
+        let (mut num, mut kept) = (Vec::new(), Vec::new());
+        for k in 0..6 {
+            probes += 1;
+            if oracle(&moved(k, FD_H), None).decisions != base
+                || oracle(&moved(k, -FD_H), None).decisions != base
+            {
+                continue;
+            }
+            valid += 1;
+            num.push(central_differences(|t| cov_loss(&moved(k, t[0]), &cot), &[0.0], FD_H)[0]);
+            kept.push(ana[k]);
+        }
+        let mut checker = GradientChecker::new();
+        checker.check("a subset's camera twist (ω, v) vs FD", &num, &kept, FD_TOL);
+        static TALLY: ProbeTally = ProbeTally::new(30);
+        let tally = TALLY.add(probes, valid);
+        prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
+        checker.finish();
+    }
+}

@@ -385,6 +385,7 @@ pub fn run(args: Args) -> Result<()> {
             "pose_correction": config.pose_correction,
             "pose_error": pose_error,
             "camera_correction": config.camera_correction,
+            "camera_gauge": config.camera_gauge,
             "camera_error": camera_error,
             "seed": config.seed,
             "threads": rayon::current_num_threads(),

@@ -50,6 +50,19 @@ pub enum ExposureNetworks {
     PerSubframe,
 }
 
+/// What sets the clip's common camera offset under camera correction (see
+/// [`TrainConfig::camera_gauge`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraGauge {
+    /// Every frame's correction learns from every Gaussian, its clip mean included.
+    #[default]
+    Free,
+    /// The frames' corrections have no common part; one clip-wide twist learns from the person's
+    /// Gaussians alone.
+    Person,
+}
+
 /// Which screen-space gradient feeds densification (see [`TrainConfig::density_gradient`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]

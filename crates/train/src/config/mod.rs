@@ -471,6 +471,12 @@ training_options! {
     /// move with the mid-exposure twist.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction_change: bool = true,
+    /// With camera correction, what sets the offset common to every frame's camera — a gauge the
+    /// static room cannot see, since it can turn with the cameras and fit the images as well:
+    /// `free` (every frame's twist learns from every Gaussian) or `person` (the frames' twists are
+    /// kept to a zero clip mean and one clip-wide twist learns from the person's Gaussians alone,
+    /// whose poses are in the true world; `train::pose::camera_correction`).
+    camera_gauge: CameraGauge = CameraGauge::Free,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
     camera_correction_from: usize = 100,

@@ -6,6 +6,7 @@ use super::{Model, Rendered};
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::{
     corrected_world_to_camera, interpolated_camera_correction, twist_at, CAMERA_CORRECTION_VALUES,
+    TWIST_VALUES,
 };
 use crate::TrainError;
 use rasterize_cpu::Camera;
@@ -44,19 +45,56 @@ pub fn corrected_camera(camera: &Camera, correction: &[f32], offset: f32) -> Cam
 }
 
 impl Model {
-    /// Training slot `slot`'s camera correction ([`CAMERA_CORRECTION_VALUES`] values; empty when
-    /// camera correction is off).
-    pub fn training_camera_correction(&self, slot: usize) -> &[f32] {
+    /// Training slot `slot`'s camera correction ([`CAMERA_CORRECTION_VALUES`] values, the clip-wide
+    /// twist of [`Model::camera_gauge`] added to its mid-exposure half; empty when camera
+    /// correction is off).
+    pub fn training_camera_correction(&self, slot: usize) -> Vec<f32> {
         let n = CAMERA_CORRECTION_VALUES;
-        self.camera_corrections
+        let row = self
+            .camera_corrections
             .get(slot * n..(slot + 1) * n)
-            .unwrap_or(&[])
+            .unwrap_or(&[]);
+        self.with_gauge(row.to_vec())
     }
 
     /// The camera correction of frame `index` at mid exposure, interpolated between the training
-    /// frames around it (empty when camera correction is off).
+    /// frames around it, with the clip-wide twist (empty when camera correction is off).
     pub fn camera_correction_for(&self, index: u32) -> Vec<f32> {
-        interpolated_camera_correction(&self.frame_indices, &self.camera_corrections, index)
+        self.with_gauge(interpolated_camera_correction(
+            &self.frame_indices,
+            &self.camera_corrections,
+            index,
+        ))
+    }
+
+    /// `correction` with the clip-wide twist added to its mid-exposure half.
+    fn with_gauge(&self, mut correction: Vec<f32>) -> Vec<f32> {
+        if correction.len() == CAMERA_CORRECTION_VALUES {
+            for (c, &g) in correction.iter_mut().zip(&self.camera_gauge[..]) {
+                *c += g;
+            }
+        }
+        correction
+    }
+
+    /// With a clip-wide twist: removes the clip mean of the training frames' mid-exposure twists
+    /// (summed in slot order), so that only the person's twist moves every camera together.
+    pub fn centre_camera_corrections(&mut self) {
+        let (n, rows) = (CAMERA_CORRECTION_VALUES, self.frame_indices.len());
+        if self.camera_gauge.is_empty() || rows == 0 || self.camera_corrections.len() != rows * n {
+            return;
+        }
+        let mut mean = [0.0f64; TWIST_VALUES];
+        for row in self.camera_corrections.chunks(n) {
+            for (m, &v) in mean.iter_mut().zip(row) {
+                *m += f64::from(v);
+            }
+        }
+        for row in self.camera_corrections.chunks_mut(n) {
+            for (v, &m) in row.iter_mut().zip(&mean) {
+                *v -= (m / rows as f64) as f32;
+            }
+        }
     }
 
     /// Frame `index`'s `camera` with its learned correction at mid exposure (`camera` unchanged

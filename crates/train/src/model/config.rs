@@ -29,6 +29,9 @@ pub struct ModelConfig {
     pub pose_correction_knot_every: usize,
     /// The model carries learned per-training-frame camera corrections.
     pub camera_correction: bool,
+    /// With camera correction, the model carries one clip-wide twist set by the person (the
+    /// frames' twists then keep a zero clip mean; `TrainConfig::camera_gauge`).
+    pub camera_gauge: bool,
 }
 
 impl From<&TrainConfig> for ModelConfig {
@@ -45,6 +48,8 @@ impl From<&TrainConfig> for ModelConfig {
             pose_correction: config.pose_correction,
             pose_correction_knot_every: config.pose_correction_knot_every,
             camera_correction: config.camera_correction,
+            camera_gauge: config.camera_correction
+                && config.camera_gauge == crate::config::CameraGauge::Person,
         }
     }
 }

@@ -56,6 +56,9 @@ pub const NETWORK_GROUPS: [(&str, &str); 6] = [
 /// their own per-frame optimiser, and models without them keep their bytes).
 pub const CAMERA_CORRECTIONS_TENSOR: &str = "camera_corrections";
 
+/// The tensor of the clip-wide camera twist set by the person ([`Model::camera_gauge`]).
+pub const CAMERA_GAUGE_TENSOR: &str = "camera_gauge";
+
 /// What a reconstruction learned.
 #[derive(Clone, Debug)]
 pub struct Model {
@@ -75,6 +78,10 @@ pub struct Model {
     /// Per-training-frame camera corrections, (frames, [`CAMERA_CORRECTION_VALUES`])
     /// (`train::pose::camera_correction`); empty when `camera_correction` is off.
     pub camera_corrections: Vec<f32>,
+    /// With `camera_gauge`: the clip-wide twist every frame's correction adds at mid exposure
+    /// ([`CAMERA_CORRECTION_VALUES`] values, the change half zero), learned from the person's
+    /// Gaussians alone; the frames' own twists then keep a zero clip mean. Empty otherwise.
+    pub camera_gauge: Vec<f32>,
     /// Scene extent (m): scales the position rate and the density thresholds.
     pub scene_extent: f32,
 }
@@ -255,6 +262,11 @@ impl Model {
         } else {
             Vec::new()
         };
+        let camera_gauge = if config.camera_gauge {
+            vec![0.0; CAMERA_CORRECTION_VALUES]
+        } else {
+            Vec::new()
+        };
         Ok(Self {
             config,
             set,
@@ -263,6 +275,7 @@ impl Model {
             frame_indices,
             pose_corrections,
             camera_corrections,
+            camera_gauge,
             scene_extent,
         })
     }
@@ -321,6 +334,9 @@ impl Model {
         if !self.camera_corrections.is_empty() {
             w.push(CAMERA_CORRECTIONS_TENSOR, self.camera_corrections.clone());
         }
+        if !self.camera_gauge.is_empty() {
+            w.push(CAMERA_GAUGE_TENSOR, self.camera_gauge.clone());
+        }
     }
 
     /// Replaces every network group by the tensors [`Model::push_networks`] wrote, checking each
@@ -334,6 +350,9 @@ impl Model {
         if !self.camera_corrections.is_empty() {
             self.camera_corrections =
                 r.get_len(CAMERA_CORRECTIONS_TENSOR, self.camera_corrections.len())?;
+        }
+        if !self.camera_gauge.is_empty() {
+            self.camera_gauge = r.get_len(CAMERA_GAUGE_TENSOR, self.camera_gauge.len())?;
         }
         Ok(())
     }

@@ -25,6 +25,15 @@
 //! **Held-out frames** take the mid-exposure correction interpolated in frame number between the
 //! training frames around them, never fitted to held-out images. The regulariser is the pose
 //! correction's (`crate::pose::correction::knot_prior_terms`), one knot per training frame.
+//!
+//! **The gauge** (`TrainConfig::camera_gauge`): an offset common to every camera is nearly
+//! invisible to the static room, which can turn with the cameras and fit the images as well; only
+//! the person, posed in the true world, disagrees. With `person`, every frame's mid-exposure twist
+//! is `g + ξ_k`: the frames' own twists `ξ_k` learn from every Gaussian but are kept to a zero
+//! clip mean (the mean is removed after each step), and the clip-wide twist `g` learns from the
+//! person's Gaussians alone — its gradient is the mid-exposure twist's with the rasterizer's
+//! camera gradient summed over the person's Gaussians only (`rasterize_cpu::camera_pose_gradient`
+//! is a sum over Gaussians), the room's pull on the common offset left out.
 
 use crate::pose::correction::KnotSpan;
 

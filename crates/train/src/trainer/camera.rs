@@ -3,9 +3,9 @@
 //! rasterizer-input gradients.
 
 use crate::config::TrainConfig;
-use crate::model::{corrected_camera, Model, PassCamera, PosedGradients};
+use crate::model::{corrected_camera, FramePass, Model, PassCamera, PosedGradients};
 use crate::pose::camera_correction::{
-    correction_backward, twist_at, twist_backward, CAMERA_CORRECTION_VALUES,
+    correction_backward, twist_at, twist_backward, CAMERA_CORRECTION_VALUES, TWIST_VALUES,
 };
 use crate::pose::correction::{exposure_offset, knot_prior_terms, CorrectionPrior};
 use crate::TrainError;
@@ -21,6 +21,8 @@ pub(super) struct CorrectedCameras {
     view_centres: Vec<[f32; 3]>,
     /// Each pass's twist and exposure offset.
     twists: Vec<([f64; 6], f32)>,
+    /// The model has a clip-wide twist (`Model::camera_gauge`), learned from the person alone.
+    gauge: bool,
 }
 
 impl CorrectedCameras {
@@ -35,7 +37,7 @@ impl CorrectedCameras {
             cameras: given
                 .iter()
                 .zip(&offsets)
-                .map(|(c, &o)| corrected_camera(c, correction, o))
+                .map(|(c, &o)| corrected_camera(c, &correction, o))
                 .collect(),
             view_centres: given
                 .iter()
@@ -43,8 +45,9 @@ impl CorrectedCameras {
                 .collect(),
             twists: offsets
                 .iter()
-                .map(|&o| (twist_at(correction, o), o))
+                .map(|&o| (twist_at(&correction, o), o))
                 .collect(),
+            gauge: !model.camera_gauge.is_empty(),
         }
     }
 
@@ -60,25 +63,47 @@ impl CorrectedCameras {
             .collect()
     }
 
+    /// Values of a frame's gradient ([`CorrectedCameras::add_gradient`]): its correction's, then
+    /// with a clip-wide twist that twist's (the same layout).
+    pub fn gradient_len(&self) -> usize {
+        CAMERA_CORRECTION_VALUES * if self.gauge { 2 } else { 1 }
+    }
+
     /// Adds ∂L/∂(this frame's correction) ([`CAMERA_CORRECTION_VALUES`] values) to `grad` from pass
-    /// `pass`'s rasterizer inputs (`means`, `covariances`, world) and their gradients `posed`.
+    /// `s` (`pass`, its rasterizer-input gradients `posed`); with a clip-wide twist, then adds
+    /// that twist's gradient from the person's Gaussians alone (the pass's active ones) to the
+    /// next [`CAMERA_CORRECTION_VALUES`] values.
     pub fn add_gradient(
         &self,
-        pass: usize,
-        means: &[[f32; 3]],
-        covariances: &[[[f32; 3]; 3]],
+        s: usize,
+        pass: &FramePass<'_>,
         posed: &PosedGradients,
         grad: &mut [f64],
     ) -> Result<(), TrainError> {
-        let d_left = camera_pose_gradient(
-            &self.cameras[pass],
-            means,
-            covariances,
-            &posed.means,
-            &posed.covariances,
-        )?;
-        let (twist, offset) = self.twists[pass];
-        correction_backward(&twist_backward(&d_left, &twist), offset, grad);
+        let (means, covariances) = (&pass.posed.means, &pass.posed.covariances);
+        let camera = &self.cameras[s];
+        let d_left =
+            camera_pose_gradient(camera, means, covariances, &posed.means, &posed.covariances)?;
+        let (twist, offset) = self.twists[s];
+        let n = CAMERA_CORRECTION_VALUES;
+        correction_backward(&twist_backward(&d_left, &twist), offset, &mut grad[..n]);
+        if self.gauge {
+            let person = pass.active();
+            let pick = |v: &[[f32; 3]]| person.iter().map(|&i| v[i]).collect::<Vec<_>>();
+            let pick_cov = |v: &[[[f32; 3]; 3]]| person.iter().map(|&i| v[i]).collect::<Vec<_>>();
+            let d_person = camera_pose_gradient(
+                camera,
+                &pick(means),
+                &pick_cov(covariances),
+                &pick(&posed.means),
+                &pick_cov(&posed.covariances),
+            )?;
+            // The clip-wide twist adds to the mid-exposure twist: its gradient is the mid half's.
+            let g = twist_backward(&d_person, &twist);
+            for (o, v) in grad[n..n + TWIST_VALUES].iter_mut().zip(g) {
+                *o += v;
+            }
+        }
         Ok(())
     }
 }
@@ -90,13 +115,16 @@ pub(super) struct CameraGradient {
     pub values: Vec<f32>,
     /// The training slots whose corrections the step moves.
     pub slots: Vec<usize>,
+    /// ∂L/∂ the clip-wide twist (`Model::camera_gauge`; empty without one): the person's share.
+    pub gauge: Vec<f32>,
     /// The prior's value on the step's frames.
     pub prior: f32,
 }
 
 impl CameraGradient {
-    /// The gradient of the frames `frames` (slot, ∂L/∂ its correction), with the prior's terms of
-    /// each (weights of `config`).
+    /// The gradient of the frames `frames` (slot, ∂L/∂ its correction, then the clip-wide twist's
+    /// share as [`CorrectedCameras::gradient_len`] lays it out), with the prior's terms of each
+    /// (weights of `config`).
     pub fn of(model: &Model, config: &TrainConfig, frames: &[(usize, Vec<f64>)]) -> Self {
         let n = CAMERA_CORRECTION_VALUES;
         let mut values = vec![0.0f32; model.camera_corrections.len()];
@@ -106,9 +134,13 @@ impl CameraGradient {
             smooth: config.camera_correction_smooth_weight,
         };
         let mut prior_value = 0.0;
+        let mut gauge = vec![0.0f32; model.camera_gauge.len()];
         for (slot, g) in frames {
             let row = &mut values[slot * n..(slot + 1) * n];
             for (r, &v) in row.iter_mut().zip(g) {
+                *r += v as f32;
+            }
+            for (r, &v) in gauge.iter_mut().zip(g.get(n..).unwrap_or(&[])) {
                 *r += v as f32;
             }
             if !slots.contains(slot) {
@@ -124,12 +156,13 @@ impl CameraGradient {
         Self {
             values,
             slots,
+            gauge,
             prior: prior_value,
         }
     }
 
     /// True when every value is finite.
     pub fn all_finite(&self) -> bool {
-        self.values.iter().all(|v| v.is_finite()) && self.prior.is_finite()
+        self.values.iter().chain(&self.gauge).all(|v| v.is_finite()) && self.prior.is_finite()
     }
 }

@@ -253,6 +253,12 @@ impl Trainer {
                 &update.slots,
                 rate_scale,
             )?;
+            self.optimisers.step_camera_gauge(
+                &mut self.model.camera_gauge,
+                &update.gauge,
+                rate_scale,
+            )?;
+            self.model.centre_camera_corrections();
         }
         Ok(())
     }

@@ -22,7 +22,6 @@ use crate::loss::photometric::{exposure_loss, ExposureEvents};
 use crate::model::{
     ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
 };
-use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::posing::ModelGradients;
 use crate::TrainError;
 use rasterize_cpu::TileSharing;
@@ -295,9 +294,8 @@ impl Trainer {
             let grads = next.pass.model_backward(&posed)?;
             k.grads.add_shared(&grads);
             if let Some(c) = next_cameras {
-                let mut g = vec![0.0; CAMERA_CORRECTION_VALUES];
-                let p = &next.pass.posed;
-                c.add_gradient(0, &p.means, &p.covariances, &posed, &mut g)?;
+                let mut g = vec![0.0; c.gradient_len()];
+                c.add_gradient(0, &next.pass, &posed, &mut g)?;
                 camera_frames.push((c.slot, g));
             }
             if let (Some(c), Some(g)) = (next_corrected, corrections.as_mut()) {
@@ -398,14 +396,12 @@ impl Trainer {
         let started = Instant::now();
         // The camera corrections' gradient, from the renders' own gradients (before the AIAP
         // regulariser adds to the mid pass's).
-        let mut camera_grad = cameras.map(|_| vec![0.0f64; CAMERA_CORRECTION_VALUES]);
+        let mut camera_grad = cameras.map(|c| vec![0.0f64; c.gradient_len()]);
         let mut camera_gradient = |s: usize, pass: &FramePass<'_>, g: &PosedGradients| match (
             cameras,
             camera_grad.as_mut(),
         ) {
-            (Some(c), Some(grad)) => {
-                c.add_gradient(s, &pass.posed.means, &pass.posed.covariances, g, grad)
-            }
+            (Some(c), Some(grad)) => c.add_gradient(s, pass, g, grad),
             _ => Ok(()),
         };
         camera_gradient(mid, first, &posed)?;

@@ -83,6 +83,7 @@ pub fn bits(t: &Trainer) -> Vec<u32> {
         .chain(&t.model.latents)
         .chain(&t.model.pose_corrections)
         .chain(&t.model.camera_corrections)
+        .chain(&t.model.camera_gauge)
         .map(|v| v.to_bits())
         .collect()
 }
