@@ -177,6 +177,27 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         &metrics["step_seconds_breakdown"]["total"]
     ));
 
+    // --split train scores the training frames, into the run's `train-split/` folder.
+    let o = xtask()
+        .args(["eval", "--split", "train", "--model"])
+        .arg(out.join("model"))
+        .arg("--data")
+        .arg(fixture())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let train_split: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("train-split/metrics.json")).unwrap(),
+    )
+    .unwrap();
+    let train_frames = scene["frames"].as_array().unwrap().len() - test_frames;
+    assert_eq!(train_split["split"], "train");
+    assert_eq!(train_split["test_frames"], train_frames);
+    assert!(train_split["test_psnr_full"].as_f64().unwrap().is_finite());
+    assert_ne!(train_split["test_psnr_full"], metrics["test_psnr_full"]);
+    assert!(String::from_utf8_lossy(&o.stdout)
+        .contains(&format!("train split ({train_frames} frames)")));
+
     // render-pose: a new pose renders to a PNG and a posed PLY.
     let poses = dir.path().join("poses.json");
     let mut pose = vec![0.0f32; 72];

@@ -1,7 +1,8 @@
 //! `cargo xtask eval`: score a saved model on a scene's test split (PSNR/SSIM/LPIPS full frame and in
 //! the human box against the sharp references, mask IoU, the blurred input's own figures), write
 //! `metrics.json` and one comparison strip PNG per test frame, and print a summary table. LPIPS uses
-//! the shipped weights (`data-fixtures/lpips/`).
+//! the shipped weights (`data-fixtures/lpips/`). `--split train` scores the training frames
+//! instead, into their own folder.
 
 use crate::outputs::evaluation::{write_evaluation, EvalSummary};
 use anyhow::{Context, Result};
@@ -17,9 +18,24 @@ pub struct Args {
     /// Scene directory (scene format v1) with the test split; default: the default benchmark.
     #[arg(long)]
     pub data: Option<PathBuf>,
-    /// Output directory for metrics.json and eval/strip_*.png (default: the model's parent).
+    /// Output directory for metrics.json and eval/strip_*.png (default: the model's parent; with
+    /// `--split train`, its `train-split/` folder).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Which frames to score against their sharp references: `test` (the held-out frames) or
+    /// `train` (the frames the model was trained on: a small gap between the two says the
+    /// held-out error is what the blur hid, not unseen poses).
+    #[arg(long, value_enum, default_value_t = SplitArg::Test)]
+    pub split: SplitArg,
+}
+
+/// The frames `eval` scores.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SplitArg {
+    /// The held-out frames.
+    Test,
+    /// The training frames.
+    Train,
 }
 
 /// Runs `eval`.
@@ -32,10 +48,19 @@ pub fn run(args: Args) -> Result<()> {
     };
     let data = train::data::load_dataset(&data_dir)
         .with_context(|| format!("loading the scene {}", data_dir.display()))?;
+    let split = match args.split {
+        SplitArg::Test => scene::Split::Test,
+        SplitArg::Train => scene::Split::Train,
+    };
     let out = args.out.clone().unwrap_or_else(|| {
-        args.model
+        let parent = args
+            .model
             .parent()
-            .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+            .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+        match split {
+            scene::Split::Test => parent,
+            scene::Split::Train => parent.join("train-split"),
+        }
     });
     let model = &loaded.model;
     let human = model.human_count();
@@ -46,6 +71,7 @@ pub fn run(args: Args) -> Result<()> {
         &data,
         &out,
         &EvalSummary {
+            split,
             train_seconds: f64::NAN,
             steps: loaded.manifest.steps,
             gaussians_human: human,

@@ -355,6 +355,7 @@ pub fn run(args: Args) -> Result<()> {
     let pose_error = crate::outputs::pose_report::pose_report(&data, model, &ctx.body)?;
     let camera_error = crate::outputs::camera_report::camera_report(&data, model)?;
     let summary = EvalSummary {
+        split: scene::Split::Test,
         train_seconds,
         steps: trainer.step,
         gaussians_human: model.human_count(),

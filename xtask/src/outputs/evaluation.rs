@@ -23,12 +23,21 @@ pub struct EvalSummary {
     pub gaussians_scene: usize,
     /// Anything else to record (merged into metrics.json).
     pub extra: serde_json::Value,
+    /// The frames scored: the held-out ones (`Test`, what every figure of the project is), or the
+    /// training frames, against their sharp references (how much of the held-out gap is
+    /// generalisation to unseen poses rather than what the blur hides).
+    pub split: scene::Split,
 }
 
 /// Prints the test split's image metrics against the sharp references (`sharp`), else against the
 /// observed frames (real data); a figure that cannot be measured (no mask for a human box) is a
 /// dash.
-fn print_metrics_table(m: &train::eval::FrameMetrics, frames: usize, sharp: bool) {
+fn print_metrics_table(
+    m: &train::eval::FrameMetrics,
+    split: scene::Split,
+    frames: usize,
+    sharp: bool,
+) {
     let reference = if sharp { "sharp" } else { "observed" };
     let cell = |v: f64, digits: usize, width: usize| {
         if v.is_finite() {
@@ -38,7 +47,8 @@ fn print_metrics_table(m: &train::eval::FrameMetrics, frames: usize, sharp: bool
         }
     };
     println!();
-    println!("| test split ({frames} frames)      | full frame | human box |");
+    let heading = format!("{} split ({frames} frames)", split.as_str());
+    println!("| {heading:<28} | full frame | human box |");
     println!("|------------------------------|-----------:|----------:|");
     let rows = [
         ("PSNR render", " (dB)", m.psnr_full, m.psnr_human_box, 2),
@@ -84,7 +94,7 @@ fn print_metrics_table(m: &train::eval::FrameMetrics, frames: usize, sharp: bool
     );
 }
 
-/// Evaluates the test split, writes `out/metrics.json` and `out/eval/strip_NNNNNN.png`, prints a table.
+/// Evaluates the split `summary.split` (the test split unless told), writes `out/metrics.json` and `out/eval/strip_NNNNNN.png`, prints a table.
 pub fn write_evaluation(
     model: &Model,
     body: &Body,
@@ -95,7 +105,7 @@ pub fn write_evaluation(
     let weights = crate::common::shipped_lpips_weights();
     let lpips = lpips::load_safetensors(&weights)
         .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
-    let frames = evaluate_split(model, body, data, scene::Split::Test, Some(&lpips))?;
+    let frames = evaluate_split(model, body, data, summary.split, Some(&lpips))?;
     let strips = out.join("eval");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
     for f in &frames {
@@ -115,6 +125,7 @@ pub fn write_evaluation(
     let per_frame: Vec<_> = frames.iter().map(|f| f.metrics).collect();
     let m = mean_metrics(&per_frame);
     let mut metrics = json!({
+        "split": summary.split.as_str(),
         "test_frames": frames.len(),
         "test_psnr_full": m.psnr_full,
         "test_ssim_full": m.ssim_full,
@@ -165,7 +176,7 @@ pub fn write_evaluation(
     std::fs::write(&path, serde_json::to_string_pretty(&metrics)?)
         .with_context(|| format!("writing {}", path.display()))?;
     let sharp = data.scene.frames.iter().any(|f| f.sharp.is_some());
-    print_metrics_table(&m, frames.len(), sharp);
+    print_metrics_table(&m, summary.split, frames.len(), sharp);
     if summary.train_seconds.is_finite() {
         println!(
             "| training                     | {:>8.0} s | {} steps |",

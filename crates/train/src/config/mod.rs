@@ -475,7 +475,8 @@ training_options! {
     /// static room cannot see, since it can turn with the cameras and fit the images as well:
     /// `free` (every frame's twist learns from every Gaussian) or `person` (the frames' twists are
     /// kept to a zero clip mean and one clip-wide twist learns from the person's Gaussians alone,
-    /// whose poses are in the true world; `train::pose::camera_correction`).
+    /// whose poses are in the true world, at the camera rates divided by the training frames, since
+    /// it steps on every step; `train::pose::camera_correction`).
     camera_gauge: CameraGauge = CameraGauge::Free,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).

@@ -33,7 +33,9 @@
 //! clip mean (the mean is removed after each step), and the clip-wide twist `g` learns from the
 //! person's Gaussians alone — its gradient is the mid-exposure twist's with the rasterizer's
 //! camera gradient summed over the person's Gaussians only (`rasterize_cpu::camera_pose_gradient`
-//! is a sum over Gaussians), the room's pull on the common offset left out.
+//! is a sum over Gaussians), the room's pull on the common offset left out. It steps on every
+//! step, a frame's twist once per pass over the frames, so its rates are the frames' divided by
+//! the number of training frames (an Adam step moves a value by about its rate).
 
 use crate::pose::correction::KnotSpan;
 

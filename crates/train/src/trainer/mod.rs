@@ -253,10 +253,13 @@ impl Trainer {
                 &update.slots,
                 rate_scale,
             )?;
+            // The clip-wide twist steps on every step, a frame's twist once per pass over the
+            // training frames: at 1 / frames the rate it moves per pass as far as one frame's.
+            let frames = self.model.frame_indices.len().max(1) as f32;
             self.optimisers.step_camera_gauge(
                 &mut self.model.camera_gauge,
                 &update.gauge,
-                rate_scale,
+                rate_scale / frames,
             )?;
             self.model.centre_camera_corrections();
         }
