@@ -10,8 +10,6 @@
 //! with an exposure model) and differentiate each. Eval, export and rendering take a `Model`, never a
 //! trainer.
 
-use crate::checkpoint::{CheckpointReader, CheckpointWriter};
-use crate::colour::{ColourNet, ColourNetConfig};
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::correction::{knot_slots, CORRECTION_VALUES};
@@ -25,39 +23,21 @@ use crate::TrainError;
 mod camera;
 mod config;
 mod correction;
+mod networks;
 mod pass;
 pub use camera::{corrected_camera, PassCamera};
 pub use config::ModelConfig;
+pub use networks::{CAMERA_CORRECTIONS_TENSOR, CAMERA_GAUGE_TENSOR, NETWORK_GROUPS};
 use gaussians::GaussianSet;
 use rasterize_cpu::{
     render_cov, render_cov_backward, render_cov_shared, render_cov_shared_backward, Camera,
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, SharedOutputs, TileSharing,
 };
-use smpl_deform::deform_net::{NonRigidNet, SkinningField};
 use smpl_deform::math::Affine;
 use std::time::Instant;
 
 /// Number of rendered channels: linear RGB and the human probability.
 pub const RENDER_CHANNELS: usize = 4;
-
-/// Names of the model's network parameter groups, in checkpoint order, with the tensor each is
-/// stored under (the per-frame latents and pose corrections are groups too; an empty group — the
-/// pose corrections when `pose_correction` is off — is not stored).
-pub const NETWORK_GROUPS: [(&str, &str); 6] = [
-    ("nonrigid", "nonrigid"),
-    ("skinning", "skinning"),
-    ("human_colour", "human_colour"),
-    ("scene_colour", "scene_colour"),
-    ("latent", "latents"),
-    ("pose_correction", "pose_corrections"),
-];
-
-/// The tensor the camera corrections are stored under (not a [`NETWORK_GROUPS`] entry: they have
-/// their own per-frame optimiser, and models without them keep their bytes).
-pub const CAMERA_CORRECTIONS_TENSOR: &str = "camera_corrections";
-
-/// The tensor of the clip-wide camera twist set by the person ([`Model::camera_gauge`]).
-pub const CAMERA_GAUGE_TENSOR: &str = "camera_gauge";
 
 /// What a reconstruction learned.
 #[derive(Clone, Debug)]
@@ -278,83 +258,6 @@ impl Model {
             camera_gauge,
             scene_extent,
         })
-    }
-
-    /// Freshly initialised networks of `config` for the canonical body `vertices`.
-    pub fn build_networks(
-        config: &ModelConfig,
-        vertices: &[[f32; 3]],
-    ) -> Result<ModelNets<f32>, TrainError> {
-        let mut human = ColourNetConfig::human();
-        human.feature_dim = config.feature_dim;
-        human.latent_dim = config.latent_dim;
-        let mut scene = ColourNetConfig::scene();
-        scene.feature_dim = config.feature_dim;
-        Ok(ModelNets {
-            nonrigid: NonRigidNet::new(vertices, config.deform_hidden, config.seed ^ 0x11)?,
-            skinning: SkinningField::new(vertices, config.deform_hidden, config.seed ^ 0x22)?,
-            human_colour: ColourNet::new(human, config.seed ^ 0x33)?,
-            scene_colour: ColourNet::new(scene, config.seed ^ 0x44)?,
-        })
-    }
-
-    /// The flat parameters of every network group ([`NETWORK_GROUPS`] order).
-    pub fn network_groups(&self) -> [&Vec<f32>; 6] {
-        [
-            &self.nets.nonrigid.mlp.params,
-            &self.nets.skinning.mlp.params,
-            &self.nets.human_colour.mlp.params,
-            &self.nets.scene_colour.mlp.params,
-            &self.latents,
-            &self.pose_corrections,
-        ]
-    }
-
-    /// Mutable [`Model::network_groups`], for the optimisers and for loading.
-    pub fn network_groups_mut(&mut self) -> [&mut Vec<f32>; 6] {
-        [
-            &mut self.nets.nonrigid.mlp.params,
-            &mut self.nets.skinning.mlp.params,
-            &mut self.nets.human_colour.mlp.params,
-            &mut self.nets.scene_colour.mlp.params,
-            &mut self.latents,
-            &mut self.pose_corrections,
-        ]
-    }
-
-    /// Adds every network group as a tensor, and the camera corrections (`camera_corrections`)
-    /// when the model has them (the one writer of network weights: checkpoints and model
-    /// directories share it).
-    pub fn push_networks(&self, w: &mut CheckpointWriter) {
-        for ((_, tensor), params) in NETWORK_GROUPS.iter().zip(self.network_groups()) {
-            if !params.is_empty() {
-                w.push(*tensor, params.clone());
-            }
-        }
-        if !self.camera_corrections.is_empty() {
-            w.push(CAMERA_CORRECTIONS_TENSOR, self.camera_corrections.clone());
-        }
-        if !self.camera_gauge.is_empty() {
-            w.push(CAMERA_GAUGE_TENSOR, self.camera_gauge.clone());
-        }
-    }
-
-    /// Replaces every network group by the tensors [`Model::push_networks`] wrote, checking each
-    /// length against this model's shapes.
-    pub fn read_networks(&mut self, r: &CheckpointReader) -> Result<(), TrainError> {
-        for ((_, tensor), params) in NETWORK_GROUPS.iter().zip(self.network_groups_mut()) {
-            if !params.is_empty() {
-                *params = r.get_len(tensor, params.len())?;
-            }
-        }
-        if !self.camera_corrections.is_empty() {
-            self.camera_corrections =
-                r.get_len(CAMERA_CORRECTIONS_TENSOR, self.camera_corrections.len())?;
-        }
-        if !self.camera_gauge.is_empty() {
-            self.camera_gauge = r.get_len(CAMERA_GAUGE_TENSOR, self.camera_gauge.len())?;
-        }
-        Ok(())
     }
 
     /// Human probability of Gaussian `i`.
