@@ -153,6 +153,49 @@ fn a_person_gauge_moves_every_camera_and_keeps_the_frames_twists_centred() {
 }
 
 #[test]
+fn smoothed_corrections_move_the_neighbours_of_the_trained_frames_and_resume() {
+    let config = TrainConfig {
+        camera_correction_smoothing: 1.0,
+        ..camera_config(12)
+    };
+    let ctx = exposure_context(&config);
+    let run = |threads: usize| {
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+            t.run(&ctx, 12, |_, _| Ok(())).unwrap();
+            t
+        })
+    };
+    let (one, two) = (run(1), run(2));
+    assert_same_bits(&bits(&one), &bits(&two));
+    let mut sharp = Trainer::new(&ctx, camera_config(12)).unwrap();
+    sharp.run(&ctx, 12, |_, _| Ok(())).unwrap();
+    let moved = |t: &Trainer| {
+        t.model
+            .camera_corrections
+            .chunks(CAMERA_CORRECTION_VALUES)
+            .filter(|row| row.iter().any(|&v| v != 0.0))
+            .count()
+    };
+    // Every stored value within 3σ of a trained frame learns, so more rows move than frames
+    // trained; each frame's camera takes the smoothed twist.
+    assert!(
+        moved(&one) > moved(&sharp),
+        "{} vs {}",
+        moved(&one),
+        moved(&sharp)
+    );
+    let n = CAMERA_CORRECTION_VALUES;
+    let slot = 1;
+    let taken = one.model.training_camera_correction(slot);
+    assert_ne!(
+        &taken[..],
+        &one.model.camera_corrections[slot * n..(slot + 1) * n]
+    );
+    resume_is_bit_identical(&ctx, config);
+}
+
+#[test]
 fn a_person_gauge_resumes_bit_identically() {
     let config = gauge_config(16);
     resume_is_bit_identical(&exposure_context(&config), config);

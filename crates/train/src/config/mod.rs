@@ -478,6 +478,12 @@ training_options! {
     /// whose poses are in the true world, at the camera rates divided by the training frames, since
     /// it steps on every step; `train::pose::camera_correction`).
     camera_gauge: CameraGauge = CameraGauge::Free,
+    /// Width σ (training frames, in time order) of a Gaussian smoothing of the camera corrections:
+    /// the twist a frame's camera takes is the normalised kernel-weighted sum of the stored
+    /// values of the frames within 3σ, so each stored value learns from its neighbours' gradients
+    /// too (a tracker's drift is slow; a frame's own correction steps only when it trains). 0, the
+    /// default: each frame's own.
+    camera_correction_smoothing: f32 = 0.0,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
     camera_correction_from: usize = 100,

@@ -128,8 +128,7 @@ fn presets_are_valid_and_round_trip_through_json() {
     for p in [Preset::Quick, Preset::Full] {
         let c = TrainConfig::preset(p);
         c.validate().unwrap();
-        let back: TrainConfig =
-            serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+        let back: TrainConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
         assert_eq!(back, c);
     }
 }

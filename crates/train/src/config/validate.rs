@@ -197,6 +197,13 @@ impl TrainConfig {
         if self.subframes == 0 || self.subframes > 64 {
             return bad("subframes", "must be in 1..=64");
         }
+        let sigma = self.camera_correction_smoothing;
+        if !(sigma.is_finite() && (0.0..=100.0).contains(&sigma)) {
+            return bad(
+                "camera_correction_smoothing",
+                "must be a width in training frames in 0..=100",
+            );
+        }
         for (name, v) in [
             ("lr_means_final_fraction", self.lr_means_final_fraction),
             (

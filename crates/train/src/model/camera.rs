@@ -5,8 +5,8 @@
 use super::{Model, Rendered};
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::{
-    corrected_world_to_camera, interpolated_camera_correction, twist_at, CAMERA_CORRECTION_VALUES,
-    TWIST_VALUES,
+    corrected_world_to_camera, interpolated_camera_correction, smoothed_corrections, smoothed_row,
+    twist_at, CAMERA_CORRECTION_VALUES, TWIST_VALUES,
 };
 use crate::TrainError;
 use rasterize_cpu::Camera;
@@ -50,6 +50,10 @@ impl Model {
     /// correction is off).
     pub fn training_camera_correction(&self, slot: usize) -> Vec<f32> {
         let n = CAMERA_CORRECTION_VALUES;
+        let sigma = self.config.camera_correction_smoothing;
+        if sigma > 0.0 && slot * n < self.camera_corrections.len() {
+            return self.with_gauge(smoothed_row(&self.camera_corrections, slot, sigma));
+        }
         let row = self
             .camera_corrections
             .get(slot * n..(slot + 1) * n)
@@ -62,7 +66,10 @@ impl Model {
     pub fn camera_correction_for(&self, index: u32) -> Vec<f32> {
         self.with_gauge(interpolated_camera_correction(
             &self.frame_indices,
-            &self.camera_corrections,
+            &smoothed_corrections(
+                &self.camera_corrections,
+                self.config.camera_correction_smoothing,
+            ),
             index,
         ))
     }
@@ -78,14 +85,21 @@ impl Model {
     }
 
     /// With a clip-wide twist: removes the clip mean of the training frames' mid-exposure twists
-    /// (summed in slot order), so that only the person's twist moves every camera together.
+    /// (summed in slot order; the twists their cameras take, smoothed, whose weights sum to one,
+    /// so that subtracting it from every stored row centres them), so that only the person's
+    /// twist moves every camera together.
     pub fn centre_camera_corrections(&mut self) {
         let (n, rows) = (CAMERA_CORRECTION_VALUES, self.frame_indices.len());
         if self.camera_gauge.is_empty() || rows == 0 || self.camera_corrections.len() != rows * n {
             return;
         }
         let mut mean = [0.0f64; TWIST_VALUES];
-        for row in self.camera_corrections.chunks(n) {
+        let taken = smoothed_corrections(
+            &self.camera_corrections,
+            self.config.camera_correction_smoothing,
+        )
+        .into_owned();
+        for row in taken.chunks(n) {
             for (m, &v) in mean.iter_mut().zip(row) {
                 *m += f64::from(v);
             }

@@ -32,6 +32,9 @@ pub struct ModelConfig {
     /// With camera correction, the model carries one clip-wide twist set by the person (the
     /// frames' twists then keep a zero clip mean; `TrainConfig::camera_gauge`).
     pub camera_gauge: bool,
+    /// Width (training slots) of the Gaussian smoothing that turns the stored camera corrections
+    /// into the twists the frames' cameras take (0: each frame's own; `TrainConfig::camera_correction_smoothing`).
+    pub camera_correction_smoothing: f32,
 }
 
 impl From<&TrainConfig> for ModelConfig {
@@ -50,6 +53,7 @@ impl From<&TrainConfig> for ModelConfig {
             camera_correction: config.camera_correction,
             camera_gauge: config.camera_correction
                 && config.camera_gauge == crate::config::CameraGauge::Person,
+            camera_correction_smoothing: config.camera_correction_smoothing,
         }
     }
 }

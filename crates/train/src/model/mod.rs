@@ -27,8 +27,8 @@ mod networks;
 mod pass;
 pub use camera::{corrected_camera, PassCamera};
 pub use config::ModelConfig;
-pub use networks::{CAMERA_CORRECTIONS_TENSOR, CAMERA_GAUGE_TENSOR, NETWORK_GROUPS};
 use gaussians::GaussianSet;
+pub use networks::{CAMERA_CORRECTIONS_TENSOR, CAMERA_GAUGE_TENSOR, NETWORK_GROUPS};
 use rasterize_cpu::{
     render_cov, render_cov_backward, render_cov_shared, render_cov_shared_backward, Camera,
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, SharedOutputs, TileSharing,

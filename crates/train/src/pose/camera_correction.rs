@@ -162,6 +162,55 @@ pub fn interpolated_camera_correction(frames: &[u32], corrections: &[f32], index
     KnotSpan::of(frames, index).blend(corrections, CAMERA_CORRECTION_VALUES, TWIST_VALUES)
 }
 
+/// Training slot `slot`'s weights over the stored corrections of the `slots` training slots under
+/// a Gaussian smoothing `sigma` slots wide (`TrainConfig::camera_correction_smoothing`): `(slot j,
+/// K(slot, j))` for |j − slot| ≤ 3σ, K ∝ exp(−(j − slot)² / 2σ²), summing to 1. With σ = 0 the
+/// slot's own value alone.
+pub fn smoothing_weights(slot: usize, slots: usize, sigma: f32) -> Vec<(usize, f64)> {
+    if sigma <= 0.0 || slots == 0 {
+        return vec![(slot, 1.0)];
+    }
+    let sigma = f64::from(sigma);
+    let radius = (3.0 * sigma).ceil() as usize;
+    let range = slot.saturating_sub(radius)..(slot + radius + 1).min(slots);
+    let raw: Vec<(usize, f64)> = range
+        .map(|j| {
+            let d = j as f64 - slot as f64;
+            (j, (-0.5 * d * d / (sigma * sigma)).exp())
+        })
+        .collect();
+    let total: f64 = raw.iter().map(|&(_, w)| w).sum();
+    raw.into_iter().map(|(j, w)| (j, w / total)).collect()
+}
+
+/// The corrections the training slots' cameras take: the `stored` rows ([`CAMERA_CORRECTION_VALUES`]
+/// each) smoothed over the slots by [`smoothing_weights`] (the stored rows themselves at σ = 0).
+pub fn smoothed_corrections(stored: &[f32], sigma: f32) -> std::borrow::Cow<'_, [f32]> {
+    let n = CAMERA_CORRECTION_VALUES;
+    let slots = stored.len() / n;
+    if sigma <= 0.0 {
+        return std::borrow::Cow::Borrowed(stored);
+    }
+    let mut out = Vec::with_capacity(stored.len());
+    for slot in 0..slots {
+        out.extend(smoothed_row(stored, slot, sigma));
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+/// Slot `slot`'s row of [`smoothed_corrections`].
+pub fn smoothed_row(stored: &[f32], slot: usize, sigma: f32) -> Vec<f32> {
+    let n = CAMERA_CORRECTION_VALUES;
+    let slots = stored.len() / n;
+    let mut row = [0.0f64; CAMERA_CORRECTION_VALUES];
+    for (j, w) in smoothing_weights(slot, slots, sigma) {
+        for (r, &v) in row.iter_mut().zip(&stored[j * n..(j + 1) * n]) {
+            *r += w * f64::from(v);
+        }
+    }
+    row.iter().map(|&v| v as f32).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -254,6 +303,70 @@ mod tests {
         let mut g = vec![0.0; 12];
         correction_backward(&[1.0, 0.0, 0.0, 0.0, 0.0, 2.0], 0.25, &mut g);
         assert_eq!((g[0], g[5], g[6], g[11]), (1.0, 2.0, 0.25, 0.5));
+    }
+
+    #[test]
+    fn smoothing_weights_are_a_normalised_gaussian_and_zero_width_keeps_each_slot() {
+        assert_eq!(smoothing_weights(3, 10, 0.0), vec![(3, 1.0)]);
+        let w = smoothing_weights(0, 10, 1.0);
+        assert_eq!(w.first().map(|p| p.0), Some(0));
+        assert_eq!(w.last().map(|p| p.0), Some(3));
+        assert!((w.iter().map(|p| p.1).sum::<f64>() - 1.0).abs() < 1e-12);
+        assert!((w[1].1 / w[0].1 - (-0.5f64).exp()).abs() < 1e-12);
+        // A constant is kept, a spike spread over its neighbours.
+        let rows: Vec<f32> = (0..10)
+            .flat_map(|_| [0.25f32; CAMERA_CORRECTION_VALUES])
+            .collect();
+        let smoothed = smoothed_corrections(&rows, 1.5);
+        assert!(smoothed.iter().all(|&v| (v - 0.25).abs() < 1e-6));
+        let mut spike = vec![0.0f32; 10 * CAMERA_CORRECTION_VALUES];
+        spike[5 * CAMERA_CORRECTION_VALUES] = 1.0;
+        let s = smoothed_corrections(&spike, 1.0);
+        let at = |slot: usize| s[slot * CAMERA_CORRECTION_VALUES];
+        assert!(at(5) < 1.0 && at(4) > 0.0 && at(4) == at(6) && at(9) == 0.0);
+        assert!(matches!(
+            smoothed_corrections(&spike, 0.0),
+            std::borrow::Cow::Borrowed(_)
+        ));
+    }
+
+    #[test]
+    fn the_smoothings_gradient_is_each_frames_gradient_spread_by_its_weights() {
+        // f(z) = Σ_k c_k · ξ_k(z) is linear in the stored rows z: its central differences in one
+        // stored value equal Σ_k K(k, j) c_k, the spread the trainer applies (f32 rows of order 1,
+        // h = 1e-2: rounding error ≈ 1e-7 / h per term).
+        let (slots, n, sigma) = (9usize, CAMERA_CORRECTION_VALUES, 1.3f32);
+        let z: Vec<f32> = (0..slots * n)
+            .map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.1)
+            .collect();
+        let c: Vec<f64> = (0..slots * n)
+            .map(|i| ((i * 13 % 7) as f64 - 3.0) * 0.2)
+            .collect();
+        let f = |z: &[f32]| -> f64 {
+            let s = smoothed_corrections(z, sigma);
+            s.iter().zip(&c).map(|(&a, &b)| f64::from(a) * b).sum()
+        };
+        let mut spread = vec![0.0f64; slots * n];
+        for k in 0..slots {
+            for (j, w) in smoothing_weights(k, slots, sigma) {
+                for v in 0..n {
+                    spread[j * n + v] += w * c[k * n + v];
+                }
+            }
+        }
+        let h = 1e-2f32;
+        for i in [0, 5, 3 * n + 2, 8 * n + 11] {
+            let (mut up, mut down) = (z.clone(), z.clone());
+            up[i] += h;
+            down[i] -= h;
+            let fd = (f(&up) - f(&down)) / f64::from(up[i] - down[i]);
+            assert!(
+                (fd - spread[i]).abs() < 1e-4,
+                "value {i}: {fd} vs {}",
+                spread[i]
+            );
+        }
+        assert!(spread.iter().any(|&g| g != 0.0));
     }
 
     #[test]

@@ -5,7 +5,8 @@
 use crate::config::TrainConfig;
 use crate::model::{corrected_camera, FramePass, Model, PassCamera, PosedGradients};
 use crate::pose::camera_correction::{
-    correction_backward, twist_at, twist_backward, CAMERA_CORRECTION_VALUES, TWIST_VALUES,
+    correction_backward, smoothing_weights, twist_at, twist_backward, CAMERA_CORRECTION_VALUES,
+    TWIST_VALUES,
 };
 use crate::pose::correction::{exposure_offset, knot_prior_terms, CorrectionPrior};
 use crate::TrainError;
@@ -135,18 +136,31 @@ impl CameraGradient {
         };
         let mut prior_value = 0.0;
         let mut gauge = vec![0.0f32; model.camera_gauge.len()];
+        let sigma = model.config.camera_correction_smoothing;
+        let rows = model.camera_corrections.len() / n;
         for (slot, g) in frames {
-            let row = &mut values[slot * n..(slot + 1) * n];
-            for (r, &v) in row.iter_mut().zip(g) {
-                *r += v as f32;
-            }
             for (r, &v) in gauge.iter_mut().zip(g.get(n..).unwrap_or(&[])) {
                 *r += v as f32;
             }
-            if !slots.contains(slot) {
-                prior_value += knot_prior_terms(&model.camera_corrections, n, *slot, prior, row);
-                slots.push(*slot);
+            // Each stored row the frame's twist weighs gets its share (the frame's own alone
+            // without smoothing).
+            for (j, w) in smoothing_weights(*slot, rows, sigma) {
+                let row = &mut values[j * n..(j + 1) * n];
+                for (r, &v) in row.iter_mut().zip(&g[..n]) {
+                    *r += if sigma > 0.0 {
+                        (w * v) as f32
+                    } else {
+                        v as f32
+                    };
+                }
+                if !slots.contains(&j) {
+                    slots.push(j);
+                }
             }
+        }
+        for &slot in &slots {
+            let row = &mut values[slot * n..(slot + 1) * n];
+            prior_value += knot_prior_terms(&model.camera_corrections, n, slot, prior, row);
         }
         if !config.camera_correction_change {
             for row in values.chunks_mut(n) {
