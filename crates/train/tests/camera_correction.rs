@@ -20,6 +20,25 @@ fn camera_config(steps: usize) -> TrainConfig {
     }
 }
 
+/// A trainer run `steps` steps of `config` on one thread, after checking that two threads train
+/// the same bits.
+fn trained_alike_on_one_and_two_threads(
+    ctx: &train::data::TrainingData,
+    config: &TrainConfig,
+    steps: usize,
+) -> Trainer {
+    let run = |threads: usize| {
+        with_threads(threads, || {
+            let mut t = Trainer::new(ctx, config.clone()).unwrap();
+            t.run(ctx, steps, |_, _| Ok(())).unwrap();
+            t
+        })
+    };
+    let (one, two) = (run(1), run(2));
+    assert_same_bits(&bits(&one), &bits(&two));
+    one
+}
+
 #[test]
 fn a_correction_that_cannot_move_changes_no_bit() {
     let ctx = context();
@@ -51,15 +70,7 @@ fn a_correction_that_cannot_move_changes_no_bit() {
 fn a_learning_correction_moves_the_trained_frames_cameras_whatever_the_thread_count() {
     let config = camera_config(12);
     let ctx = exposure_context(&config);
-    let run = |threads: usize| {
-        with_threads(threads, || {
-            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
-            t.run(&ctx, 12, |_, _| Ok(())).unwrap();
-            t
-        })
-    };
-    let (one, two) = (run(1), run(2));
-    assert_same_bits(&bits(&one), &bits(&two));
+    let one = trained_alike_on_one_and_two_threads(&ctx, &config, 12);
     let c = &one.model.camera_corrections;
     assert!(c.iter().all(|v| v.is_finite()));
     let moved: Vec<bool> = c
@@ -109,15 +120,7 @@ fn gauge_config(steps: usize) -> TrainConfig {
 fn a_person_gauge_moves_every_camera_and_keeps_the_frames_twists_centred() {
     let config = gauge_config(12);
     let ctx = exposure_context(&config);
-    let run = |threads: usize| {
-        with_threads(threads, || {
-            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
-            t.run(&ctx, 12, |_, _| Ok(())).unwrap();
-            t
-        })
-    };
-    let (one, two) = (run(1), run(2));
-    assert_same_bits(&bits(&one), &bits(&two));
+    let one = trained_alike_on_one_and_two_threads(&ctx, &config, 12);
     let (gauge, rows) = (&one.model.camera_gauge, &one.model.camera_corrections);
     assert_eq!(gauge.len(), CAMERA_CORRECTION_VALUES);
     // The person's Gaussians pull on the clip-wide twist; its change half never moves.
@@ -159,15 +162,7 @@ fn smoothed_corrections_move_the_neighbours_of_the_trained_frames_and_resume() {
         ..camera_config(12)
     };
     let ctx = exposure_context(&config);
-    let run = |threads: usize| {
-        with_threads(threads, || {
-            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
-            t.run(&ctx, 12, |_, _| Ok(())).unwrap();
-            t
-        })
-    };
-    let (one, two) = (run(1), run(2));
-    assert_same_bits(&bits(&one), &bits(&two));
+    let one = trained_alike_on_one_and_two_threads(&ctx, &config, 12);
     let mut sharp = Trainer::new(&ctx, camera_config(12)).unwrap();
     sharp.run(&ctx, 12, |_, _| Ok(())).unwrap();
     let moved = |t: &Trainer| {
