@@ -27,6 +27,23 @@ fn write_config(dir: &Path) -> PathBuf {
     p
 }
 
+/// `eval` of the run folder `out`'s model on the fixture with `extra` flags: asserts that it
+/// succeeds and returns its output and the `metrics.json` it wrote (`metrics`, relative to `out`).
+fn eval(out: &Path, extra: &[&str], metrics: &Path) -> (std::process::Output, serde_json::Value) {
+    let o = xtask()
+        .arg("eval")
+        .args(extra)
+        .arg("--model")
+        .arg(out.join("model"))
+        .arg("--data")
+        .arg(fixture())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(out.join(metrics)).unwrap();
+    (o, serde_json::from_str(&text).unwrap())
+}
+
 fn reconstruct(out: &Path, config: &Path, extra: &[&str]) -> std::process::Output {
     let o = xtask()
         .arg("reconstruct")
@@ -129,19 +146,8 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
 
     // eval of the saved model reproduces the figures reconstruct wrote.
     let eval_out = dir.path().join("eval");
-    let o = xtask()
-        .args(["eval", "--model"])
-        .arg(out.join("model"))
-        .arg("--data")
-        .arg(fixture())
-        .arg("--out")
-        .arg(&eval_out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let again: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(eval_out.join("metrics.json")).unwrap())
-            .unwrap();
+    let eval_dir = eval_out.to_str().unwrap();
+    let (_, again) = eval(&out, &["--out", eval_dir], &eval_out.join("metrics.json"));
     assert_eq!(again["test_psnr_full"], metrics["test_psnr_full"]);
     assert_eq!(again["mask_iou"], metrics["mask_iou"]);
     assert_eq!(again["test_lpips_full"], metrics["test_lpips_full"]);
@@ -150,16 +156,7 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
         metrics["blurred_lpips_human_box"]
     );
     // Re-scored in the run's own folder (the default --out), the run's own entries stay.
-    let o = xtask()
-        .args(["eval", "--model"])
-        .arg(out.join("model"))
-        .arg("--data")
-        .arg(fixture())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let in_place: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    let (_, in_place) = eval(&out, &[], Path::new("metrics.json"));
     assert_eq!(in_place["test_psnr_full"], metrics["test_psnr_full"]);
     // (Floats to 1e-12: serde_json's default parsing is not exactly rounded, so a value read and
     // written again may differ in its last digit.)
@@ -178,18 +175,11 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
     ));
 
     // --split train scores the training frames, into the run's `train-split/` folder.
-    let o = xtask()
-        .args(["eval", "--split", "train", "--model"])
-        .arg(out.join("model"))
-        .arg("--data")
-        .arg(fixture())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let train_split: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(out.join("train-split/metrics.json")).unwrap(),
-    )
-    .unwrap();
+    let (o, train_split) = eval(
+        &out,
+        &["--split", "train"],
+        Path::new("train-split/metrics.json"),
+    );
     let train_frames = scene["frames"].as_array().unwrap().len() - test_frames;
     assert_eq!(train_split["split"], "train");
     assert_eq!(train_split["test_frames"], train_frames);

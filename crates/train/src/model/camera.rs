@@ -49,16 +49,8 @@ impl Model {
     /// twist of [`Model::camera_gauge`] added to its mid-exposure half; empty when camera
     /// correction is off).
     pub fn training_camera_correction(&self, slot: usize) -> Vec<f32> {
-        let n = CAMERA_CORRECTION_VALUES;
         let sigma = self.config.camera_correction_smoothing;
-        if sigma > 0.0 && slot * n < self.camera_corrections.len() {
-            return self.with_gauge(smoothed_row(&self.camera_corrections, slot, sigma));
-        }
-        let row = self
-            .camera_corrections
-            .get(slot * n..(slot + 1) * n)
-            .unwrap_or(&[]);
-        self.with_gauge(row.to_vec())
+        self.with_gauge(smoothed_row(&self.camera_corrections, slot, sigma))
     }
 
     /// The camera correction of frame `index` at mid exposure, interpolated between the training
@@ -94,12 +86,8 @@ impl Model {
             return;
         }
         let mut mean = [0.0f64; TWIST_VALUES];
-        let taken = smoothed_corrections(
-            &self.camera_corrections,
-            self.config.camera_correction_smoothing,
-        )
-        .into_owned();
-        for row in taken.chunks(n) {
+        let sigma = self.config.camera_correction_smoothing;
+        for row in smoothed_corrections(&self.camera_corrections, sigma).chunks(n) {
             for (m, &v) in mean.iter_mut().zip(row) {
                 *m += f64::from(v);
             }

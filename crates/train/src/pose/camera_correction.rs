@@ -198,10 +198,14 @@ pub fn smoothed_corrections(stored: &[f32], sigma: f32) -> std::borrow::Cow<'_, 
     std::borrow::Cow::Owned(out)
 }
 
-/// Slot `slot`'s row of [`smoothed_corrections`].
+/// Slot `slot`'s row of [`smoothed_corrections`] (the stored row itself at σ = 0; empty past
+/// the stored rows).
 pub fn smoothed_row(stored: &[f32], slot: usize, sigma: f32) -> Vec<f32> {
     let n = CAMERA_CORRECTION_VALUES;
     let slots = stored.len() / n;
+    if sigma <= 0.0 || slot >= slots {
+        return stored.get(slot * n..(slot + 1) * n).unwrap_or(&[]).to_vec();
+    }
     let mut row = [0.0f64; CAMERA_CORRECTION_VALUES];
     for (j, w) in smoothing_weights(slot, slots, sigma) {
         for (r, &v) in row.iter_mut().zip(&stored[j * n..(j + 1) * n]) {

@@ -147,11 +147,7 @@ impl CameraGradient {
             for (j, w) in smoothing_weights(*slot, rows, sigma) {
                 let row = &mut values[j * n..(j + 1) * n];
                 for (r, &v) in row.iter_mut().zip(&g[..n]) {
-                    *r += if sigma > 0.0 {
-                        (w * v) as f32
-                    } else {
-                        v as f32
-                    };
+                    *r += (w * v) as f32;
                 }
                 if !slots.contains(&j) {
                     slots.push(j);
