@@ -221,10 +221,11 @@ fn synth_refuses_bad_pose_errors_and_documents_the_flag() {
 }
 
 /// `synth --people 2` writes a version-3 scene whose terminal report gives each person's blurred
-/// box, and `reconstruct` refuses it naming its people (the model reconstructs one person); five
-/// people are refused naming the knob.
+/// box, and `reconstruct` trains it with one class per person: `metrics.json` scores each person's
+/// mask and box under its id, and each person has a posed PLY of its own; five people are refused
+/// naming the knob.
 #[test]
-fn two_people_are_generated_and_reconstruct_refuses_them_by_name() {
+fn two_people_are_generated_and_reconstructed_person_by_person() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("people");
     let args = tiny_args(&out, &[("--people", "2"), ("--frames", "4")]);
@@ -239,19 +240,45 @@ fn two_people_are_generated_and_reconstruct_refuses_them_by_name() {
         serde_json::from_slice(&std::fs::read(out.join("scene.json")).unwrap()).unwrap();
     assert_eq!(scene["format_version"], 3);
     assert_eq!(scene["frames"][0]["people"][0]["id"], 1);
+    let run = tmp.path().join("run");
     let o = xtask(&[
         "reconstruct",
         "--data",
         out.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
         "--steps",
-        "1",
+        "2",
+        "--human-gaussians",
+        "150",
+        "--scene-gaussians",
+        "300",
+        "--deform-hidden",
+        "16",
+        "--skinning-samples",
+        "32",
     ]);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
-    assert!(
-        stderr.contains("the scene has 2 people") && stderr.contains("ids [0, 1]"),
-        "{stderr}"
-    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let people = metrics["people"].as_array().unwrap();
+    assert_eq!(people.len(), 2, "{metrics}");
+    for (p, id) in people.iter().zip([0, 1]) {
+        assert_eq!(p["id"], id);
+        assert!(p["mask_iou"].as_f64().is_some_and(f64::is_finite), "{p}");
+    }
+    assert_eq!(metrics["person_class_changes"], 0, "{metrics}");
+    let posed = |id: u32| {
+        std::fs::read_dir(run.join("model"))
+            .unwrap()
+            .filter_map(Result::ok)
+            .any(|e| {
+                e.file_name()
+                    .to_string_lossy()
+                    .ends_with(&format!("_person_{id}.ply"))
+            })
+    };
+    assert!(posed(0) && posed(1));
     let args = tiny_args(&out, &[("--people", "5")]);
     let o = xtask(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let stderr = String::from_utf8_lossy(&o.stderr);

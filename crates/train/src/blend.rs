@@ -16,6 +16,12 @@
 //! The probability comes from the semantic mode (`--semantic`): `OneHot` p = softmax(l)[1] over K = 2
 //! logits (paper), `Scalar` p = sigmoid(l) of a single logit, `None` p = 1 for every Gaussian
 //! (everything is deformed, as in 3DGS-Avatar).
+//!
+//! With several people (`OneHot` only) a Gaussian has K = 1 + P logits, class 0 the scene and class
+//! j the person j − 1 ([`SemanticMode::logits_for`]): its human probability is p = 1 − softmax(l)[0]
+//! (the sum of the people's), each person's own probability softmax(l)[j] is rendered as that
+//! person's mask ([`person_probabilities`]), and its human branch is deformed by its most probable
+//! person ([`most_probable_person`]; locally constant, so it adds no gradient).
 
 use num_traits::Float;
 
@@ -34,18 +40,29 @@ pub enum SemanticMode {
 }
 
 impl SemanticMode {
-    /// Number of stored logits per Gaussian.
+    /// Number of stored logits per Gaussian with one person.
     pub fn logits_per_gaussian(self) -> usize {
+        self.logits_for(1)
+    }
+
+    /// Number of stored logits per Gaussian of a model of `people` people: K = 1 + `people` for
+    /// `OneHot` (the scene, then each person), else as with one person (only `OneHot` tells people
+    /// apart).
+    pub fn logits_for(self, people: usize) -> usize {
         match self {
-            Self::OneHot => 2,
+            Self::OneHot => 1 + people.max(1),
             Self::Scalar => 1,
             Self::None => 0,
         }
     }
 
-    /// Human probability from the Gaussian's logits.
+    /// Human probability from the Gaussian's logits (with K > 2 one-hot logits: 1 − softmax(l)[0]).
     pub fn probability<T: Float>(self, logits: &[T]) -> T {
         match self {
+            Self::OneHot if logits.len() > 2 => {
+                let (e, sum) = exponentials(logits);
+                T::one() - e[0] / sum
+            }
             Self::OneHot => sigmoid(logits[1] - logits[0]),
             Self::Scalar => sigmoid(logits[0]),
             Self::None => T::one(),
@@ -55,6 +72,15 @@ impl SemanticMode {
     /// Adds dL/dlogits given dL/dp into `d_logits`.
     pub fn probability_backward<T: Float>(self, logits: &[T], d_p: T, d_logits: &mut [T]) {
         match self {
+            Self::OneHot if logits.len() > 2 => {
+                // p = 1 − s₀: ∂p/∂l₀ = −s₀(1 − s₀), ∂p/∂l_k = s₀ s_k (k ≥ 1).
+                let (e, sum) = exponentials(logits);
+                let s0 = e[0] / sum;
+                d_logits[0] = d_logits[0] - d_p * s0 * (T::one() - s0);
+                for k in 1..logits.len() {
+                    d_logits[k] = d_logits[k] + d_p * s0 * (e[k] / sum);
+                }
+            }
             Self::OneHot => {
                 let p = sigmoid(logits[1] - logits[0]);
                 let g = d_p * p * (T::one() - p);
@@ -68,6 +94,51 @@ impl SemanticMode {
             Self::None => {}
         }
     }
+}
+
+/// exp(l − max l) of every logit and their sum.
+fn exponentials<T: Float>(logits: &[T]) -> (Vec<T>, T) {
+    let m = logits.iter().fold(T::neg_infinity(), |m, &l| m.max(l));
+    let e: Vec<T> = logits.iter().map(|&l| (l - m).exp()).collect();
+    let sum = e.iter().fold(T::zero(), |a, &b| a + b);
+    (e, sum)
+}
+
+/// Each person's probability of a Gaussian with K = 1 + P one-hot logits: softmax(l)[1..] into
+/// `out` (P values).
+pub fn person_probabilities<T: Float>(logits: &[T], out: &mut [T]) {
+    let (e, sum) = exponentials(logits);
+    for (o, &ek) in out.iter_mut().zip(&e[1..]) {
+        *o = ek / sum;
+    }
+}
+
+/// Adds dL/dlogits given dL/d [`person_probabilities`] (`d_q`, P values) into `d_logits` (K values):
+/// ∂s_j/∂l_k = s_j (δ_jk − s_k).
+pub fn person_probabilities_backward<T: Float>(logits: &[T], d_q: &[T], d_logits: &mut [T]) {
+    let (e, sum) = exponentials(logits);
+    let s: Vec<T> = e.iter().map(|&v| v / sum).collect();
+    // Σ_j d_q_j s_j, over the people's classes j ≥ 1.
+    let weighted = d_q
+        .iter()
+        .zip(&s[1..])
+        .fold(T::zero(), |a, (&d, &sj)| a + d * sj);
+    for k in 0..logits.len() {
+        let own = if k >= 1 { d_q[k - 1] } else { T::zero() };
+        d_logits[k] = d_logits[k] + s[k] * (own - weighted);
+    }
+}
+
+/// The person (0-based) whose class has the largest logit among K = 1 + P one-hot logits (the
+/// first on a tie); 0 with one person.
+pub fn most_probable_person<T: Float>(logits: &[T]) -> usize {
+    let mut best = 0;
+    for j in 1..logits.len().saturating_sub(1) {
+        if logits[1 + j] > logits[1 + best] {
+            best = j;
+        }
+    }
+    best
 }
 
 #[inline]

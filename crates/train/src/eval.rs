@@ -203,17 +203,13 @@ pub fn evaluate_frame(
         return Ok(out);
     };
     let (x0, y0, x1, y1) = bbox;
-    let crop_of = |img: &[f32]| crop(img, shape, x0, y0, x1, y1);
-    let box_shape = ImageShape {
-        channels: 3,
-        height: y1 - y0,
-        width: x1 - x0,
-    };
-    let (r, g, b) = (crop_of(f.render), crop_of(f.reference), crop_of(f.blurred));
-    out.psnr_human_box = psnr(&r, &g);
-    out.ssim_human_box = f64::from(ssim(&r, &g, box_shape, None));
-    out.blurred_psnr_human_box = psnr(&b, &g);
-    out.blurred_ssim_human_box = f64::from(ssim(&b, &g, box_shape, None));
+    let inside = box_figures(f, bbox, lpips)?;
+    out.psnr_human_box = inside.psnr;
+    out.ssim_human_box = inside.ssim;
+    out.blurred_psnr_human_box = inside.blurred_psnr;
+    out.blurred_ssim_human_box = inside.blurred_ssim;
+    out.lpips_human_box = inside.lpips;
+    out.blurred_lpips_human_box = inside.blurred_lpips;
     let outside = |img: &[f32]| -> Vec<f32> {
         let plane = f.width * f.height;
         (0..3 * plane)
@@ -229,11 +225,52 @@ pub fn evaluate_frame(
         out.psnr_outside_box = psnr(&outside(f.render), &reference_outside);
         out.blurred_psnr_outside_box = psnr(&outside(f.blurred), &reference_outside);
     }
+    Ok(out)
+}
+
+/// The render's and the blurred input's figures inside one box.
+struct BoxFigures {
+    psnr: f64,
+    ssim: f64,
+    lpips: f64,
+    blurred_psnr: f64,
+    blurred_ssim: f64,
+    blurred_lpips: f64,
+}
+
+/// [`BoxFigures`] of `f` inside `bbox` `(x0, y0, x1, y1)` (exclusive ends); LPIPS (NaN without
+/// `lpips`) in the box grown to the network's minimum size.
+fn box_figures(
+    f: &EvalFrame<'_>,
+    bbox: (usize, usize, usize, usize),
+    lpips: Option<&Lpips<f32>>,
+) -> Result<BoxFigures, TrainError> {
+    let shape = ImageShape {
+        channels: 3,
+        height: f.height,
+        width: f.width,
+    };
+    let (x0, y0, x1, y1) = bbox;
+    let crop_of = |img: &[f32]| crop(img, shape, x0, y0, x1, y1);
+    let box_shape = ImageShape {
+        channels: 3,
+        height: y1 - y0,
+        width: x1 - x0,
+    };
+    let (r, g, b) = (crop_of(f.render), crop_of(f.reference), crop_of(f.blurred));
+    let mut out = BoxFigures {
+        psnr: psnr(&r, &g),
+        ssim: f64::from(ssim(&r, &g, box_shape, None)),
+        lpips: f64::NAN,
+        blurred_psnr: psnr(&b, &g),
+        blurred_ssim: f64::from(ssim(&b, &g, box_shape, None)),
+        blurred_lpips: f64::NAN,
+    };
     if let (Some(net), Some((x0, y0, x1, y1))) =
         (lpips, grown_box(bbox, f.width, f.height, lpips::MIN_SIZE))
     {
         let crop_of = |img: &[f32]| crop(img, shape, x0, y0, x1, y1);
-        (out.lpips_human_box, out.blurred_lpips_human_box) = lpips_pair(
+        (out.lpips, out.blurred_lpips) = lpips_pair(
             net,
             &crop_of(f.render),
             &crop_of(f.blurred),
@@ -243,6 +280,77 @@ pub fn evaluate_frame(
         )?;
     }
     Ok(out)
+}
+
+/// One person's figures in a frame of several people: its own mask (from the frame's person ids)
+/// against its own rendered probability, and the render inside its own box.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct PersonMetrics {
+    /// IoU of the person's rendered probability > 0.5 against its mask (NaN without person ids).
+    pub mask_iou: f64,
+    /// PSNR (dB) inside the person's box (NaN when it is not seen).
+    pub psnr_box: f64,
+    /// SSIM inside the person's box.
+    pub ssim_box: f64,
+    /// LPIPS inside the person's box (grown to the network's minimum size).
+    pub lpips_box: f64,
+    /// PSNR (dB) of the blurred input inside the box.
+    pub blurred_psnr_box: f64,
+    /// SSIM of the blurred input inside the box.
+    pub blurred_ssim_box: f64,
+    /// LPIPS of the blurred input inside the box.
+    pub blurred_lpips_box: f64,
+}
+
+/// [`PersonMetrics`] of one person: `f.mask` is its own mask and `f.human_probability` its own
+/// rendered probability.
+pub fn evaluate_person(
+    f: &EvalFrame<'_>,
+    lpips: Option<&Lpips<f32>>,
+) -> Result<PersonMetrics, TrainError> {
+    let mut out = PersonMetrics {
+        mask_iou: f.mask.map_or(f64::NAN, |mask| {
+            let m: Vec<f32> = mask.iter().map(|&b| if b { 1.0 } else { 0.0 }).collect();
+            mask_iou(f.human_probability, &m)
+        }),
+        psnr_box: f64::NAN,
+        ssim_box: f64::NAN,
+        lpips_box: f64::NAN,
+        blurred_psnr_box: f64::NAN,
+        blurred_ssim_box: f64::NAN,
+        blurred_lpips_box: f64::NAN,
+    };
+    if let Some(bbox) = f.mask.and_then(|mask| mask_bbox(mask, f.width, f.height)) {
+        let inside = box_figures(f, bbox, lpips)?;
+        out.psnr_box = inside.psnr;
+        out.ssim_box = inside.ssim;
+        out.lpips_box = inside.lpips;
+        out.blurred_psnr_box = inside.blurred_psnr;
+        out.blurred_ssim_box = inside.blurred_ssim;
+        out.blurred_lpips_box = inside.blurred_lpips;
+    }
+    Ok(out)
+}
+
+/// Mean of one person's per-frame figures (NaN entries skipped per field).
+pub fn mean_person_metrics(frames: &[PersonMetrics]) -> PersonMetrics {
+    let mean = |get: fn(&PersonMetrics) -> f64| {
+        let vals: Vec<f64> = frames.iter().map(get).filter(|v| v.is_finite()).collect();
+        if vals.is_empty() {
+            f64::NAN
+        } else {
+            vals.iter().sum::<f64>() / vals.len() as f64
+        }
+    };
+    PersonMetrics {
+        mask_iou: mean(|m| m.mask_iou),
+        psnr_box: mean(|m| m.psnr_box),
+        ssim_box: mean(|m| m.ssim_box),
+        lpips_box: mean(|m| m.lpips_box),
+        blurred_psnr_box: mean(|m| m.blurred_psnr_box),
+        blurred_ssim_box: mean(|m| m.blurred_ssim_box),
+        blurred_lpips_box: mean(|m| m.blurred_lpips_box),
+    }
 }
 
 /// Mean of the per-frame figures (NaN entries, from frames without a human, are skipped per field).
@@ -307,6 +415,8 @@ pub struct EvaluatedFrame {
     pub index: u32,
     /// Its figures.
     pub metrics: FrameMetrics,
+    /// With several people, each person's own figures (the model's person order; empty with one).
+    pub people: Vec<PersonMetrics>,
     /// The comparison strip (width, height, planar RGB).
     pub strip: (usize, usize, Vec<f32>),
 }
@@ -319,7 +429,7 @@ pub struct EvaluatedFrame {
 /// and with camera correction the camera's ([`crate::model::Model::render_frame`]).
 pub fn evaluate_split(
     model: &crate::model::Model,
-    body: &crate::pose::body::Body,
+    cast: &crate::pose::body::Cast<'_>,
     data: &crate::data::Dataset,
     split: scene::Split,
     lpips: Option<&Lpips<f32>>,
@@ -327,7 +437,7 @@ pub fn evaluate_split(
     let (w, h) = (data.camera.width as usize, data.camera.height as usize);
     let mut out = Vec::new();
     for f in data.frames.iter().filter(|f| f.split == split) {
-        let pose = body.prepare(&model.corrected_params(f.index, &f.smpl))?;
+        let pose = cast.prepare(&model.corrected_params(f.index, &f.smpl), &f.others)?;
         let r = model.render_frame(f.index, &f.camera, &pose, model.latent_for(f.index))?;
         // Grey frames are compared with the render's luminance, as in training.
         let grey_render = data
@@ -344,9 +454,23 @@ pub fn evaluate_split(
             mask: f.mask.as_deref(),
             human_probability: &r.human,
         };
+        let mut people = Vec::with_capacity(r.people.len());
+        for (j, probability) in r.people.iter().enumerate() {
+            let own: Option<Vec<bool>> = f
+                .person_ids
+                .as_ref()
+                .map(|ids| ids.iter().map(|&id| usize::from(id) == j + 1).collect());
+            let person = EvalFrame {
+                mask: own.as_deref(),
+                human_probability: probability,
+                ..frame
+            };
+            people.push(evaluate_person(&person, lpips)?);
+        }
         out.push(EvaluatedFrame {
             index: f.index,
             metrics: evaluate_frame(&frame, lpips)?,
+            people,
             strip: comparison_strip(&frame),
         });
     }

@@ -38,6 +38,10 @@ pub struct ModelManifest {
     pub body_model: String,
     /// Shape parameters.
     pub betas: Vec<f32>,
+    /// The other people's shape parameters, the scene's person order (absent with one person:
+    /// the body model is everyone's, each person with its own betas).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub other_betas: Vec<Vec<f32>>,
     /// The training camera, stored as `scene.json` stores it (`scene::camera_json`).
     #[serde(with = "scene::camera_json")]
     pub camera: scene::Camera,
@@ -55,10 +59,22 @@ pub struct LoadedModel {
     pub manifest: ModelManifest,
     /// The learned model.
     pub model: Model,
-    /// The canonical body.
+    /// The canonical body (of the first person, with several).
     pub body: Body,
+    /// The other people's canonical bodies (empty with one person).
+    pub others: Vec<Body>,
     /// The manifest's camera, checked for rendering (`Camera::validate`).
     pub camera: rasterize_cpu::Camera,
+}
+
+impl LoadedModel {
+    /// The people the model is posed with.
+    pub fn cast(&self) -> crate::pose::body::Cast<'_> {
+        crate::pose::body::Cast {
+            first: &self.body,
+            others: &self.others,
+        }
+    }
 }
 
 fn io_err(path: &Path, e: impl std::fmt::Display) -> TrainError {
@@ -106,6 +122,7 @@ pub fn save_model(
         config: config.clone(),
         body_model,
         betas: body.betas.clone(),
+        other_betas: data.scene.people.iter().map(|p| p.betas.clone()).collect(),
         camera: data.scene.camera.clone(),
         frame_indices: model.frame_indices.clone(),
         scene_extent: model.scene_extent,
@@ -198,6 +215,11 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
     }
     // `save_model` stores SMPL paths absolute; a hand-edited relative one is taken relative to `dir`.
     let body = Body::load(&manifest.body_model, manifest.betas.clone(), dir)?;
+    let others = manifest
+        .other_betas
+        .iter()
+        .map(|betas| Body::new(body.model.clone(), betas.clone()))
+        .collect::<Result<Vec<_>, _>>()?;
     let ply = dir.join("canonical.ply");
     let set = gaussians::ply::read_ply(&ply).map_err(|e| io_err(&ply, e))?;
     manifest.config.validate()?;
@@ -212,6 +234,16 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
         manifest.frame_indices.clone(),
         manifest.scene_extent,
     )?;
+    if model.people() != 1 + others.len() {
+        return Err(io_err(
+            &json,
+            format!(
+                "canonical.ply has the semantic classes of {} people, model.json the betas of {}",
+                model.people(),
+                1 + others.len()
+            ),
+        ));
+    }
     model.read_networks(&CheckpointReader::open(&dir.join("networks.safetensors"))?)?;
     manifest.camera.validate()?;
     let camera = manifest.camera.clone();
@@ -219,6 +251,7 @@ pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
         manifest,
         model,
         body,
+        others,
         camera,
     })
 }

@@ -174,9 +174,21 @@ fn visible(cameras: &[Camera], p: [f32; 3]) -> bool {
     })
 }
 
-/// Builds the initial set. `canonical_vertices`/`faces`/`skinning_weights` describe the canonical body
-/// mesh (weights N_v × 24, only used by the surface sampler's interpolation), `cameras` the training
-/// cameras and `body_positions` the body's root position per training frame (world).
+/// One person's canonical body mesh, as the initialisation samples it.
+#[derive(Clone, Copy, Debug)]
+pub struct BodySurface<'a> {
+    /// Canonical vertices (m).
+    pub vertices: &'a [[f32; 3]],
+    /// Triangles.
+    pub faces: &'a [[u32; 3]],
+    /// Skinning weights N_v × 24 (only used by the surface sampler's interpolation).
+    pub weights: &'a [f32],
+}
+
+/// Builds the initial set of one person. `canonical_vertices`/`faces`/`skinning_weights` describe
+/// the canonical body mesh (weights N_v × 24, only used by the surface sampler's interpolation),
+/// `cameras` the training cameras and `body_positions` the body's root position per training frame
+/// (world).
 pub fn initialise(
     canonical_vertices: &[[f32; 3]],
     faces: &[[u32; 3]],
@@ -185,21 +197,37 @@ pub fn initialise(
     body_positions: &[[f32; 3]],
     config: &InitConfig,
 ) -> InitialModel {
+    let body = BodySurface {
+        vertices: canonical_vertices,
+        faces,
+        weights: skinning_weights,
+    };
+    initialise_people(&[body], cameras, body_positions, config)
+}
+
+/// Builds the initial set of one or more people: `config.human_count` samples on each person's
+/// canonical body (`bodies`, the model's person order), labelled with that person's class (with
+/// one-hot semantics and several people, K = 1 + P logits), then the scene samples.
+/// `body_positions` are every person's root positions over the training frames (world).
+pub fn initialise_people(
+    bodies: &[BodySurface<'_>],
+    cameras: &[Camera],
+    body_positions: &[[f32; 3]],
+    config: &InitConfig,
+) -> InitialModel {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
     let cube = scene_cube(cameras, body_positions, config.scene_depth_factor);
     let mut points = Vec::new();
+    let mut person_of = Vec::new();
     let human_n = match config.mode {
         InitMode::SmplCube | InitMode::SmplOnly => config.human_count,
         InitMode::Random => 0,
     };
-    if human_n > 0 {
-        let samples = smpl_deform::sample_surface(
-            canonical_vertices,
-            faces,
-            skinning_weights,
-            human_n,
-            config.seed ^ 0x5eed,
-        );
+    for (j, body) in bodies.iter().enumerate().filter(|_| human_n > 0) {
+        // The first person's samples are those of a one-person model, bit for bit.
+        let seed = config.seed ^ 0x5eed ^ ((j as u64) << 40);
+        let samples =
+            smpl_deform::sample_surface(body.vertices, body.faces, body.weights, human_n, seed);
         for (p, n) in samples.points.iter().zip(&samples.normals) {
             let depth = rng.gen_range(0.0..=config.surface_inside_depth);
             points.push([
@@ -207,6 +235,7 @@ pub fn initialise(
                 p[1] - n[1] * depth,
                 p[2] - n[2] * depth,
             ]);
+            person_of.push(j);
         }
     }
     let human = points.len();
@@ -228,7 +257,7 @@ pub fn initialise(
         }
     }
     let n = points.len();
-    let k = config.semantic.logits_per_gaussian();
+    let k = config.semantic.logits_for(bodies.len());
     let mut set = GaussianSet::zeros(n, 0, config.feature_dim, k);
     let cap = config.max_initial_scale.ln();
     set.log_scales = knn_log_scales(&points)
@@ -253,7 +282,11 @@ pub fn initialise(
             config.semantic_init == SemanticInit::OneHot && config.mode != InitMode::Random;
         match (config.semantic, labelled) {
             (SemanticMode::OneHot, true) => {
-                logits.copy_from_slice(&if is_human { [-l, l] } else { [l, -l] });
+                // The labelled class +λ, every other −λ (scene, then one class per person).
+                let class = if is_human { 1 + person_of[i] } else { 0 };
+                for (c, v) in logits.iter_mut().enumerate() {
+                    *v = if c == class { l } else { -l };
+                }
             }
             _ => logits.iter_mut().for_each(|v| *v = 0.0),
         }

@@ -16,6 +16,11 @@
 //! own cotangent, differentiated by one reference backward that receives the re-posings' summed
 //! cotangents — w.r.t. the same quantities and every pass's bones (same tolerance and argument).
 //!
+//! Both checks run with one person and with two and three people (K = 1 + P one-hot classes, each
+//! Gaussian deformed by its most probable person's bones and pose code, each person's probability
+//! an output of its own; probes that change a Gaussian's most probable person need two logits
+//! within 1e-6 of each other, probability ~1e-6).
+//!
 //! The third is learned pose correction end to end: a frame's correction → its corrected
 //! sub-exposure poses → bones and pose code → the same composition → outputs, plus the prior.
 
@@ -34,6 +39,8 @@ use train::pose::reposing::{repose_frame, repose_frame_backward, ReposeCotangent
 const TOL: Tolerance = Tolerance::new(1e-7, 1e-6);
 const H: f64 = 1e-6;
 const N: usize = 3;
+/// Gaussians of a case with several people (enough for every person to have some, mostly).
+const N_PEOPLE: usize = 6;
 const F: usize = 3;
 
 struct Case {
@@ -52,6 +59,12 @@ struct Case {
 }
 
 fn case(seed: u64, scalar: bool, gate: f64) -> Case {
+    case_of(seed, scalar, gate, 1)
+}
+
+/// A case of `people` people (one-hot semantics when more than one).
+fn case_of(seed: u64, scalar: bool, gate: f64, people: usize) -> Case {
+    let n = if people > 1 { N_PEOPLE } else { N };
     // Not `seed` itself: the networks below draw their initial weights from a generator seeded so.
     let mut rng = rng(seed ^ 0xca5e);
     let mut r = || rng.gen_range(-1.0..1.0);
@@ -77,7 +90,7 @@ fn case(seed: u64, scalar: bool, gate: f64) -> Case {
         human_colour: ColourNet::new(human, seed ^ 2).expect("net"),
         scene_colour: ColourNet::new(scene, seed ^ 3).expect("net"),
     };
-    let bones = (0..24)
+    let bones = (0..24 * people)
         .map(|_| {
             // A rotation from a random axis-angle (Rodrigues) and a translation.
             let w = [0.5 * r(), 0.5 * r(), 0.5 * r()];
@@ -96,25 +109,25 @@ fn case(seed: u64, scalar: bool, gate: f64) -> Case {
             m
         })
         .collect();
-    let mode = if scalar {
+    let mode = if scalar && people == 1 {
         SemanticMode::Scalar
     } else {
         SemanticMode::OneHot
     };
     Case {
         nets,
-        means: (0..N).map(|_| [0.5 * r(), 0.5 * r(), 0.5 * r()]).collect(),
-        log_scales: (0..N)
+        means: (0..n).map(|_| [0.5 * r(), 0.5 * r(), 0.5 * r()]).collect(),
+        log_scales: (0..n)
             .map(|_| [-2.0 + 0.3 * r(), -2.0 + 0.3 * r(), -2.0 + 0.3 * r()])
             .collect(),
-        quats: (0..N)
+        quats: (0..n)
             .map(|_| [1.0, 0.3 * r(), 0.3 * r(), 0.3 * r()])
             .collect(),
-        features: (0..N * F).map(|_| r()).collect(),
-        logits: (0..N * mode.logits_per_gaussian())
+        features: (0..n * F).map(|_| r()).collect(),
+        logits: (0..n * mode.logits_for(people))
             .map(|_| 2.0 * r())
             .collect(),
-        pose_code: (0..207).map(|_| 0.2 * r()).collect(),
+        pose_code: (0..207 * people).map(|_| 0.2 * r()).collect(),
         bones,
         latent: vec![r(), r()],
         centre: [0.2 * r(), 0.1 * r(), -3.0],
@@ -145,7 +158,24 @@ fn outputs(
     pose_frame_gated(&c.nets, c.mode, c.gate, &g, &f).expect("forward")
 }
 
-/// ⟨cot, outputs⟩ over the flattened outputs (means, covariances, colours, probability).
+impl Case {
+    fn n(&self) -> usize {
+        self.means.len()
+    }
+
+    fn people(&self) -> usize {
+        self.bones.len() / 24
+    }
+
+    /// The length of the flattened outputs (means, covariances, colours, probability, and each
+    /// person's probability with several people).
+    fn outputs_len(&self) -> usize {
+        let extra = if self.people() > 1 { self.people() } else { 0 };
+        self.n() * (3 + 9 + 3 + 1 + extra)
+    }
+}
+
+/// ⟨cot, outputs⟩ over the flattened outputs (means, covariances, colours, probability, people).
 fn pairing(o: &PosedFrame<f64>, cot: &[f64]) -> f64 {
     let flat: Vec<f64> = o
         .means
@@ -154,8 +184,10 @@ fn pairing(o: &PosedFrame<f64>, cot: &[f64]) -> f64 {
         .chain(o.covariances.iter().flatten().flatten())
         .chain(&o.colours)
         .chain(&o.human_probability)
+        .chain(&o.person_probability)
         .copied()
         .collect();
+    assert_eq!(flat.len(), cot.len());
     flat.iter().zip(cot).map(|(a, b)| a * b).sum()
 }
 
@@ -174,14 +206,29 @@ fn reposed_loss(c: &Case, reposings: &[Vec<[f64; 12]>], cots: &[Vec<f64>]) -> f6
     total
 }
 
-/// The four output cotangents of a flat cotangent vector.
-fn frame_cotangents(cot: &[f64]) -> (Vec<[f64; 3]>, Vec<[[f64; 3]; 3]>) {
-    let means = rows::<3>(&cot[..N * 3]);
-    let covariances = cot[N * 3..N * 12]
+/// The means' and covariances' cotangents of a flat cotangent vector of `n` Gaussians.
+fn frame_cotangents(cot: &[f64], n: usize) -> (Vec<[f64; 3]>, Vec<[[f64; 3]; 3]>) {
+    let means = rows::<3>(&cot[..n * 3]);
+    let covariances = cot[n * 3..n * 12]
         .chunks(9)
         .map(|m| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
         .collect();
     (means, covariances)
+}
+
+/// The posing's cotangents of a flat cotangent vector (see [`pairing`]).
+fn cotangents<'a>(
+    cot: &'a [f64],
+    n: usize,
+    rows: &'a (Vec<[f64; 3]>, Vec<[[f64; 3]; 3]>),
+) -> FrameCotangents<'a, f64> {
+    FrameCotangents {
+        means: &rows.0,
+        covariances: &rows.1,
+        colours: &cot[n * 12..n * 15],
+        human_probability: &cot[n * 15..n * 16],
+        person_probability: &cot[n * 16..],
+    }
 }
 
 /// FD over one parameter block, read and written through `get`/`set` closures.
@@ -224,21 +271,15 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(8))]
 
     #[test]
-    fn model_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>()) {
-        let c = case(seed, scalar, if gated { 0.5 } else { 0.0 });
-        let outputs_len = N * (3 + 9 + 3 + 1);
-        let cot = symmetric_from_seed(seed ^ 0xabc, outputs_len);
+    fn model_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>(), people in 1usize..=3) {
+        let c = case_of(seed, scalar, if gated { 0.5 } else { 0.0 }, people);
+        let n = c.n();
+        let cot = symmetric_from_seed(seed ^ 0xabc, c.outputs_len());
         let (_, cache) = outputs(&c);
-        let means_cot = rows::<3>(&cot[..N * 3]);
-        let cov_cot: Vec<[[f64; 3]; 3]> = cot[N * 3..N * 12].chunks(9).map(|m| [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]]).collect();
+        let split = frame_cotangents(&cot, n);
         let g = GaussianParams { means: &c.means, log_scales: &c.log_scales, quats: &c.quats, features: &c.features, semantic_logits: &c.logits };
         let f = FrameInputs { pose_code: &c.pose_code, bones: &c.bones, camera_centre: c.centre, latent: &c.latent };
-        let grads = pose_frame_backward(&c.nets, c.mode, &g, &f, &cache, &FrameCotangents {
-            means: &means_cot,
-            covariances: &cov_cot,
-            colours: &cot[N * 12..N * 15],
-            human_probability: &cot[N * 15..],
-        }).expect("backward");
+        let grads = pose_frame_backward(&c.nets, c.mode, &g, &f, &cache, &cotangents(&cot, n, &split)).expect("backward");
         let flat = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
         let mut checker = GradientChecker::new();
         let num = fd(&c, &cot, flat(&c.means), |w, p| w.means = rows(p));
@@ -263,6 +304,8 @@ proptest! {
         checker.check("human colour net", &num, &grads.human_colour, TOL);
         let num = fd(&c, &cot, c.nets.scene_colour.mlp.params.clone(), |w, p| w.nets.scene_colour.mlp.params = p.to_vec());
         checker.check("scene colour net", &num, &grads.scene_colour, TOL);
+        let num = fd(&c, &cot, c.pose_code.clone(), |w, p| w.pose_code = p.to_vec());
+        checker.check("pose code", &num, &grads.pose_code, TOL);
         checker.finish();
     }
 }
@@ -271,41 +314,31 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(6))]
 
     #[test]
-    fn reposed_frame_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>()) {
-        let c = case(seed, scalar, if gated { 0.5 } else { 0.0 });
+    fn reposed_frame_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>(), people in 1usize..=3) {
+        let c = case_of(seed, scalar, if gated { 0.5 } else { 0.0 }, people);
+        let n = c.n();
         let mut rng = rng(seed ^ 0x5eb);
         let reposings: Vec<Vec<[f64; 12]>> = (0..2)
             .map(|_| c.bones.iter().map(|b| b.map(|v| v + 0.05 * rng.gen_range(-1.0..1.0))).collect())
             .collect();
-        let outputs_len = N * (3 + 9 + 3 + 1);
-        let cots: Vec<Vec<f64>> = (0..3).map(|s| symmetric_from_seed(seed ^ (0xabc + s), outputs_len)).collect();
+        let cots: Vec<Vec<f64>> = (0..3).map(|s| symmetric_from_seed(seed ^ (0xabc + s), c.outputs_len())).collect();
         let (reference, cache) = outputs(&c);
         // At the reference's own bones a re-posing is the reference, bit for bit.
         let (same, _) = repose_frame(&reference, &cache, &c.bones).expect("repose");
         prop_assert_eq!(&same, &reference);
         let g = GaussianParams { means: &c.means, log_scales: &c.log_scales, quats: &c.quats, features: &c.features, semantic_logits: &c.logits };
-        let mut summed = ReposeCotangents::zeros(N, cache.active().len());
+        let mut summed = ReposeCotangents::zeros(n, cache.active().len());
         let mut sub_bones = Vec::new();
         for (bones, cot) in reposings.iter().zip(&cots[1..]) {
             let (_, sub) = repose_frame(&reference, &cache, bones).expect("repose");
-            let (means, covariances) = frame_cotangents(cot);
-            let (d, d_bones) = repose_frame_backward(c.mode, &g, &cache, bones, &sub, &FrameCotangents {
-                means: &means,
-                covariances: &covariances,
-                colours: &cot[N * 12..N * 15],
-                human_probability: &cot[N * 15..],
-            }).expect("re-posing backward");
+            let split = frame_cotangents(cot, n);
+            let (d, d_bones) = repose_frame_backward(c.mode, &g, &cache, bones, &sub, &cotangents(cot, n, &split)).expect("re-posing backward");
             summed.add(&d);
             sub_bones.push(d_bones);
         }
         let f = FrameInputs { pose_code: &c.pose_code, bones: &c.bones, camera_centre: c.centre, latent: &c.latent };
-        let (means, covariances) = frame_cotangents(&cots[0]);
-        let grads = pose_frame_backward_with(&c.nets, c.mode, &g, &f, &cache, &FrameCotangents {
-            means: &means,
-            covariances: &covariances,
-            colours: &cots[0][N * 12..N * 15],
-            human_probability: &cots[0][N * 15..],
-        }, Some(&summed)).expect("backward");
+        let split = frame_cotangents(&cots[0], n);
+        let grads = pose_frame_backward_with(&c.nets, c.mode, &g, &f, &cache, &cotangents(&cots[0], n, &split), Some(&summed)).expect("backward");
         let flat = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
         let fd = |x: Vec<f64>, set: &dyn Fn(&mut Case, &[f64])| {
             let mut work = clone_case(&c);
@@ -428,8 +461,7 @@ proptest! {
         let b = correction_body(seed);
         let all: Vec<f64> = symmetric_from_seed(seed ^ 0xc0, 3 * CORRECTION_VALUES).iter().map(|v| 0.1 * v).collect();
         let prior = CorrectionPrior { zero: 0.3, smooth: 0.7 };
-        let outputs_len = N * (3 + 9 + 3 + 1);
-        let cots: Vec<Vec<f64>> = (0..3).map(|s| symmetric_from_seed(seed ^ (0xdef + s), outputs_len)).collect();
+        let cots: Vec<Vec<f64>> = (0..3).map(|s| symmetric_from_seed(seed ^ (0xdef + s), c.outputs_len())).collect();
 
         // Analytic: the forward, then the backward of every stage.
         let correction = &all[CORRECTION_VALUES..2 * CORRECTION_VALUES];
@@ -444,24 +476,14 @@ proptest! {
         let mut d_bones = vec![Vec::new(); 3];
         for s in [0, 2] {
             let (_, sub) = repose_frame(&reference, &cache, &frames[s].bones).expect("repose");
-            let (means, covariances) = frame_cotangents(&cots[s]);
-            let (d, bones) = repose_frame_backward(mid.mode, &g, &cache, &frames[s].bones, &sub, &FrameCotangents {
-                means: &means,
-                covariances: &covariances,
-                colours: &cots[s][N * 12..N * 15],
-                human_probability: &cots[s][N * 15..],
-            }).expect("re-posing backward");
+            let split = frame_cotangents(&cots[s], N);
+            let (d, bones) = repose_frame_backward(mid.mode, &g, &cache, &frames[s].bones, &sub, &cotangents(&cots[s], N, &split)).expect("re-posing backward");
             summed.add(&d);
             d_bones[s] = bones;
         }
         let f = FrameInputs { pose_code: &mid.pose_code, bones: &mid.bones, camera_centre: mid.centre, latent: &mid.latent };
-        let (means, covariances) = frame_cotangents(&cots[1]);
-        let grads = pose_frame_backward_with(&mid.nets, mid.mode, &g, &f, &cache, &FrameCotangents {
-            means: &means,
-            covariances: &covariances,
-            colours: &cots[1][N * 12..N * 15],
-            human_probability: &cots[1][N * 15..],
-        }, Some(&summed)).expect("backward");
+        let split = frame_cotangents(&cots[1], N);
+        let grads = pose_frame_backward_with(&mid.nets, mid.mode, &g, &f, &cache, &cotangents(&cots[1], N, &split), Some(&summed)).expect("backward");
         d_bones[1] = grads.bones.clone();
         let mut ana = vec![0.0; CORRECTION_VALUES];
         for s in 0..3 {

@@ -67,7 +67,7 @@ pub fn run(args: Args) -> Result<()> {
     let camera_error = crate::outputs::camera_report::camera_report(&data, model)?;
     write_evaluation(
         model,
-        &loaded.body,
+        &loaded.cast(),
         &data,
         &out,
         &EvalSummary {

@@ -337,9 +337,10 @@ pub fn run(args: Args) -> Result<()> {
             .with_context(|| format!("writing the corrected poses to {}", model_dir.display()))?;
     }
     if let Some(first) = ctx.frames.first() {
-        let pose = ctx
-            .body
-            .prepare(&model.corrected_params(first.index, &first.pose.params))?;
+        let pose = ctx.cast().prepare(
+            &model.corrected_params(first.index, &first.pose.params),
+            &first.pose.others,
+        )?;
         let r = model.render_frame(
             first.index,
             &first.camera,
@@ -350,6 +351,18 @@ pub fn run(args: Args) -> Result<()> {
         let path = model_dir.join(format!("posed_frame_{:06}.ply", first.index));
         gaussians::ply::write_ply(&path, &posed)
             .with_context(|| format!("writing {}", path.display()))?;
+        if model.people() > 1 {
+            // Each person alone: its Gaussians (human probability ≥ 0.5, most probably its).
+            for (j, id) in data.scene.person_ids().into_iter().enumerate() {
+                let own: Vec<usize> = (0..model.set.len())
+                    .filter(|&i| model.probability(i) >= 0.5 && model.person_of(i) == j)
+                    .collect();
+                let path =
+                    model_dir.join(format!("posed_frame_{:06}_person_{id}.ply", first.index));
+                gaussians::ply::write_ply(&path, &posed.select(&own))
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+        }
     }
     let breakdown = mean_times(&recent);
     let pose_error = crate::outputs::pose_report::pose_report(&data, model, &ctx.body)?;
@@ -396,6 +409,11 @@ pub fn run(args: Args) -> Result<()> {
                 .collect::<serde_json::Map<_, _>>(),
         }),
     };
+    let mut summary = summary;
+    if model.people() > 1 {
+        summary.extra["people_count"] = serde_json::json!(model.people());
+        summary.extra["person_class_changes"] = serde_json::json!(trainer.person_changes);
+    }
     if config.event_loss {
         crate::outputs::pictures::write_event_picture(&data, &out)?;
     }
@@ -410,7 +428,7 @@ pub fn run(args: Args) -> Result<()> {
             crate::outputs::pictures::write_flow_picture(&data, kind, &out)?;
         }
     }
-    write_evaluation(model, &ctx.body, &data, &out, &summary)?;
+    write_evaluation(model, &ctx.cast(), &data, &out, &summary)?;
     if let Some(report) = &pose_error {
         println!("{}", crate::outputs::pose_report::summary_line(report));
     }

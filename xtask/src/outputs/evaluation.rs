@@ -5,9 +5,9 @@
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::Path;
-use train::eval::{evaluate_split, mean_metrics};
+use train::eval::{evaluate_split, mean_metrics, mean_person_metrics, PersonMetrics};
 use train::model::Model;
-use train::pose::body::Body;
+use train::pose::body::Cast;
 
 /// Training facts recorded next to the figures.
 pub struct EvalSummary {
@@ -97,7 +97,7 @@ fn print_metrics_table(
 /// Evaluates the split `summary.split` (the test split unless told), writes `out/metrics.json` and `out/eval/strip_NNNNNN.png`, prints a table.
 pub fn write_evaluation(
     model: &Model,
-    body: &Body,
+    cast: &Cast<'_>,
     data: &train::data::Dataset,
     out: &Path,
     summary: &EvalSummary,
@@ -105,7 +105,7 @@ pub fn write_evaluation(
     let weights = crate::common::shipped_lpips_weights();
     let lpips = lpips::load_safetensors(&weights)
         .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
-    let frames = evaluate_split(model, body, data, summary.split, Some(&lpips))?;
+    let frames = evaluate_split(model, cast, data, summary.split, Some(&lpips))?;
     let strips = out.join("eval");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
     for f in &frames {
@@ -124,6 +124,17 @@ pub fn write_evaluation(
     }
     let per_frame: Vec<_> = frames.iter().map(|f| f.metrics).collect();
     let m = mean_metrics(&per_frame);
+    let people: Vec<PersonMetrics> = (0..model.people())
+        .filter(|_| model.people() > 1)
+        .map(|j| {
+            let own: Vec<_> = frames
+                .iter()
+                .filter_map(|f| f.people.get(j).copied())
+                .collect();
+            mean_person_metrics(&own)
+        })
+        .collect();
+    let ids = data.scene.person_ids();
     let mut metrics = json!({
         "split": summary.split.as_str(),
         "test_frames": frames.len(),
@@ -149,8 +160,15 @@ pub fn write_evaluation(
         "gaussians_human": summary.gaussians_human,
         "gaussians_scene": summary.gaussians_scene,
         "lpips": "AlexNet v0.1 on sRGB-encoded images (lower is closer); a human box below 31 px per side is grown to 31 for LPIPS",
-        "per_frame": frames.iter().map(|f| json!({"index": f.index, "metrics": f.metrics})).collect::<Vec<_>>(),
+        "per_frame": frames.iter().map(|f| per_frame_json(f, &ids)).collect::<Vec<_>>(),
     });
+    if !people.is_empty() {
+        metrics["people"] = people
+            .iter()
+            .zip(&ids)
+            .map(|(p, id)| person_json(p, *id))
+            .collect();
+    }
     if let (Some(obj), Some(extra)) = (metrics.as_object_mut(), summary.extra.as_object()) {
         for (k, v) in extra {
             obj.insert(k.clone(), v.clone());
@@ -177,6 +195,13 @@ pub fn write_evaluation(
         .with_context(|| format!("writing {}", path.display()))?;
     let sharp = data.scene.frames.iter().any(|f| f.sharp.is_some());
     print_metrics_table(&m, summary.split, frames.len(), sharp);
+    for (p, id) in people.iter().zip(&ids) {
+        let label = format!("person {id}: box PSNR, IoU");
+        println!(
+            "| {label:<28} | {:>7.2} dB | {:>9.3} |",
+            p.psnr_box, p.mask_iou
+        );
+    }
     if summary.train_seconds.is_finite() {
         println!(
             "| training                     | {:>8.0} s | {} steps |",
@@ -205,4 +230,33 @@ pub fn write_evaluation(
         report.display()
     );
     Ok(())
+}
+
+/// One evaluated frame in `metrics.json`: its figures and, with several people, each person's.
+fn per_frame_json(f: &train::eval::EvaluatedFrame, ids: &[u32]) -> serde_json::Value {
+    let mut entry = json!({"index": f.index, "metrics": f.metrics});
+    if !f.people.is_empty() {
+        entry["people"] = f
+            .people
+            .iter()
+            .zip(ids)
+            .map(|(p, id)| person_json(p, *id))
+            .collect();
+    }
+    entry
+}
+
+/// One person's figures under its stable id.
+fn person_json(p: &PersonMetrics, id: u32) -> serde_json::Value {
+    json!({
+        "id": id,
+        "mask_iou": p.mask_iou,
+        "test_psnr_box": p.psnr_box,
+        "test_ssim_box": p.ssim_box,
+        "test_lpips_box": p.lpips_box,
+        "blurred_psnr_box": p.blurred_psnr_box,
+        "blurred_ssim_box": p.blurred_ssim_box,
+        "blurred_lpips_box": p.blurred_lpips_box,
+        "gap_to_blurred_box_db": p.psnr_box - p.blurred_psnr_box,
+    })
 }

@@ -25,8 +25,14 @@ pub struct TrainFrame {
     pub sharp: Option<Vec<f32>>,
     /// Human mask (H × W), if the scene has one.
     pub mask: Option<Vec<bool>>,
+    /// Which person each pixel shows (H × W; 0 = nobody, p + 1 = person p of the scene's
+    /// order), if the scene has one.
+    pub person_ids: Option<Vec<u8>>,
     /// SMPL parameters at mid exposure (betas from the scene's body spec).
     pub smpl: SmplParams,
+    /// The other people's SMPL parameters at mid exposure (scene order, each with its own betas;
+    /// empty with one person).
+    pub others: Vec<SmplParams>,
     /// The camera at mid exposure: the scene camera, at the frame's own pose when it has one.
     pub camera: Camera,
 }
@@ -55,6 +61,23 @@ impl Dataset {
         crate::pose::body::Body::load(&spec.model, spec.betas.clone(), &self.dir)
     }
 
+    /// The other people's bodies (`scene.json`'s `people`, in order): the first person's body
+    /// model with each one's own betas. Empty with one person.
+    pub fn other_bodies(&self) -> Result<Vec<crate::pose::body::Body>, TrainError> {
+        let spec = &self.scene.body;
+        let model = crate::pose::body::resolve_reference(&spec.model, &self.dir)?.load()?;
+        self.scene
+            .people
+            .iter()
+            .map(|p| crate::pose::body::Body::new(model.clone(), p.betas.clone()))
+            .collect()
+    }
+
+    /// How many people the scene has.
+    pub fn people(&self) -> usize {
+        self.scene.person_count()
+    }
+
     /// Indices of the frames of a split.
     pub fn split(&self, split: Split) -> Vec<usize> {
         self.scene.split_indices(split)
@@ -78,14 +101,13 @@ impl Dataset {
     }
 }
 
-/// Loads and validates `dir` (see `scene::load`) and decodes every frame. A scene with several
-/// people (format version 3) is refused: the model reconstructs one person.
+/// Loads and validates `dir` (see `scene::load`) and decodes every frame.
 pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
     let scene = scene::load(dir)?;
-    if scene.person_count() > 1 {
+    if scene.person_count() > MAX_PEOPLE {
         return Err(TrainError::Config(format!(
             "{}: the scene has {} people (scene.json `people`, ids {:?}); the model reconstructs \
-             one person, so several people cannot be trained yet",
+             at most {MAX_PEOPLE}",
             dir.join(scene::SCENE_FILE).display(),
             scene.person_count(),
             scene.person_ids()
@@ -113,6 +135,26 @@ pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
             Some(rel) => Some(scene::read_mask(&Scene::resolve(dir, rel))?.2),
             None => None,
         };
+        let person_ids = match &f.person_ids {
+            Some(rel) => Some(read_person_ids(&Scene::resolve(dir, rel), w, h)?),
+            None => None,
+        };
+        let others = (1..scene.person_count())
+            .map(|p| {
+                let (pose, transl) = f.pose_of(p).ok_or_else(|| {
+                    TrainError::Config(format!(
+                        "{}: frame {} has no pose of person {p}",
+                        dir.join(scene::SCENE_FILE).display(),
+                        f.index
+                    ))
+                })?;
+                Ok(SmplParams {
+                    pose: pose.iter().flatten().copied().collect(),
+                    betas: scene.betas_of(p).unwrap_or_default().to_vec(),
+                    transl,
+                })
+            })
+            .collect::<Result<Vec<_>, TrainError>>()?;
         frames.push(TrainFrame {
             index: f.index,
             time_s: f.time_s,
@@ -121,11 +163,13 @@ pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
             image: read(&f.image)?,
             sharp: f.sharp.as_deref().map(read).transpose()?,
             mask,
+            person_ids,
             smpl: SmplParams {
                 pose: f.pose_flat(),
                 betas: scene.body.betas.clone(),
                 transl: f.transl,
             },
+            others,
             camera: scene.camera_of(k),
         });
     }
@@ -136,4 +180,19 @@ pub fn load_dataset(dir: &Path) -> Result<Dataset, TrainError> {
         camera,
         frames,
     })
+}
+
+/// The most people a model reconstructs (the benchmark's `--people` range).
+pub const MAX_PEOPLE: usize = 4;
+
+/// A person-id image checked against the camera's `w` × `h`.
+fn read_person_ids(path: &Path, w: u32, h: u32) -> Result<Vec<u8>, TrainError> {
+    let (iw, ih, ids) = scene::read_person_ids(path)?;
+    if (iw, ih) != (w, h) {
+        return Err(TrainError::Config(format!(
+            "{}: person ids are {iw}x{ih}, the camera is {w}x{h}",
+            path.display()
+        )));
+    }
+    Ok(ids)
 }

@@ -7,7 +7,7 @@ use super::event_counts::{expected_change, hot_pixels, slice_modulation};
 use super::event_files::read_frame_events;
 use crate::config::TrainConfig;
 use crate::loss::optical_flow::{network_target, prepare_target, FlowTarget};
-use crate::pose::body::{Body, GivenPose};
+use crate::pose::body::{Body, Cast, GivenPose};
 use crate::TrainError;
 use flow::SpyNet;
 use rasterize_cpu::Camera;
@@ -73,8 +73,10 @@ pub struct TrainingData {
     /// The frames are grey (`images.channels = 1`): the photometric and perceptual losses compare
     /// the renders' Rec. 601 luminance with them.
     pub grey: bool,
-    /// The body.
+    /// The body (of the first person, with several).
     pub body: Body,
+    /// The other people's bodies, the scene's order (empty with one person).
+    pub others: Vec<Body>,
     /// Canonical surface samples for the skinning loss.
     pub skin_points: Vec<[f32; 3]>,
     /// Body skinning weights of `skin_points`, row-major (N, 24).
@@ -117,12 +119,17 @@ pub struct TrainingData {
 impl TrainingData {
     /// Prepares the training split of `data` with `body` (surface samples drawn with `seed`).
     pub fn new(data: &Dataset, body: Body, seed: u64) -> Result<Self, TrainError> {
+        let others = data.other_bodies()?;
+        let cast = Cast {
+            first: &body,
+            others: &others,
+        };
         let mut frames = Vec::new();
         for f in data.frames.iter().filter(|f| f.split == Split::Train) {
             frames.push(TrainingFrame {
                 index: f.index,
                 image: f.image.clone(),
-                pose: body.given(&f.smpl)?,
+                pose: cast.given(&f.smpl, &f.others)?,
                 camera: f.camera.clone(),
             });
         }
@@ -144,6 +151,7 @@ impl TrainingData {
             frames,
             grey: data.scene.images.is_grey(),
             body,
+            others,
             skin_points: samples.points,
             skin_weights: samples.weights,
             flow_pairs: Vec::new(),
@@ -205,6 +213,17 @@ impl TrainingData {
         let keys: Vec<(f64, &smpl_deform::SmplParams)> =
             data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
         let track = crate::pose::exposure::PoseTrack::new(&keys);
+        let other_tracks: Vec<_> = (0..self.others.len())
+            .map(|j| {
+                let keys: Vec<(f64, &smpl_deform::SmplParams)> = data
+                    .frames
+                    .iter()
+                    .map(|f| (f.time_s, &f.others[j]))
+                    .collect();
+                crate::pose::exposure::PoseTrack::new(&keys)
+            })
+            .collect();
+        let cast = self.cast();
         let mut poses = Vec::with_capacity(self.frames.len());
         for frame in data.frames.iter().filter(|f| f.split == Split::Train) {
             let times =
@@ -212,7 +231,10 @@ impl TrainingData {
             poses.push(
                 times
                     .iter()
-                    .map(|&t| self.body.given(&track.at(t)))
+                    .map(|&t| {
+                        let others: Vec<_> = other_tracks.iter().map(|o| o.at(t)).collect();
+                        cast.given(&track.at(t), &others)
+                    })
                     .collect::<Result<Vec<_>, _>>()?,
             );
         }
@@ -240,6 +262,14 @@ impl TrainingData {
                 .collect();
         }
         Ok(())
+    }
+
+    /// The people the model is posed with.
+    pub fn cast(&self) -> Cast<'_> {
+        Cast {
+            first: &self.body,
+            others: &self.others,
+        }
     }
 
     /// The poses training slot `slot` is rendered at: its sub-exposure poses when `exposure`

@@ -132,6 +132,7 @@ impl Model {
         Ok(Rendered {
             rgb: pass.rgb().to_vec(),
             human: pass.human().to_vec(),
+            people: pass.people_planes(),
             posed: pass.posed,
         })
     }

@@ -10,6 +10,7 @@
 //! with an exposure model) and differentiate each. Eval, export and rendering take a `Model`, never a
 //! trainer.
 
+use crate::blend::SemanticMode;
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::correction::{knot_slots, CORRECTION_VALUES};
@@ -36,7 +37,9 @@ use rasterize_cpu::{
 use smpl_deform::math::Affine;
 use std::time::Instant;
 
-/// Number of rendered channels: linear RGB and the human probability.
+/// Number of rendered channels of a model of one person: linear RGB and the human probability.
+/// A model of several people renders each person's probability after them
+/// ([`Model::render_channels`]).
 pub const RENDER_CHANNELS: usize = 4;
 
 /// What a reconstruction learned.
@@ -73,6 +76,8 @@ pub struct Rendered {
     pub rgb: Vec<f32>,
     /// Rendered human probability (H, W) (alpha-composited, 0 where nothing is drawn).
     pub human: Vec<f32>,
+    /// With several people, each person's rendered probability (H, W) (empty with one).
+    pub people: Vec<Vec<f32>>,
     /// The posed per-Gaussian attributes.
     pub posed: PosedFrame<f32>,
 }
@@ -193,6 +198,8 @@ pub struct PosedGradients {
     pub colours: Vec<f32>,
     /// dL/d human probability, N.
     pub human_probability: Vec<f32>,
+    /// dL/d each person's probability, N × P with several people (else empty).
+    pub person_probability: Vec<f32>,
     /// dL/d opacity logits (stored directly in the set: no model backward needed).
     pub opacity_logits: Vec<f32>,
     /// dL/d screen-space means (pixels), for density control.
@@ -210,8 +217,15 @@ impl Model {
         frame_indices: Vec<u32>,
         scene_extent: f32,
     ) -> Result<Self, TrainError> {
-        let k = config.semantic.logits_per_gaussian();
-        if set.semantic_logits.len() != set.len() * k || set.feature_dim != config.feature_dim {
+        let people = match config.semantic {
+            SemanticMode::OneHot => set.semantic_classes.saturating_sub(1).max(1),
+            _ => 1,
+        };
+        let k = config.semantic.logits_for(people);
+        if set.semantic_classes != k
+            || set.semantic_logits.len() != set.len() * k
+            || set.feature_dim != config.feature_dim
+        {
             return Err(TrainError::Config(format!(
                 "the Gaussians carry {} semantic logits and {} features each; the configuration needs {k} and {}",
                 set.semantic_logits.len().checked_div(set.len()).unwrap_or(0),
@@ -260,12 +274,40 @@ impl Model {
         })
     }
 
+    /// The number of people the model reconstructs (one semantic class each).
+    pub fn people(&self) -> usize {
+        match self.config.semantic {
+            SemanticMode::OneHot => self.set.semantic_classes.saturating_sub(1).max(1),
+            _ => 1,
+        }
+    }
+
+    /// The number of rendered channels: RGB, the human probability and, with several people,
+    /// each person's probability.
+    pub fn render_channels(&self) -> usize {
+        match self.people() {
+            1 => RENDER_CHANNELS,
+            p => RENDER_CHANNELS + p,
+        }
+    }
+
+    /// Gaussian `i`'s semantic logits.
+    pub fn logits(&self, i: usize) -> &[f32] {
+        let k = self.set.semantic_classes;
+        &self.set.semantic_logits[i * k..(i + 1) * k]
+    }
+
     /// Human probability of Gaussian `i`.
     pub fn probability(&self, i: usize) -> f32 {
-        let k = self.config.semantic.logits_per_gaussian();
-        self.config
-            .semantic
-            .probability(&self.set.semantic_logits[i * k..(i + 1) * k])
+        self.config.semantic.probability(self.logits(i))
+    }
+
+    /// The person (0-based) Gaussian `i` is most probably part of (0 with one person).
+    pub fn person_of(&self, i: usize) -> usize {
+        match self.people() {
+            1 => 0,
+            _ => crate::blend::most_probable_person(self.logits(i)),
+        }
     }
 
     /// Number of Gaussians with human probability ≥ 0.5.
@@ -303,8 +345,8 @@ impl Model {
         }
     }
 
-    /// The rasterizer settings: the background colour with a 0 human-probability channel behind it
-    /// and the configured near plane.
+    /// The rasterizer settings: the background colour with 0 probability channels behind it and the
+    /// configured near plane.
     pub fn render_settings(&self) -> RenderSettings {
         let mut background: Vec<f64> = self
             .config
@@ -312,7 +354,7 @@ impl Model {
             .iter()
             .map(|&v| f64::from(v))
             .collect();
-        background.push(0.0);
+        background.resize(self.render_channels(), 0.0);
         RenderSettings {
             near_plane: self.config.near_plane,
             background,
@@ -568,6 +610,7 @@ impl Model {
         Ok(Rendered {
             rgb: pass.rgb().to_vec(),
             human: pass.human().to_vec(),
+            people: pass.people_planes(),
             posed: pass.posed,
         })
     }
@@ -603,17 +646,20 @@ fn splats<'a>(
         covariances: &posed.covariances,
         opacity_logits: &model.set.opacity_logits,
         channels,
-        num_channels: RENDER_CHANNELS,
+        num_channels: model.render_channels(),
     }
 }
 
-/// Per-Gaussian render channels (r, g, b, p), N × 4 row-major.
+/// Per-Gaussian render channels (r, g, b, p), N × 4 row-major, with each person's probability
+/// after p when the frame has several people (N × (4 + P)).
 fn interleave_channels(posed: &PosedFrame<f32>) -> Vec<f32> {
     let n = posed.means.len();
-    let mut channels = Vec::with_capacity(n * RENDER_CHANNELS);
+    let people = posed.person_probability.len().checked_div(n).unwrap_or(0);
+    let mut channels = Vec::with_capacity(n * (RENDER_CHANNELS + people));
     for i in 0..n {
         channels.extend_from_slice(&posed.colours[i * 3..i * 3 + 3]);
         channels.push(posed.human_probability[i]);
+        channels.extend_from_slice(&posed.person_probability[i * people..(i + 1) * people]);
     }
     channels
 }

@@ -19,7 +19,22 @@ impl FramePass<'_> {
         &self.out.image[3 * hw..4 * hw]
     }
 
-    /// Rasterizer backward of the image cotangent `d_image` ((C, H, W), C = [`RENDER_CHANNELS`]) plus,
+    /// The number of rendered channels ([`Model::render_channels`]).
+    pub fn render_channels(&self) -> usize {
+        self.model.render_channels()
+    }
+
+    /// With several people, each person's rendered probability, (H, W) each (empty with one).
+    pub fn people_planes(&self) -> Vec<Vec<f32>> {
+        let hw = self.pixels();
+        let extra = self.model.render_channels() - RENDER_CHANNELS;
+        (0..extra)
+            .map(|j| self.out.image[(4 + j) * hw..(5 + j) * hw].to_vec())
+            .collect()
+    }
+
+    /// Rasterizer backward of the image cotangent `d_image` ((C, H, W), C =
+    /// [`Model::render_channels`]) plus,
     /// when given, a cotangent `d_geometric` of the RGB planes of which only the geometric share is
     /// kept: its gradients w.r.t. the means, covariances and screen-space means. The backward is
     /// linear in the cotangent, so this is exactly the gradient of all losses with `d_geometric`'s
@@ -30,7 +45,7 @@ impl FramePass<'_> {
         d_geometric: Option<&[f32]>,
     ) -> Result<PosedGradients, TrainError> {
         let g = self.rasterizer_backward(d_image, d_geometric)?;
-        Ok(PosedGradients::from_raster(g))
+        Ok(PosedGradients::from_raster(g, self.model.render_channels()))
     }
 
     fn rasterizer_backward(
@@ -161,21 +176,30 @@ impl Model {
             sharing,
             &cotangents,
         )?;
-        Ok(grads.into_iter().map(PosedGradients::from_raster).collect())
+        let channels = self.render_channels();
+        Ok(grads
+            .into_iter()
+            .map(|g| PosedGradients::from_raster(g, channels))
+            .collect())
     }
 }
 
 impl PosedGradients {
-    /// The rasterizer's gradients, the render channels split into RGB and human probability.
-    fn from_raster(g: Gradients<f32>) -> Self {
-        let per = g.channels.chunks_exact(RENDER_CHANNELS);
+    /// The rasterizer's gradients, the `channels` render channels split into RGB, human
+    /// probability and (with several people) each person's.
+    fn from_raster(g: Gradients<f32>, channels: usize) -> Self {
+        let per = g.channels.chunks_exact(channels);
         let colours = per.clone().flat_map(|c| c[..3].iter().copied()).collect();
-        let human_probability = per.map(|c| c[3]).collect();
+        let human_probability = per.clone().map(|c| c[3]).collect();
+        let person_probability = per
+            .flat_map(|c| c[RENDER_CHANNELS..].iter().copied())
+            .collect();
         PosedGradients {
             means: g.means,
             covariances: g.covariances,
             colours,
             human_probability,
+            person_probability,
             opacity_logits: g.opacity_logits,
             means_2d: g.means_2d,
         }
@@ -188,6 +212,7 @@ impl PosedGradients {
             covariances: &self.covariances,
             colours: &self.colours,
             human_probability: &self.human_probability,
+            person_probability: &self.person_probability,
         }
     }
 }

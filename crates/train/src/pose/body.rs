@@ -8,14 +8,15 @@ use smpl_deform::math::Affine;
 use smpl_deform::{BodyModel, BodyRef, CanonicalBody, SmplDeformError, SmplParams, NUM_JOINTS};
 use std::path::Path;
 
-/// A body pose prepared for the model: the pose feature and the canonical-to-frame bone transforms.
+/// A body pose prepared for the model: the pose feature and the canonical-to-frame bone
+/// transforms — of every person of the model, one after the other ([`Cast::prepare`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PreparedPose {
-    /// The 207-value pose feature (R[1:] − I).
+    /// The 207-value pose feature (R[1:] − I), per person.
     pub pose_code: Vec<f32>,
-    /// `frame_from_canonical` per bone (24, row-major 3×4).
+    /// `frame_from_canonical` per bone (24 per person, row-major 3×4).
     pub bones: Vec<Affine<f32>>,
-    /// World position of the root joint (m).
+    /// World position of the first person's root joint (m).
     pub root: [f32; 3],
 }
 
@@ -23,10 +24,71 @@ pub struct PreparedPose {
 /// model consumes it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GivenPose {
-    /// The SMPL parameters.
+    /// The first person's SMPL parameters.
     pub params: SmplParams,
-    /// The same pose prepared by [`Body::prepare`].
+    /// The other people's SMPL parameters, the model's person order (empty with one person).
+    pub others: Vec<SmplParams>,
+    /// Every person's pose prepared by [`Cast::prepare`].
     pub prepared: PreparedPose,
+}
+
+/// The people a model is posed with: the first person's body and the others' (the scene's person
+/// order). With no others it prepares exactly what [`Body::prepare`] does.
+#[derive(Clone, Copy, Debug)]
+pub struct Cast<'a> {
+    /// The first person.
+    pub first: &'a Body,
+    /// Everyone else.
+    pub others: &'a [Body],
+}
+
+impl Cast<'_> {
+    /// The number of people.
+    pub fn len(&self) -> usize {
+        1 + self.others.len()
+    }
+
+    /// Always false: a cast has its first person.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Every person's pose prepared in one: `first` for the first person, `others[j]` for the
+    /// others' (the pose codes and bones concatenated, the root the first person's). A missing
+    /// or extra pose is an error.
+    pub fn prepare(
+        &self,
+        first: &SmplParams,
+        others: &[SmplParams],
+    ) -> Result<PreparedPose, TrainError> {
+        if others.len() != self.others.len() {
+            return Err(TrainError::Config(format!(
+                "a pose of {} people for a model of {}",
+                1 + others.len(),
+                self.len()
+            )));
+        }
+        let mut prepared = self.first.prepare(first)?;
+        for (body, params) in self.others.iter().zip(others) {
+            let own = body.prepare(params)?;
+            prepared.pose_code.extend_from_slice(&own.pose_code);
+            prepared.bones.extend_from_slice(&own.bones);
+        }
+        Ok(prepared)
+    }
+
+    /// The poses with their prepared form ([`Cast::prepare`]).
+    pub fn given(
+        &self,
+        first: &SmplParams,
+        others: &[SmplParams],
+    ) -> Result<GivenPose, TrainError> {
+        Ok(GivenPose {
+            prepared: self.prepare(first, others)?,
+            params: first.clone(),
+            others: others.to_vec(),
+        })
+    }
 }
 
 /// What [`Body::pose_backward`] needs of a pose prepared by [`Body::prepare_differentiable`]: the
@@ -80,11 +142,12 @@ impl Body {
         })
     }
 
-    /// `params` with its prepared pose ([`Body::prepare`]).
+    /// `params` with its prepared pose ([`Body::prepare`]), the body alone.
     pub fn given(&self, params: &SmplParams) -> Result<GivenPose, TrainError> {
         Ok(GivenPose {
             prepared: self.prepare(params)?,
             params: params.clone(),
+            others: Vec::new(),
         })
     }
 

@@ -14,6 +14,7 @@
 //! then cost one network forward and backward plus S cheap re-posings, instead of S of each.
 
 use crate::blend::{blend, BlendInputs, SemanticMode};
+use crate::pose::posing::PeopleRepose;
 pub use crate::pose::posing::ReposeCotangents;
 use crate::pose::posing::{
     blend_backward_active, deformed_covariance, FrameCache, FrameCotangents, GaussianParams,
@@ -21,14 +22,13 @@ use crate::pose::posing::{
 };
 use crate::TrainError;
 use nn::Real;
-use smpl_deform::deform_net::ReposeCache;
 use smpl_deform::math::Affine;
 
 /// What [`repose_frame_backward`] needs of a re-posed pass.
 #[derive(Clone, Debug)]
 pub struct ReposedCache<T> {
     active: Vec<usize>,
-    repose: ReposeCache<T>,
+    repose: PeopleRepose<T>,
     posed_mats: Vec<[T; 9]>,
     inputs: Vec<BlendInputs<T>>,
 }
@@ -41,7 +41,7 @@ impl<T> ReposedCache<T> {
 }
 
 /// The frame `reference` (posed with `reference_cache`) posed with other `bones` (24
-/// `frame_from_canonical` transforms), sharing every network output of the reference (see the
+/// `frame_from_canonical` transforms per person), sharing every network output of the reference (see the
 /// module documentation). With the reference's own bones the result is the reference, bit for bit.
 pub fn repose_frame<T: Real>(
     reference: &PosedFrame<T>,
@@ -89,6 +89,7 @@ pub fn repose_frame_backward<T: Real>(
     let mut covariances = cot.covariances.to_vec();
     let mut scene_colours = cot.colours.to_vec();
     let mut human_probability = cot.human_probability.to_vec();
+    let person_probability = cot.person_probability.to_vec();
     let active = blend_backward_active(
         mode,
         g.semantic_logits,
@@ -115,6 +116,7 @@ pub fn repose_frame_backward<T: Real>(
         covariances,
         scene_colours,
         human_probability,
+        person_probability,
         human_colours: active.human_rgb,
         log_scales: active.log_scales,
         moved,

@@ -28,6 +28,13 @@ struct CheckpointMeta {
     rng_seed: String,
     rng_word_pos: String,
     order: Vec<usize>,
+    /// [`Trainer::person_changes`] (absent when 0, as in checkpoints from before several people).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    person_changes: u64,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 impl Trainer {
@@ -60,6 +67,7 @@ impl Trainer {
             rng_seed,
             rng_word_pos,
             order: self.order.clone(),
+            person_changes: self.person_changes,
         };
         let json = serde_json::to_string(&meta).map_err(|e| TrainError::Checkpoint {
             path: path.to_path_buf(),
@@ -79,7 +87,7 @@ impl Trainer {
         }
         let config = meta.config;
         config.validate()?;
-        let k = config.semantic.logits_per_gaussian();
+        let k = config.semantic.logits_for(data.cast().len());
         let set = r.set("set", meta.sh_degree, config.feature_dim, k)?;
         let model_config = ModelConfig::from(&config);
         let nets = Model::build_networks(&model_config, &data.body.canonical.posed.vertices)?;
@@ -127,6 +135,7 @@ impl Trainer {
             rng: rng_from_strings(&meta.rng_seed, &meta.rng_word_pos).map_err(|e| r.error(e))?,
             order: meta.order,
             aiap,
+            person_changes: meta.person_changes,
         })
     }
 }

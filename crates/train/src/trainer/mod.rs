@@ -22,7 +22,7 @@ pub use terms::warm_up_skinning;
 use crate::config::TrainConfig;
 use crate::data::TrainingData;
 use crate::density::{DensityStrategy, StepStatistics};
-use crate::init::{initialise, InitConfig};
+use crate::init::{initialise_people, BodySurface, InitConfig};
 use crate::model::{Model, ModelConfig};
 use crate::optimisers::Optimisers;
 use crate::pose::posing::ModelGradients;
@@ -53,6 +53,10 @@ pub struct Trainer {
     rng: ChaCha8Rng,
     order: Vec<usize>,
     aiap: AiapNeighbours,
+    /// With several people: how many times a Gaussian's most probable person changed in an
+    /// update, over the whole run (checkpointed); a Gaussian never moves between people by
+    /// densification, whose children inherit their parent's logits.
+    pub person_changes: u64,
 }
 
 /// Scene extent of an initial cube: half its diagonal.
@@ -66,18 +70,34 @@ impl Trainer {
     /// Initialises the model (paper §4.2) for `data` and fresh optimiser state.
     pub fn new(data: &TrainingData, config: TrainConfig) -> Result<Self, TrainError> {
         config.validate()?;
+        if config.pose_correction && !data.others.is_empty() {
+            return Err(TrainError::Config(format!(
+                "pose correction (--pose-correction on) corrects one person; the scene has {}",
+                data.cast().len()
+            )));
+        }
         let vertices = &data.body.canonical.posed.vertices;
-        let roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.prepared.root).collect();
+        let mut roots: Vec<[f32; 3]> = data.frames.iter().map(|f| f.pose.prepared.root).collect();
+        // The others' translations too, so that the scene cube holds every person's path.
+        for f in &data.frames {
+            roots.extend(f.pose.others.iter().map(|p| p.transl));
+        }
         // The scene is sampled where any training frame's camera sees it.
         let cameras: Vec<_> = if data.frames.iter().all(|f| f.camera == data.camera) {
             vec![data.camera.clone()]
         } else {
             data.frames.iter().map(|f| f.camera.clone()).collect()
         };
-        let init = initialise(
-            vertices,
-            &data.body.model.faces,
-            &data.body.model.weights,
+        let bodies: Vec<BodySurface<'_>> = std::iter::once(&data.body)
+            .chain(&data.others)
+            .map(|b| BodySurface {
+                vertices: &b.canonical.posed.vertices,
+                faces: &b.model.faces,
+                weights: &b.model.weights,
+            })
+            .collect();
+        let init = initialise_people(
+            &bodies,
             &cameras,
             &roots,
             &InitConfig {
@@ -121,6 +141,7 @@ impl Trainer {
             aiap: AiapNeighbours::of(&model),
             model,
             step: 0,
+            person_changes: 0,
         }
     }
 

@@ -201,6 +201,7 @@ impl Trainer {
         drop(frame_k);
 
         let t0 = Instant::now();
+        let people_before = self.people_of_gaussians();
         self.apply_gradients(
             slot,
             back.grads,
@@ -209,6 +210,7 @@ impl Trainer {
             back.corrections,
             back.cameras,
         )?;
+        let person_changes = self.count_person_changes(&people_before);
         times.adam = t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         self.refine(data, &statistics);
@@ -232,8 +234,31 @@ impl Trainer {
             gaussians_scene: self.model.set.len() - human,
             active,
             shared_tiles,
+            person_changes,
             times,
         })
+    }
+
+    /// Every Gaussian's most probable person with several people (empty with one).
+    fn people_of_gaussians(&self) -> Vec<usize> {
+        let model = &self.model;
+        if model.people() == 1 {
+            return Vec::new();
+        }
+        (0..model.set.len()).map(|i| model.person_of(i)).collect()
+    }
+
+    /// The Gaussians whose most probable person differs from `before` (of the same set), added to
+    /// [`Trainer::person_changes`].
+    fn count_person_changes(&mut self, before: &[usize]) -> usize {
+        let model = &self.model;
+        let changed = before
+            .iter()
+            .enumerate()
+            .filter(|&(i, &p)| model.person_of(i) != p)
+            .count();
+        self.person_changes += changed as u64;
+        changed
     }
 
     /// The backward of the step's passes into one set of gradients: frame k's passes (the AIAP
@@ -623,7 +648,9 @@ fn frame_losses(
         shape,
         config.ssim_weight,
         events,
-        RENDER_CHANNELS,
+        passes
+            .first()
+            .map_or(RENDER_CHANNELS, FramePass::render_channels),
         data.grey,
     );
     let mut d_images = photo.d_renders;

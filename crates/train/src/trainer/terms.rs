@@ -8,7 +8,7 @@ use crate::loss::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP
 use crate::loss::event::pair_event_loss_with;
 use crate::loss::optical_flow::{pair_flow_loss, pair_warp_loss};
 use crate::loss::photometric::add_scaled;
-use crate::model::{Model, PosedGradients, RENDER_CHANNELS};
+use crate::model::{Model, PosedGradients};
 use crate::pose::posing::{ModelGradients, PosedFrame};
 use crate::TrainError;
 use flow::SpyNet;
@@ -82,7 +82,7 @@ pub(super) fn pair_terms(
     let mut terms = PairTerms {
         flow: 0.0,
         event: 0.0,
-        d_second: vec![0.0f32; RENDER_CHANNELS * hw],
+        d_second: vec![0.0f32; d_first.len()],
         d_flow_geometric: None,
         flow_network_seconds: 0.0,
     };
@@ -129,7 +129,8 @@ pub(super) fn pair_terms(
 }
 
 /// The AIAP neighbourhoods: the human Gaussians (probability ≥ 0.5) and their K nearest human
-/// neighbours in canonical space, refreshed after density control.
+/// neighbours in canonical space, refreshed after density control. With several people, whose
+/// canonical spaces overlap, a Gaussian's neighbours are of its own person.
 #[derive(Clone, Debug, Default)]
 pub(super) struct AiapNeighbours {
     /// Set indices of the human Gaussians.
@@ -141,16 +142,41 @@ pub(super) struct AiapNeighbours {
 impl AiapNeighbours {
     /// The neighbourhoods of `model`'s current human Gaussians.
     pub fn of(model: &Model) -> Self {
-        let index: Vec<usize> = (0..model.set.len())
+        let human: Vec<usize> = (0..model.set.len())
             .filter(|&i| model.probability(i) >= 0.5)
             .collect();
-        let points: Vec<[f32; 3]> = index.iter().map(|&i| model.set.means[i]).collect();
-        let neighbours = if points.len() > AIAP_NEIGHBOURS {
+        let neighbours_of = |index: &[usize]| {
+            let points: Vec<[f32; 3]> = index.iter().map(|&i| model.set.means[i]).collect();
             gaussians::init::knn_indices(&points, AIAP_NEIGHBOURS)
-        } else {
-            Vec::new()
         };
-        Self { index, neighbours }
+        if model.people() == 1 {
+            let neighbours = if human.len() > AIAP_NEIGHBOURS {
+                neighbours_of(&human)
+            } else {
+                Vec::new()
+            };
+            return Self {
+                index: human,
+                neighbours,
+            };
+        }
+        // Person by person; a person with too few Gaussians has no neighbourhoods.
+        let mut out = Self::default();
+        for person in 0..model.people() {
+            let own: Vec<usize> = human
+                .iter()
+                .copied()
+                .filter(|&i| model.person_of(i) == person)
+                .collect();
+            if own.len() <= AIAP_NEIGHBOURS {
+                continue;
+            }
+            let offset = out.index.len() as u32;
+            out.neighbours
+                .extend(neighbours_of(&own).into_iter().map(|k| k + offset));
+            out.index.extend(own);
+        }
+        out
     }
 }
 

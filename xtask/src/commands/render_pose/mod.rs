@@ -46,6 +46,14 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let loaded = train::export::load_model(&args.model)
         .with_context(|| format!("loading the model {}", args.model.display()))?;
+    if loaded.model.people() > 1 {
+        bail!(
+            "{}: the model reconstructs {} people; render-pose poses a model of one person \
+             (posing several people, one motion each, is not built yet)",
+            args.model.display(),
+            loaded.model.people()
+        );
+    }
     let poses_path = match (&args.poses, &args.motion) {
         (_, Some(motion)) => {
             if args.ply {

@@ -25,23 +25,29 @@
 //! the skinning field at the canonical means, and that pass is reused, forward and backward
 //! (`DeformCache::skinning_at`: bit for bit what a second evaluation would give).
 
+mod people;
 mod repose_cotangents;
 mod views;
 
+pub(crate) use people::PeopleRepose;
 pub use repose_cotangents::ReposeCotangents;
 
-use crate::blend::{blend, blend_backward, BlendInputs, Blended, SemanticMode};
+use crate::blend::{
+    blend, blend_backward, most_probable_person, person_probabilities,
+    person_probabilities_backward, BlendInputs, Blended, SemanticMode,
+};
 use crate::colour::{ColourInputs, ColourNet};
 use crate::TrainError;
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};
 use nn::Real;
+use people::{DeformCotangents, DeformNets, PeopleDeform};
 use rayon::prelude::*;
 use smpl_deform::deform_net::{
-    deform_gaussians, deform_gaussians_backward_with_moved, CanonicalGaussians, DeformCache,
-    NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
+    CanonicalGaussians, NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
 };
 use smpl_deform::math::{Affine, Mat3};
-use views::{canonical_view_directions, view_directions_backward, CanonicalViews};
+use smpl_deform::{NUM_JOINTS, NUM_POSE_FEATURES};
+use views::CanonicalViews;
 
 /// The four networks of the model.
 #[derive(Clone, Debug)]
@@ -67,21 +73,61 @@ pub struct GaussianParams<'a, T> {
     pub quats: &'a [[T; 4]],
     /// Colour features, N × feature_dim (shared by both colour networks).
     pub features: &'a [T],
-    /// Semantic logits, N × `SemanticMode::logits_per_gaussian`.
+    /// Semantic logits, N × `SemanticMode::logits_for` the frame's people.
     pub semantic_logits: &'a [T],
 }
 
-/// What a frame contributes.
+impl<T> GaussianParams<'_, T> {
+    /// The number of semantic logits per Gaussian (0 without Gaussians).
+    fn logits_per_gaussian(&self) -> usize {
+        self.semantic_logits
+            .len()
+            .checked_div(self.means.len())
+            .unwrap_or(0)
+    }
+}
+
+/// What a frame contributes. With several people, each one's pose code and bones follow the
+/// previous one's (person order of the model's semantic classes).
 #[derive(Clone, Copy, Debug)]
 pub struct FrameInputs<'a, T> {
-    /// The 207-value pose feature of the frame.
+    /// The 207-value pose feature of the frame, per person.
     pub pose_code: &'a [T],
-    /// `frame_from_canonical` transform per bone (24).
+    /// `frame_from_canonical` transform per bone (24 per person).
     pub bones: &'a [Affine<T>],
     /// Camera centre in world coordinates (m).
     pub camera_centre: [T; 3],
     /// Per-frame latent of the human colour network.
     pub latent: &'a [T],
+}
+
+impl<T> FrameInputs<'_, T> {
+    /// The number of people the frame poses (its bones / 24).
+    pub fn people(&self) -> usize {
+        self.bones.len() / NUM_JOINTS
+    }
+
+    /// Checks that the bones and the pose code are those of whole people (at least one).
+    fn check(&self) -> Result<(), TrainError> {
+        let people = self.people().max(1);
+        for (what, expected, found) in [
+            ("frame bones", people * NUM_JOINTS, self.bones.len()),
+            (
+                "frame pose code",
+                people * NUM_POSE_FEATURES,
+                self.pose_code.len(),
+            ),
+        ] {
+            if expected != found {
+                return Err(TrainError::Shape {
+                    what: what.into(),
+                    expected,
+                    found,
+                });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Blended attributes of every Gaussian in the frame.
@@ -95,6 +141,8 @@ pub struct PosedFrame<T> {
     pub colours: Vec<T>,
     /// Human probability per Gaussian.
     pub human_probability: Vec<T>,
+    /// With several people: each person's probability per Gaussian, N × P (empty with one).
+    pub person_probability: Vec<T>,
 }
 
 /// Forward state kept for the backward pass.
@@ -102,7 +150,7 @@ pub struct PosedFrame<T> {
 pub struct FrameCache<T: Real> {
     /// Indices of the Gaussians whose human branch was evaluated (p ≥ gate), ascending.
     pub(crate) active: Vec<usize>,
-    pub(crate) deform: DeformCache<T>,
+    pub(crate) deform: PeopleDeform<T>,
     posed_mats: Vec<Mat3<T>>,
     pub(crate) posed_log_scales: Vec<[T; 3]>,
     human_colour: crate::colour::ColourCache<T>,
@@ -128,6 +176,8 @@ pub struct FrameCotangents<'a, T> {
     pub colours: &'a [T],
     /// dL/d human probability.
     pub human_probability: &'a [T],
+    /// dL/d each person's probability, N × P with several people (else empty).
+    pub person_probability: &'a [T],
 }
 
 /// Gradients of one frame.
@@ -153,9 +203,9 @@ pub struct ModelGradients<T> {
     pub scene_colour: Vec<T>,
     /// dL/d frame latent.
     pub latent: Vec<T>,
-    /// dL/d bone transforms.
+    /// dL/d bone transforms (24 per person).
     pub bones: Vec<Affine<T>>,
-    /// dL/d pose code (207 values; for pose correction).
+    /// dL/d pose code (207 values per person; for pose correction).
     pub pose_code: Vec<T>,
 }
 
@@ -260,7 +310,10 @@ pub(crate) fn blend_backward_active<T: Real>(
     cot: &FrameCotangents<'_, T>,
     out: StaticCotangents<'_, T>,
 ) -> ActiveBlendGrads<T> {
-    let k = mode.logits_per_gaussian();
+    let k = semantic_logits
+        .len()
+        .checked_div(out.probability.len())
+        .unwrap_or(0);
     let na = active.len();
     // Every active Gaussian's backward in parallel, then written in order (the serial bits).
     let per_active: Vec<_> = active
@@ -331,7 +384,14 @@ pub fn pose_frame_gated<T: Real>(
     frame: &FrameInputs<'_, T>,
 ) -> Result<(PosedFrame<T>, FrameCache<T>), TrainError> {
     let n = g.means.len();
-    let k = mode.logits_per_gaussian();
+    frame.check()?;
+    let people = frame.people();
+    if people > 1 && mode != SemanticMode::OneHot {
+        return Err(TrainError::Config(format!(
+            "{people} people need one-hot semantics (one class per person), not {mode:?}"
+        )));
+    }
+    let k = mode.logits_for(people);
     if g.semantic_logits.len() != n * k {
         return Err(TrainError::Shape {
             what: "semantic logits".into(),
@@ -350,7 +410,22 @@ pub fn pose_frame_gated<T: Real>(
     let probability: Vec<T> = (0..n)
         .map(|i| mode.probability(&g.semantic_logits[i * k..(i + 1) * k]))
         .collect();
+    let person_probability = if people > 1 {
+        let mut q = vec![T::zero(); n * people];
+        for (i, out) in q.chunks_exact_mut(people).enumerate() {
+            person_probabilities(&g.semantic_logits[i * k..(i + 1) * k], out);
+        }
+        q
+    } else {
+        Vec::new()
+    };
     let active: Vec<usize> = (0..n).filter(|&i| probability[i] >= gate).collect();
+    let owners: Option<Vec<usize>> = (people > 1).then(|| {
+        active
+            .iter()
+            .map(|&i| most_probable_person(&g.semantic_logits[i * k..(i + 1) * k]))
+            .collect()
+    });
     let a_means = gather(g.means, 1, &active);
     let a_log_scales = gather(g.log_scales, 1, &active);
     let a_quats = gather(g.quats, 1, &active);
@@ -360,10 +435,10 @@ pub fn pose_frame_gated<T: Real>(
         log_scales: &a_log_scales,
         quats: &a_quats,
     };
-    let (posed, deform) = deform_gaussians(
-        &nets.nonrigid,
-        &nets.skinning,
+    let (posed, deform) = PeopleDeform::forward(
+        nets.deform_nets(),
         &canonical,
+        owners.as_deref(),
         frame.pose_code,
         frame.bones,
     )?;
@@ -377,7 +452,7 @@ pub fn pose_frame_gated<T: Real>(
     };
     let c = frame.camera_centre;
     let na = active.len();
-    let views = canonical_view_directions(frame.bones, c, &posed.positions, &direction_weights);
+    let views = deform.views(frame.bones, c, &posed.positions, &direction_weights);
     let scene_dirs: Vec<[T; 3]> = g
         .means
         .iter()
@@ -402,6 +477,7 @@ pub fn pose_frame_gated<T: Real>(
             .collect(),
         colours: scene_rgb.clone(),
         human_probability: probability,
+        person_probability,
     };
     let mut inputs = Vec::with_capacity(na);
     for (a, &i) in active.iter().enumerate() {
@@ -436,6 +512,16 @@ pub fn pose_frame_gated<T: Real>(
     ))
 }
 
+impl<T: Real> ModelNets<T> {
+    /// The two networks of the deformation.
+    fn deform_nets(&self) -> DeformNets<'_, T> {
+        DeformNets {
+            nonrigid: &self.nonrigid,
+            skinning: &self.skinning,
+        }
+    }
+}
+
 impl<T: Real> FrameCache<T> {
     /// Indices of the Gaussians whose human branch was evaluated (ascending).
     pub fn active(&self) -> &[usize] {
@@ -468,7 +554,7 @@ pub fn pose_frame_backward_with<T: Real>(
     reposings: Option<&ReposeCotangents<T>>,
 ) -> Result<ModelGradients<T>, TrainError> {
     let n = g.means.len();
-    let k = mode.logits_per_gaussian();
+    let k = g.logits_per_gaussian();
     let active = &cache.active;
     let na = active.len();
     if let Some(r) = reposings {
@@ -480,6 +566,7 @@ pub fn pose_frame_backward_with<T: Real>(
         d_cov_static,
         d_scene_rgb,
         d_p,
+        d_q,
         active:
             ActiveBlendGrads {
                 x_def: mut d_x_def,
@@ -489,7 +576,7 @@ pub fn pose_frame_backward_with<T: Real>(
             },
     } = blend_cotangents(mode, g, cache, cot, reposings);
     let (mut d_log_scales, mut d_quats) =
-        static_backward(mode, g, &d_p, &d_cov_static, &mut d_semantic);
+        static_backward(mode, g, &d_p, &d_q, &d_cov_static, &mut d_semantic);
     let human = nets
         .human_colour
         .backward(&cache.human_colour, &d_human_rgb)?;
@@ -502,7 +589,7 @@ pub fn pose_frame_backward_with<T: Real>(
             dm[a] = dm[a] + dd[a];
         }
     }
-    let (d_direction_weights, d_bone_rotations) = view_directions_backward(
+    let (d_direction_weights, d_bone_rotations) = cache.deform.views_backward(
         frame.bones,
         &cache.views,
         &cache.direction_weights,
@@ -513,21 +600,23 @@ pub fn pose_frame_backward_with<T: Real>(
     let mut d_skinning = vec![T::zero(); nets.skinning.mlp.num_params()];
     let direction_skinning = match &cache.direction_skinning {
         Some(skinning) => skinning,
-        None => cache.deform.skinning(),
+        None => cache.deform.reused_skinning().ok_or_else(|| {
+            TrainError::Config("the view directions' skinning pass was not kept".into())
+        })?,
     };
     let d_means_from_weights =
         nets.skinning
             .backward(direction_skinning, &d_direction_weights, &mut d_skinning)?;
     debug_assert_eq!(human.extra.len(), na * NR_FEATURE_DIM);
-    let deform = deform_gaussians_backward_with_moved(
-        &nets.nonrigid,
-        &nets.skinning,
+    let deform = cache.deform.backward(
+        nets.deform_nets(),
         frame.bones,
-        &cache.deform,
-        &d_x_def,
-        &d_s_def,
-        &d_mats,
-        &human.extra,
+        &DeformCotangents {
+            positions: &d_x_def,
+            log_scales: &d_s_def,
+            mats: &d_mats,
+            features: &human.extra,
+        },
         reposings.map(|r| &r.moved),
         &mut d_nonrigid,
         &mut d_skinning,
@@ -572,6 +661,8 @@ struct BlendCotangents<T> {
     d_cov_static: Vec<[[T; 3]; 3]>,
     d_scene_rgb: Vec<T>,
     d_p: Vec<T>,
+    /// Of each person's probability, N × P (empty with one person).
+    d_q: Vec<T>,
     active: ActiveBlendGrads<T>,
 }
 
@@ -589,6 +680,7 @@ fn blend_cotangents<T: Real>(
     let mut d_cov_static: Vec<[[T; 3]; 3]> = cot.covariances.to_vec();
     let mut d_scene_rgb: Vec<T> = cot.colours.to_vec();
     let mut d_p: Vec<T> = cot.human_probability.to_vec();
+    let mut d_q: Vec<T> = cot.person_probability.to_vec();
     let mut active = blend_backward_active(
         mode,
         g.semantic_logits,
@@ -614,6 +706,7 @@ fn blend_cotangents<T: Real>(
         );
         add(&mut d_scene_rgb, &r.scene_colours);
         add(&mut d_p, &r.human_probability);
+        add(&mut d_q, &r.person_probability);
         add(&mut active.human_rgb, &r.human_colours);
         add(
             active.log_scales.as_flattened_mut(),
@@ -625,6 +718,7 @@ fn blend_cotangents<T: Real>(
         d_cov_static,
         d_scene_rgb,
         d_p,
+        d_q,
         active,
     }
 }
@@ -641,20 +735,26 @@ fn with_rotations<T: Real>(mut d_bones: Vec<Affine<T>>, d_rotations: &[[T; 9]]) 
 }
 
 /// The semantic logits' and static covariances' share of the backward of every Gaussian: the
-/// human probability's cotangent `d_p` into `d_semantic`, and ∂L/∂(log-scales, quaternions) of
-/// the static covariances' cotangents.
+/// human probability's cotangent `d_p` (and with several people each person's, `d_q`, N × P) into
+/// `d_semantic`, and ∂L/∂(log-scales, quaternions) of the static covariances' cotangents.
 #[allow(clippy::type_complexity)]
 fn static_backward<T: Real>(
     mode: SemanticMode,
     g: &GaussianParams<'_, T>,
     d_p: &[T],
+    d_q: &[T],
     d_cov_static: &[[[T; 3]; 3]],
     d_semantic: &mut [T],
 ) -> (Vec<[T; 3]>, Vec<[T; 4]>) {
     let n = g.means.len();
-    let k = mode.logits_per_gaussian();
+    let k = g.logits_per_gaussian();
+    let people = d_q.len().checked_div(n).unwrap_or(0);
     let semantic_backward = |i: usize, d_semantic: &mut [T]| {
-        mode.probability_backward(&g.semantic_logits[i * k..(i + 1) * k], d_p[i], d_semantic);
+        let logits = &g.semantic_logits[i * k..(i + 1) * k];
+        mode.probability_backward(logits, d_p[i], d_semantic);
+        if people > 1 {
+            person_probabilities_backward(logits, &d_q[i * people..(i + 1) * people], d_semantic);
+        }
         covariance_3d_backward(g.log_scales[i], g.quats[i], &d_cov_static[i])
     };
     // Per Gaussian, in parallel (each writes only its own logits' slots).

@@ -18,6 +18,8 @@ pub struct ReposeCotangents<T> {
     pub scene_colours: Vec<T>,
     /// ∂L/∂ human probability, N.
     pub human_probability: Vec<T>,
+    /// ∂L/∂ each person's probability, N × P with several people (else empty).
+    pub person_probability: Vec<T>,
     /// ∂L/∂ human colours of the active Gaussians, active × 3.
     pub human_colours: Vec<T>,
     /// ∂L/∂ deformed log-scales of the active Gaussians.
@@ -34,6 +36,7 @@ impl<T: Real> ReposeCotangents<T> {
             covariances: vec![[[T::zero(); 3]; 3]; n],
             scene_colours: vec![T::zero(); n * 3],
             human_probability: vec![T::zero(); n],
+            person_probability: Vec::new(),
             human_colours: vec![T::zero(); active * 3],
             log_scales: vec![[T::zero(); 3]; active],
             moved: MovedCotangents::zeros(active),
@@ -52,6 +55,11 @@ impl<T: Real> ReposeCotangents<T> {
         );
         add(&mut self.scene_colours, &other.scene_colours);
         add(&mut self.human_probability, &other.human_probability);
+        if self.person_probability.is_empty() {
+            self.person_probability = other.person_probability.clone();
+        } else {
+            add(&mut self.person_probability, &other.person_probability);
+        }
         add(&mut self.human_colours, &other.human_colours);
         add(
             self.log_scales.as_flattened_mut(),
