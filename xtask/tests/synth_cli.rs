@@ -228,7 +228,7 @@ fn synth_refuses_bad_pose_errors_and_documents_the_flag() {
 fn two_people_are_generated_and_reconstructed_person_by_person() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("people");
-    let args = tiny_args(&out, &[("--people", "2"), ("--frames", "4")]);
+    let args = tiny_args(&out, &[("--people", "2"), ("--frames", "10")]);
     let o = xtask(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -279,6 +279,35 @@ fn two_people_are_generated_and_reconstructed_person_by_person() {
             })
     };
     assert!(posed(0) && posed(1));
+    // Person 1 walks the AMASS fixture while person 0 stands still; a motion without an id is
+    // refused, naming the ids.
+    let model = run.join("model");
+    let walk = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data-fixtures/motion/walk_amass.npz");
+    let gif = tmp.path().join("walk.gif");
+    let animate = |motion: &str| {
+        xtask(&[
+            "render-pose",
+            "--model",
+            model.to_str().unwrap(),
+            "--data",
+            out.to_str().unwrap(),
+            "--motion",
+            motion,
+            "--frames",
+            "3",
+            "--out",
+            gif.to_str().unwrap(),
+        ])
+    };
+    let o = animate(&format!("1={}", walk.display()));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(gif.is_file());
+    let o = animate(walk.to_str().unwrap());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && stderr.contains("--motion ID=FILE") && stderr.contains("[0, 1]"),
+        "{stderr}"
+    );
     let args = tiny_args(&out, &[("--people", "5")]);
     let o = xtask(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let stderr = String::from_utf8_lossy(&o.stderr);

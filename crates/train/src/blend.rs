@@ -231,4 +231,24 @@ mod tests {
         assert_eq!(SemanticMode::None.probability::<f64>(&[]), 1.0);
         assert!((SemanticMode::OneHot.probability(&[-3.0f64, 3.0]) - 0.997_527_376).abs() < 1e-8);
     }
+
+    #[test]
+    fn several_people_share_the_human_probability_and_own_their_class() {
+        let mode = SemanticMode::OneHot;
+        assert_eq!((mode.logits_for(1), mode.logits_for(3)), (2, 4));
+        assert_eq!(SemanticMode::Scalar.logits_for(3), 1);
+        // Person 1 of three labelled as the initialisation labels it.
+        let logits = [-3.0f64, -3.0, 3.0, -3.0];
+        let mut q = [0.0; 3];
+        person_probabilities(&logits, &mut q);
+        let p = mode.probability(&logits);
+        assert!((q.iter().sum::<f64>() - p).abs() < 1e-15, "{q:?} {p}");
+        assert!(q[1] > 0.99 && q[0] < 0.003 && q[2] < 0.003, "{q:?}");
+        assert_eq!(most_probable_person(&logits), 1);
+        // The scene's logits keep every person's probability below the default gate of 0.01.
+        assert!(mode.probability(&[3.0f64, -3.0, -3.0, -3.0, -3.0]) < 0.01);
+        // Two logits: the paper's sigmoid, bit for bit.
+        assert_eq!(mode.probability(&[0.3f32, 1.1]), sigmoid(1.1f32 - 0.3));
+        assert_eq!(most_probable_person(&[0.3f32, 1.1]), 0);
+    }
 }

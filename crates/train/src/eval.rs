@@ -385,7 +385,36 @@ pub fn mean_metrics(frames: &[FrameMetrics]) -> FrameMetrics {
 /// A horizontal strip `blurred | render | reference | human probability (grey)` as planar (3, H, 4W),
 /// with a 2-pixel white separator between panels (so the strip is 4W + 6 wide).
 pub fn comparison_strip(f: &EvalFrame<'_>) -> (usize, usize, Vec<f32>) {
+    comparison_strip_of_people(f, &[])
+}
+
+/// The colour each person's rendered probability is drawn in ([`comparison_strip_of_people`]),
+/// by person (cycled past four): orange, sky blue, green, magenta (linear RGB).
+pub const PERSON_COLOURS: [[f32; 3]; 4] = [
+    [1.0, 0.35, 0.05],
+    [0.1, 0.55, 1.0],
+    [0.2, 0.9, 0.2],
+    [0.9, 0.15, 0.8],
+];
+
+/// [`comparison_strip`] whose last panel, with several people, shows each person's rendered
+/// probability (`people`, (H, W) each) in its own colour ([`PERSON_COLOURS`]); with `people`
+/// empty the human probability in grey.
+pub fn comparison_strip_of_people(
+    f: &EvalFrame<'_>,
+    people: &[Vec<f32>],
+) -> (usize, usize, Vec<f32>) {
     let (w, h) = (f.width, f.height);
+    let semantic = |c: usize, y: usize, x: usize| -> f32 {
+        if people.is_empty() {
+            return f.human_probability[y * w + x];
+        }
+        people
+            .iter()
+            .enumerate()
+            .map(|(j, p)| PERSON_COLOURS[j % PERSON_COLOURS.len()][c] * p[y * w + x])
+            .sum()
+    };
     let sep = 2;
     let out_w = 4 * w + 3 * sep;
     let mut out = vec![1.0f32; 3 * h * out_w];
@@ -393,7 +422,7 @@ pub fn comparison_strip(f: &EvalFrame<'_>) -> (usize, usize, Vec<f32>) {
         &|c, y, x| f.blurred[(c * h + y) * w + x],
         &|c, y, x| f.render[(c * h + y) * w + x],
         &|c, y, x| f.reference[(c * h + y) * w + x],
-        &|_, y, x| f.human_probability[y * w + x],
+        &semantic,
     ];
     for (k, panel) in panels.iter().enumerate() {
         let x_off = k * (w + sep);
@@ -471,7 +500,7 @@ pub fn evaluate_split(
             index: f.index,
             metrics: evaluate_frame(&frame, lpips)?,
             people,
-            strip: comparison_strip(&frame),
+            strip: comparison_strip_of_people(&frame, &r.people),
         });
     }
     Ok(out)

@@ -6,7 +6,8 @@
 //! `pose` may also be 24 axis-angle triples, as `scene.json` writes a frame's pose.
 //!
 //! With `--motion FILE` (an AMASS or PeopleSnapshot `.npz`) it animates the person inside the
-//! reconstructed scene instead: see [`animate`].
+//! reconstructed scene instead, and a model of several people with one `--motion ID=FILE` per
+//! person: see [`animate`].
 
 mod animate;
 
@@ -28,9 +29,10 @@ pub struct Args {
     /// SMPL-H, `trans`, optional `mocap_framerate`), a PeopleSnapshot / InstantAvatar `.npz`
     /// (`global_orient`, `body_pose`, `transl`) or an EasyMocap `smpl/` folder of per-frame JSON
     /// (`Rh`, `Th`, `poses`). Writes an animated GIF (or, when `--out` does not end in `.gif`, a
-    /// folder of PNG frames).
-    #[arg(long)]
-    pub motion: Option<PathBuf>,
+    /// folder of PNG frames). A model of several people: `--motion ID=FILE` once per person to
+    /// move (the scene's person ids); the others stand still.
+    #[arg(long, value_parser = animate::parse_motion)]
+    pub motion: Vec<animate::MotionArg>,
     /// Output directory (`--poses`), or the GIF file or PNG folder (`--motion`).
     #[arg(long)]
     pub out: PathBuf,
@@ -46,24 +48,23 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let loaded = train::export::load_model(&args.model)
         .with_context(|| format!("loading the model {}", args.model.display()))?;
+    if !args.motion.is_empty() {
+        if args.ply {
+            bail!("--ply writes one PLY per pose of --poses; it does not apply to --motion");
+        }
+        return animate::run(&loaded, &args.motion, &args.out, &args.animation);
+    }
+    let Some(poses_path) = &args.poses else {
+        bail!("give --poses POSES.json or --motion FILE.npz");
+    };
     if loaded.model.people() > 1 {
         bail!(
-            "{}: the model reconstructs {} people; render-pose poses a model of one person \
-             (posing several people, one motion each, is not built yet)",
+            "{}: the model reconstructs {} people; --poses poses one person (animate several \
+             with --motion ID=FILE, one per person)",
             args.model.display(),
             loaded.model.people()
         );
     }
-    let poses_path = match (&args.poses, &args.motion) {
-        (_, Some(motion)) => {
-            if args.ply {
-                bail!("--ply writes one PLY per pose of --poses; it does not apply to --motion");
-            }
-            return animate::run(&loaded, motion, &args.out, &args.animation);
-        }
-        (Some(p), None) => p,
-        (None, None) => bail!("give --poses POSES.json or --motion FILE.npz"),
-    };
     let text = std::fs::read_to_string(poses_path)
         .with_context(|| format!("reading {}", poses_path.display()))?;
     let value: serde_json::Value = serde_json::from_str(&text)
