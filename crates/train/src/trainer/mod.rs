@@ -145,6 +145,28 @@ impl Trainer {
         }
     }
 
+    /// Every Gaussian's most probable person with several people (empty with one).
+    fn people_of_gaussians(&self) -> Vec<usize> {
+        let model = &self.model;
+        if model.people() == 1 {
+            return Vec::new();
+        }
+        (0..model.set.len()).map(|i| model.person_of(i)).collect()
+    }
+
+    /// The Gaussians whose most probable person differs from `before` (of the same set), added to
+    /// [`Trainer::person_changes`].
+    fn count_person_changes(&mut self, before: &[usize]) -> usize {
+        let model = &self.model;
+        let changed = before
+            .iter()
+            .enumerate()
+            .filter(|&(i, &p)| model.person_of(i) != p)
+            .count();
+        self.person_changes += changed as u64;
+        changed
+    }
+
     /// The hyper-parameters.
     pub fn config(&self) -> &TrainConfig {
         &self.config
