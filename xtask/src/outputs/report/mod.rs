@@ -15,6 +15,9 @@ use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+mod tables;
+use tables::summary_table;
+
 /// Escapes text for HTML.
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -66,71 +69,6 @@ fn setting_text(v: &serde_json::Value) -> String {
         serde_json::Value::String(s) => s.clone(),
         other => other.to_string(),
     }
-}
-
-/// The summary table of a run's `metrics.json`.
-fn summary_table(m: &serde_json::Value) -> String {
-    let row = |name: &str, prefix: &str| {
-        format!(
-            "<tr><td>{name}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
-            cell(number(m, &format!("{prefix}_psnr_full")), 2),
-            cell(number(m, &format!("{prefix}_psnr_human_box")), 2),
-            cell(number(m, &format!("{prefix}_ssim_full")), 4),
-            cell(number(m, &format!("{prefix}_ssim_human_box")), 4),
-            cell(number(m, &format!("{prefix}_lpips_full")), 4),
-            cell(number(m, &format!("{prefix}_lpips_human_box")), 4),
-        )
-    };
-    let mut s = String::from(
-        "<table>\n<tr><th>against the sharp reference</th><th>PSNR full (dB)</th>\
-         <th>PSNR box (dB)</th><th>SSIM full</th><th>SSIM box</th><th>LPIPS full</th>\
-         <th>LPIPS box</th></tr>\n",
-    );
-    s += &row("render", "test");
-    s += &row("blurred input", "blurred");
-    let gap = |k: &str| number(m, k).map(|g| format!("{g:+.2}"));
-    let _ = writeln!(
-        s,
-        "<tr><td>render − blurred input</td><td>{}</td><td>{}</td><td colspan=\"4\"></td></tr>",
-        gap("gap_to_blurred_full_db").unwrap_or_else(|| "—".into()),
-        gap("gap_to_blurred_human_box_db").unwrap_or_else(|| "—".into()),
-    );
-    s += "</table>\n<table>\n";
-    let mut fact = |name: &str, value: String| {
-        let _ = writeln!(s, "<tr><td>{name}</td><td>{}</td></tr>", esc(&value));
-    };
-    fact("human mask IoU (p > 0.5)", cell(number(m, "mask_iou"), 3));
-    fact("test frames", cell(number(m, "test_frames"), 0));
-    fact("steps", cell(number(m, "steps"), 0));
-    if let Some(t) = number(m, "train_seconds") {
-        fact("training time", format!("{:.0} s ({:.1} min)", t, t / 60.0));
-    }
-    fact(
-        "Gaussians (human + scene)",
-        format!(
-            "{} + {}",
-            cell(number(m, "gaussians_human"), 0),
-            cell(number(m, "gaussians_scene"), 0)
-        ),
-    );
-    for key in [
-        "blur_model",
-        "subframes",
-        "event_loss",
-        "flow_loss",
-        "semantic",
-        "train_on",
-        "pose_correction",
-        "preset",
-        "data",
-    ] {
-        if let Some(v) = m.get(key) {
-            let shown = v.as_str().map_or_else(|| v.to_string(), str::to_string);
-            fact(key, shown);
-        }
-    }
-    s += "</table>\n";
-    s
 }
 
 /// `(step, value)` series of `log.jsonl` field `key`, averaged into at most `buckets` buckets.
