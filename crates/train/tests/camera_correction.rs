@@ -191,6 +191,33 @@ fn smoothed_corrections_move_the_neighbours_of_the_trained_frames_and_resume() {
 }
 
 #[test]
+fn smoothing_the_mid_exposure_twist_alone_keeps_each_frames_own_change() {
+    let config = TrainConfig {
+        camera_correction_smoothing: 1.0,
+        camera_correction_smooth_change: false,
+        ..camera_config(12)
+    };
+    let ctx = exposure_context(&config);
+    let one = trained_alike_on_one_and_two_threads(&ctx, &config, 12);
+    let n = CAMERA_CORRECTION_VALUES;
+    let mut moved_change = 0;
+    for slot in 0..ctx.frames.len() {
+        let taken = one.model.training_camera_correction(slot);
+        let stored = &one.model.camera_corrections[slot * n..(slot + 1) * n];
+        // The change over the exposure is the frame's own; the mid-exposure twist is smoothed.
+        assert_eq!(&taken[TWIST_VALUES..], &stored[TWIST_VALUES..], "slot {slot}");
+        moved_change += usize::from(stored[TWIST_VALUES..].iter().any(|&v| v != 0.0));
+    }
+    assert!(moved_change >= 2, "{moved_change}");
+    let smoothed_twist = (0..ctx.frames.len()).any(|slot| {
+        one.model.training_camera_correction(slot)[..TWIST_VALUES]
+            != one.model.camera_corrections[slot * n..slot * n + TWIST_VALUES]
+    });
+    assert!(smoothed_twist);
+    resume_is_bit_identical(&ctx, config);
+}
+
+#[test]
 fn a_person_gauge_resumes_bit_identically() {
     let config = gauge_config(16);
     resume_is_bit_identical(&exposure_context(&config), config);

@@ -484,6 +484,11 @@ training_options! {
     /// too (a tracker's drift is slow; a frame's own correction steps only when it trains). 0, the
     /// default: each frame's own.
     camera_correction_smoothing: f32 = 0.0,
+    /// With `camera_correction_smoothing`: whether the smoothing covers each exposure's change of
+    /// the camera too (on, the default) or only the mid-exposure twist (off: each frame keeps its
+    /// own change over the exposure, where a hand's tremor is).
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    camera_correction_smooth_change: bool = true,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
     camera_correction_from: usize = 100,

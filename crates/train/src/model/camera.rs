@@ -50,7 +50,13 @@ impl Model {
     /// correction is off).
     pub fn training_camera_correction(&self, slot: usize) -> Vec<f32> {
         let sigma = self.config.camera_correction_smoothing;
-        self.with_gauge(smoothed_row(&self.camera_corrections, slot, sigma))
+        let smoothed = self.config.camera_correction_smoothed_values;
+        self.with_gauge(smoothed_row(
+            &self.camera_corrections,
+            slot,
+            sigma,
+            smoothed,
+        ))
     }
 
     /// The camera correction of frame `index` at mid exposure, interpolated between the training
@@ -61,6 +67,7 @@ impl Model {
             &smoothed_corrections(
                 &self.camera_corrections,
                 self.config.camera_correction_smoothing,
+                self.config.camera_correction_smoothed_values,
             ),
             index,
         ))
@@ -87,7 +94,8 @@ impl Model {
         }
         let mut mean = [0.0f64; TWIST_VALUES];
         let sigma = self.config.camera_correction_smoothing;
-        for row in smoothed_corrections(&self.camera_corrections, sigma).chunks(n) {
+        let smoothed = self.config.camera_correction_smoothed_values;
+        for row in smoothed_corrections(&self.camera_corrections, sigma, smoothed).chunks(n) {
             for (m, &v) in mean.iter_mut().zip(row) {
                 *m += f64::from(v);
             }

@@ -3,6 +3,7 @@
 
 use crate::blend::SemanticMode;
 use crate::config::TrainConfig;
+use crate::pose::camera_correction::{CAMERA_CORRECTION_VALUES, TWIST_VALUES};
 
 /// The model's own settings, fixed when it is built (read from [`TrainConfig`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -35,6 +36,10 @@ pub struct ModelConfig {
     /// Width (training slots) of the Gaussian smoothing that turns the stored camera corrections
     /// into the twists the frames' cameras take (0: each frame's own; `TrainConfig::camera_correction_smoothing`).
     pub camera_correction_smoothing: f32,
+    /// How many leading values of each stored camera-correction row the smoothing covers: all
+    /// [`CAMERA_CORRECTION_VALUES`], or the mid-exposure twist's [`TWIST_VALUES`]
+    /// (`TrainConfig::camera_correction_smooth_change` off).
+    pub camera_correction_smoothed_values: usize,
 }
 
 impl From<&TrainConfig> for ModelConfig {
@@ -54,6 +59,11 @@ impl From<&TrainConfig> for ModelConfig {
             camera_gauge: config.camera_correction
                 && config.camera_gauge == crate::config::CameraGauge::Person,
             camera_correction_smoothing: config.camera_correction_smoothing,
+            camera_correction_smoothed_values: if config.camera_correction_smooth_change {
+                CAMERA_CORRECTION_VALUES
+            } else {
+                TWIST_VALUES
+            },
         }
     }
 }

@@ -183,9 +183,14 @@ pub fn smoothing_weights(slot: usize, slots: usize, sigma: f32) -> Vec<(usize, f
     raw.into_iter().map(|(j, w)| (j, w / total)).collect()
 }
 
-/// The corrections the training slots' cameras take: the `stored` rows ([`CAMERA_CORRECTION_VALUES`]
-/// each) smoothed over the slots by [`smoothing_weights`] (the stored rows themselves at σ = 0).
-pub fn smoothed_corrections(stored: &[f32], sigma: f32) -> std::borrow::Cow<'_, [f32]> {
+/// The corrections the training slots' cameras take: the leading `smoothed` values of the
+/// `stored` rows ([`CAMERA_CORRECTION_VALUES`] each) smoothed over the slots by
+/// [`smoothing_weights`], the rest each slot's own (the stored rows themselves at σ = 0).
+pub fn smoothed_corrections(
+    stored: &[f32],
+    sigma: f32,
+    smoothed: usize,
+) -> std::borrow::Cow<'_, [f32]> {
     let n = CAMERA_CORRECTION_VALUES;
     let slots = stored.len() / n;
     if sigma <= 0.0 {
@@ -193,14 +198,14 @@ pub fn smoothed_corrections(stored: &[f32], sigma: f32) -> std::borrow::Cow<'_, 
     }
     let mut out = Vec::with_capacity(stored.len());
     for slot in 0..slots {
-        out.extend(smoothed_row(stored, slot, sigma));
+        out.extend(smoothed_row(stored, slot, sigma, smoothed));
     }
     std::borrow::Cow::Owned(out)
 }
 
 /// Slot `slot`'s row of [`smoothed_corrections`] (the stored row itself at σ = 0; empty past
 /// the stored rows).
-pub fn smoothed_row(stored: &[f32], slot: usize, sigma: f32) -> Vec<f32> {
+pub fn smoothed_row(stored: &[f32], slot: usize, sigma: f32, smoothed: usize) -> Vec<f32> {
     let n = CAMERA_CORRECTION_VALUES;
     let slots = stored.len() / n;
     if sigma <= 0.0 || slot >= slots {
@@ -208,11 +213,14 @@ pub fn smoothed_row(stored: &[f32], slot: usize, sigma: f32) -> Vec<f32> {
     }
     let mut row = [0.0f64; CAMERA_CORRECTION_VALUES];
     for (j, w) in smoothing_weights(slot, slots, sigma) {
-        for (r, &v) in row.iter_mut().zip(&stored[j * n..(j + 1) * n]) {
+        for (r, &v) in row.iter_mut().zip(&stored[j * n..j * n + smoothed]) {
             *r += w * f64::from(v);
         }
     }
-    row.iter().map(|&v| v as f32).collect()
+    let own = &stored[slot * n..(slot + 1) * n];
+    (0..n)
+        .map(|k| if k < smoothed { row[k] as f32 } else { own[k] })
+        .collect()
 }
 
 #[cfg(test)]
@@ -321,17 +329,24 @@ mod tests {
         let rows: Vec<f32> = (0..10)
             .flat_map(|_| [0.25f32; CAMERA_CORRECTION_VALUES])
             .collect();
-        let smoothed = smoothed_corrections(&rows, 1.5);
+        let smoothed = smoothed_corrections(&rows, 1.5, CAMERA_CORRECTION_VALUES);
         assert!(smoothed.iter().all(|&v| (v - 0.25).abs() < 1e-6));
         let mut spike = vec![0.0f32; 10 * CAMERA_CORRECTION_VALUES];
         spike[5 * CAMERA_CORRECTION_VALUES] = 1.0;
-        let s = smoothed_corrections(&spike, 1.0);
+        let s = smoothed_corrections(&spike, 1.0, CAMERA_CORRECTION_VALUES);
         let at = |slot: usize| s[slot * CAMERA_CORRECTION_VALUES];
         assert!(at(5) < 1.0 && at(4) > 0.0 && at(4) == at(6) && at(9) == 0.0);
         assert!(matches!(
-            smoothed_corrections(&spike, 0.0),
+            smoothed_corrections(&spike, 0.0, CAMERA_CORRECTION_VALUES),
             std::borrow::Cow::Borrowed(_)
         ));
+        // Smoothing the mid-exposure twist alone keeps each row's change over the exposure.
+        let mut change = spike.clone();
+        change[5 * CAMERA_CORRECTION_VALUES + TWIST_VALUES] = 0.5;
+        let s = smoothed_corrections(&change, 1.0, TWIST_VALUES);
+        assert!(s[4 * CAMERA_CORRECTION_VALUES] > 0.0);
+        assert_eq!(s[5 * CAMERA_CORRECTION_VALUES + TWIST_VALUES], 0.5);
+        assert_eq!(s[4 * CAMERA_CORRECTION_VALUES + TWIST_VALUES], 0.0);
     }
 
     #[test]
@@ -346,31 +361,36 @@ mod tests {
         let c: Vec<f64> = (0..slots * n)
             .map(|i| ((i * 13 % 7) as f64 - 3.0) * 0.2)
             .collect();
-        let f = |z: &[f32]| -> f64 {
-            let s = smoothed_corrections(z, sigma);
-            s.iter().zip(&c).map(|(&a, &b)| f64::from(a) * b).sum()
-        };
-        let mut spread = vec![0.0f64; slots * n];
-        for k in 0..slots {
-            for (j, w) in smoothing_weights(k, slots, sigma) {
-                for v in 0..n {
-                    spread[j * n + v] += w * c[k * n + v];
+        for smoothed in [n, TWIST_VALUES] {
+            let f = |z: &[f32]| -> f64 {
+                let s = smoothed_corrections(z, sigma, smoothed);
+                s.iter().zip(&c).map(|(&a, &b)| f64::from(a) * b).sum()
+            };
+            let mut spread = vec![0.0f64; slots * n];
+            for k in 0..slots {
+                for (j, w) in smoothing_weights(k, slots, sigma) {
+                    for v in 0..smoothed {
+                        spread[j * n + v] += w * c[k * n + v];
+                    }
+                }
+                for v in smoothed..n {
+                    spread[k * n + v] += c[k * n + v];
                 }
             }
+            let h = 1e-2f32;
+            for i in [0, 5, 3 * n + 2, 8 * n + 11] {
+                let (mut up, mut down) = (z.clone(), z.clone());
+                up[i] += h;
+                down[i] -= h;
+                let fd = (f(&up) - f(&down)) / f64::from(up[i] - down[i]);
+                assert!(
+                    (fd - spread[i]).abs() < 1e-4,
+                    "value {i}: {fd} vs {}",
+                    spread[i]
+                );
+            }
+            assert!(spread.iter().any(|&g| g != 0.0));
         }
-        let h = 1e-2f32;
-        for i in [0, 5, 3 * n + 2, 8 * n + 11] {
-            let (mut up, mut down) = (z.clone(), z.clone());
-            up[i] += h;
-            down[i] -= h;
-            let fd = (f(&up) - f(&down)) / f64::from(up[i] - down[i]);
-            assert!(
-                (fd - spread[i]).abs() < 1e-4,
-                "value {i}: {fd} vs {}",
-                spread[i]
-            );
-        }
-        assert!(spread.iter().any(|&g| g != 0.0));
     }
 
     #[test]

@@ -142,16 +142,21 @@ impl CameraGradient {
             for (r, &v) in gauge.iter_mut().zip(g.get(n..).unwrap_or(&[])) {
                 *r += v as f32;
             }
-            // Each stored row the frame's twist weighs gets its share (the frame's own alone
-            // without smoothing).
+            // Each stored row the frame's twist weighs gets its share of the smoothed values
+            // (the frame's own alone without smoothing), the frame's own row the rest.
+            let smoothed = model.config.camera_correction_smoothed_values;
             for (j, w) in smoothing_weights(*slot, rows, sigma) {
                 let row = &mut values[j * n..(j + 1) * n];
-                for (r, &v) in row.iter_mut().zip(&g[..n]) {
+                for (r, &v) in row.iter_mut().zip(&g[..smoothed]) {
                     *r += (w * v) as f32;
                 }
                 if !slots.contains(&j) {
                     slots.push(j);
                 }
+            }
+            let own = &mut values[slot * n..(slot + 1) * n];
+            for (r, &v) in own.iter_mut().zip(&g[..n]).skip(smoothed) {
+                *r += v as f32;
             }
         }
         for &slot in &slots {
