@@ -205,7 +205,11 @@ fn smoothing_the_mid_exposure_twist_alone_keeps_each_frames_own_change() {
         let taken = one.model.training_camera_correction(slot);
         let stored = &one.model.camera_corrections[slot * n..(slot + 1) * n];
         // The change over the exposure is the frame's own; the mid-exposure twist is smoothed.
-        assert_eq!(&taken[TWIST_VALUES..], &stored[TWIST_VALUES..], "slot {slot}");
+        assert_eq!(
+            &taken[TWIST_VALUES..],
+            &stored[TWIST_VALUES..],
+            "slot {slot}"
+        );
         moved_change += usize::from(stored[TWIST_VALUES..].iter().any(|&v| v != 0.0));
     }
     assert!(moved_change >= 2, "{moved_change}");

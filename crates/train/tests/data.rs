@@ -134,27 +134,43 @@ fn a_moving_camera_gives_every_frame_its_own_camera() {
 }
 
 #[test]
-fn a_scene_with_several_people_is_refused_naming_them() {
+fn a_scene_with_several_people_loads_everyones_poses_and_more_than_four_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let mut s = write_scene(dir.path(), 2);
     s.format_version = scene::FORMAT_VERSION_PEOPLE;
-    s.people = vec![scene::PersonSpec {
-        id: 3,
-        betas: vec![],
-    }];
+    let person = |id: u32| scene::PersonSpec {
+        id,
+        betas: vec![0.1 * id as f32],
+    };
+    s.people = vec![person(3)];
+    let pose_of = |id: u32, f: &scene::Frame| scene::PersonPose {
+        id,
+        pose: f.pose.clone(),
+        transl: [0.5 * id as f32, 0.0, 0.0],
+    };
     for f in &mut s.frames {
-        f.people = vec![scene::PersonPose {
-            id: 3,
-            pose: f.pose.clone(),
-            transl: [0.5, 0.0, 0.0],
-        }];
+        f.people = vec![pose_of(3, f)];
+    }
+    s.write(dir.path()).unwrap();
+    let data = train::data::load_dataset(dir.path()).unwrap();
+    assert_eq!(data.people(), 2);
+    for f in &data.frames {
+        assert_eq!(f.others.len(), 1);
+        assert_eq!(f.others[0].transl, [1.5, 0.0, 0.0]);
+        assert_eq!(f.others[0].betas, vec![0.3f32]);
+        assert_eq!(f.others[0].pose, f.smpl.pose);
+    }
+    // Five people: more than the model takes, refused naming them.
+    s.people = (1..=4).map(person).collect();
+    for f in &mut s.frames {
+        f.people = (1..=4).map(|id| pose_of(id, f)).collect();
     }
     s.write(dir.path()).unwrap();
     let err = train::data::load_dataset(dir.path())
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("scene.json") && err.contains("2 people") && err.contains("[0, 3]"),
+        err.contains("scene.json") && err.contains("5 people") && err.contains("[0, 1, 2, 3, 4]"),
         "{err}"
     );
 }
