@@ -59,10 +59,7 @@ impl SemanticMode {
     /// Human probability from the Gaussian's logits (with K > 2 one-hot logits: 1 − softmax(l)[0]).
     pub fn probability<T: Float>(self, logits: &[T]) -> T {
         match self {
-            Self::OneHot if logits.len() > 2 => {
-                let (e, sum) = exponentials(logits);
-                T::one() - e[0] / sum
-            }
+            Self::OneHot if logits.len() > 2 => T::one() - class_probability(logits, 0),
             Self::OneHot => sigmoid(logits[1] - logits[0]),
             Self::Scalar => sigmoid(logits[0]),
             Self::None => T::one(),
@@ -74,11 +71,11 @@ impl SemanticMode {
         match self {
             Self::OneHot if logits.len() > 2 => {
                 // p = 1 − s₀: ∂p/∂l₀ = −s₀(1 − s₀), ∂p/∂l_k = s₀ s_k (k ≥ 1).
-                let (e, sum) = exponentials(logits);
-                let s0 = e[0] / sum;
+                let (m, sum) = softmax_norm(logits);
+                let s0 = (logits[0] - m).exp() / sum;
                 d_logits[0] = d_logits[0] - d_p * s0 * (T::one() - s0);
                 for k in 1..logits.len() {
-                    d_logits[k] = d_logits[k] + d_p * s0 * (e[k] / sum);
+                    d_logits[k] = d_logits[k] + d_p * s0 * ((logits[k] - m).exp() / sum);
                 }
             }
             Self::OneHot => {
@@ -96,36 +93,42 @@ impl SemanticMode {
     }
 }
 
-/// exp(l − max l) of every logit and their sum.
-fn exponentials<T: Float>(logits: &[T]) -> (Vec<T>, T) {
+/// The softmax's shift and normaliser of `logits`: (max l, Σ exp(l − max l)). Computed per
+/// Gaussian without allocating (the posing calls it for every Gaussian of every pass).
+fn softmax_norm<T: Float>(logits: &[T]) -> (T, T) {
     let m = logits.iter().fold(T::neg_infinity(), |m, &l| m.max(l));
-    let e: Vec<T> = logits.iter().map(|&l| (l - m).exp()).collect();
-    let sum = e.iter().fold(T::zero(), |a, &b| a + b);
-    (e, sum)
+    let sum = logits.iter().fold(T::zero(), |a, &l| a + (l - m).exp());
+    (m, sum)
+}
+
+/// softmax(l)[class].
+fn class_probability<T: Float>(logits: &[T], class: usize) -> T {
+    let (m, sum) = softmax_norm(logits);
+    (logits[class] - m).exp() / sum
 }
 
 /// Each person's probability of a Gaussian with K = 1 + P one-hot logits: softmax(l)[1..] into
 /// `out` (P values).
 pub fn person_probabilities<T: Float>(logits: &[T], out: &mut [T]) {
-    let (e, sum) = exponentials(logits);
-    for (o, &ek) in out.iter_mut().zip(&e[1..]) {
-        *o = ek / sum;
+    let (m, sum) = softmax_norm(logits);
+    for (o, &l) in out.iter_mut().zip(&logits[1..]) {
+        *o = (l - m).exp() / sum;
     }
 }
 
 /// Adds dL/dlogits given dL/d [`person_probabilities`] (`d_q`, P values) into `d_logits` (K values):
 /// ∂s_j/∂l_k = s_j (δ_jk − s_k).
 pub fn person_probabilities_backward<T: Float>(logits: &[T], d_q: &[T], d_logits: &mut [T]) {
-    let (e, sum) = exponentials(logits);
-    let s: Vec<T> = e.iter().map(|&v| v / sum).collect();
+    let (m, sum) = softmax_norm(logits);
+    let s = |k: usize| (logits[k] - m).exp() / sum;
     // Σ_j d_q_j s_j, over the people's classes j ≥ 1.
     let weighted = d_q
         .iter()
-        .zip(&s[1..])
-        .fold(T::zero(), |a, (&d, &sj)| a + d * sj);
+        .enumerate()
+        .fold(T::zero(), |a, (j, &d)| a + d * s(j + 1));
     for k in 0..logits.len() {
         let own = if k >= 1 { d_q[k - 1] } else { T::zero() };
-        d_logits[k] = d_logits[k] + s[k] * (own - weighted);
+        d_logits[k] = d_logits[k] + s(k) * (own - weighted);
     }
 }
 

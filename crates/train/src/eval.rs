@@ -332,16 +332,19 @@ pub fn evaluate_person(
     Ok(out)
 }
 
+/// The mean of `get` over `frames`, skipping non-finite values (NaN when none is finite).
+fn finite_mean<M>(frames: &[M], get: impl Fn(&M) -> f64) -> f64 {
+    let vals: Vec<f64> = frames.iter().map(get).filter(|v| v.is_finite()).collect();
+    if vals.is_empty() {
+        f64::NAN
+    } else {
+        vals.iter().sum::<f64>() / vals.len() as f64
+    }
+}
+
 /// Mean of one person's per-frame figures (NaN entries skipped per field).
 pub fn mean_person_metrics(frames: &[PersonMetrics]) -> PersonMetrics {
-    let mean = |get: fn(&PersonMetrics) -> f64| {
-        let vals: Vec<f64> = frames.iter().map(get).filter(|v| v.is_finite()).collect();
-        if vals.is_empty() {
-            f64::NAN
-        } else {
-            vals.iter().sum::<f64>() / vals.len() as f64
-        }
-    };
+    let mean = |get: fn(&PersonMetrics) -> f64| finite_mean(frames, get);
     PersonMetrics {
         mask_iou: mean(|m| m.mask_iou),
         psnr_box: mean(|m| m.psnr_box),
@@ -355,14 +358,7 @@ pub fn mean_person_metrics(frames: &[PersonMetrics]) -> PersonMetrics {
 
 /// Mean of the per-frame figures (NaN entries, from frames without a human, are skipped per field).
 pub fn mean_metrics(frames: &[FrameMetrics]) -> FrameMetrics {
-    let mean = |get: fn(&FrameMetrics) -> f64| {
-        let vals: Vec<f64> = frames.iter().map(get).filter(|v| v.is_finite()).collect();
-        if vals.is_empty() {
-            f64::NAN
-        } else {
-            vals.iter().sum::<f64>() / vals.len() as f64
-        }
-    };
+    let mean = |get: fn(&FrameMetrics) -> f64| finite_mean(frames, get);
     FrameMetrics {
         psnr_full: mean(|m| m.psnr_full),
         ssim_full: mean(|m| m.ssim_full),

@@ -217,11 +217,9 @@ impl Model {
         frame_indices: Vec<u32>,
         scene_extent: f32,
     ) -> Result<Self, TrainError> {
-        let people = match config.semantic {
-            SemanticMode::OneHot => set.semantic_classes.saturating_sub(1).max(1),
-            _ => 1,
-        };
-        let k = config.semantic.logits_for(people);
+        let k = config
+            .semantic
+            .logits_for(people_of(config.semantic, set.semantic_classes));
         if set.semantic_classes != k
             || set.semantic_logits.len() != set.len() * k
             || set.feature_dim != config.feature_dim
@@ -276,10 +274,7 @@ impl Model {
 
     /// The number of people the model reconstructs (one semantic class each).
     pub fn people(&self) -> usize {
-        match self.config.semantic {
-            SemanticMode::OneHot => self.set.semantic_classes.saturating_sub(1).max(1),
-            _ => 1,
-        }
+        people_of(self.config.semantic, self.set.semantic_classes)
     }
 
     /// The number of rendered channels: RGB, the human probability and, with several people,
@@ -613,6 +608,15 @@ impl Model {
             people: pass.people_planes(),
             posed: pass.posed,
         })
+    }
+}
+
+/// The people of a set of `classes` semantic classes under `mode`: one per class after the scene's
+/// with one-hot semantics, else one.
+fn people_of(mode: SemanticMode, classes: usize) -> usize {
+    match mode {
+        SemanticMode::OneHot => classes.saturating_sub(1).max(1),
+        _ => 1,
     }
 }
 
