@@ -120,7 +120,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     config.event_ignore_mixed = data.recorded("refractory_us") != Some(0.0);
     let body = data.body()?;
     let mut blurred = TrainingData::new(&data, body.clone(), 0)?;
-    blurred.enable_exposure(&data, subframes)?;
+    blurred.enable_exposure(&data, subframes, config.camera_interpolation)?;
     blurred.enable_exposure_events(&data, &config)?;
     if true_poses {
         use_true_sub_frame_poses(&data, &mut blurred, subframes)?;

@@ -171,7 +171,9 @@ fn exposure_loss(model: &Model, data: &TrainingData, weights: &[f32]) -> f64 {
 #[test]
 fn the_sub_exposure_mean_backward_matches_central_differences() {
     let (model, data) = model_and_data_with(|training, dataset| {
-        training.enable_exposure(dataset, 3).unwrap();
+        training
+            .enable_exposure(dataset, 3, Default::default())
+            .unwrap();
     });
     let hw = data.pixels();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);

@@ -52,7 +52,8 @@ fn two_people_context(dir: &Path, config: &train::config::TrainConfig) -> Traini
     let data = load_dataset(dir).unwrap();
     assert_eq!(data.people(), 2);
     let mut ctx = TrainingData::new(&data, data.body().unwrap(), 0).unwrap();
-    ctx.enable_exposure(&data, config.subframes).unwrap();
+    ctx.enable_exposure(&data, config.subframes, config.camera_interpolation)
+        .unwrap();
     ctx.enable_exposure_events(&data, config).unwrap();
     ctx
 }

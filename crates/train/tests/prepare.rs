@@ -19,7 +19,9 @@ fn prepare_equals_the_separate_steps_and_reports_them() {
         .prepare(&data, &config, LossNetworks::default())
         .unwrap();
     let mut by_hand = context();
-    by_hand.enable_exposure(&data, config.subframes).unwrap();
+    by_hand
+        .enable_exposure(&data, config.subframes, config.camera_interpolation)
+        .unwrap();
     by_hand.enable_exposure_events(&data, &config).unwrap();
     assert_eq!(
         format!("{:?}", prepared.exposure_poses),
@@ -82,7 +84,7 @@ fn a_step_on_data_not_prepared_for_its_configuration_is_refused() {
     let exposure = exposure_events_config(4);
     let mut poses_only = context();
     poses_only
-        .enable_exposure(&data, exposure.subframes)
+        .enable_exposure(&data, exposure.subframes, exposure.camera_interpolation)
         .unwrap();
     let lpips = TrainConfig {
         lpips_weight: 0.1,

@@ -406,7 +406,8 @@ fn an_events_file_that_does_not_cover_its_frame_is_refused_at_load_time() {
     let data = load_dataset(dir.path()).unwrap();
     let config = exposure_events_config(8);
     let mut ctx = context();
-    ctx.enable_exposure(&data, config.subframes).unwrap();
+    ctx.enable_exposure(&data, config.subframes, config.camera_interpolation)
+        .unwrap();
     let err = ctx
         .enable_exposure_events(&data, &config)
         .unwrap_err()
@@ -449,7 +450,8 @@ fn header_less_raw_event_files_need_the_scene_to_state_their_encoding() {
     let config = exposure_events_config(8);
     let load = |data: &train::data::Dataset| {
         let mut ctx = context();
-        ctx.enable_exposure(data, config.subframes).unwrap();
+        ctx.enable_exposure(data, config.subframes, config.camera_interpolation)
+            .unwrap();
         ctx.enable_exposure_events(data, &config).map(|()| ctx)
     };
     let err = load(&load_dataset(dir.path()).unwrap())

@@ -489,6 +489,15 @@ training_options! {
     /// own change over the exposure, where a hand's tremor is).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction_smooth_change: bool = true,
+    /// With a moving camera and `blur_model = exposure`: how the camera's path inside each
+    /// exposure is interpolated between the frames' mid-exposure cameras (a cubic Hermite curve
+    /// either way, C¹, through every frame's camera). `band-limited` (the default) takes the
+    /// tangents from a windowed band-limited differentiator over 8 frames on each side, exact for
+    /// motion below half the frame rate (a hand's tremor, 8–12 Hz at 30 fps) and for constant
+    /// motion: on the `handheld` benchmark's path it misses 4 % of the in-exposure motion where
+    /// `local` (fourth-order central differences, the body's rule and the default before
+    /// 2026-12-02) misses 37 % (`docs/BENCHMARKS.md`, "A moving camera").
+    camera_interpolation: CameraInterpolation = CameraInterpolation::BandLimited,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
     camera_correction_from: usize = 100,

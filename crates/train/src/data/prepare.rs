@@ -81,7 +81,7 @@ impl TrainingData {
             done.edi_warmup = Some(deblurred.map_err(step("the EDI warm-up"))?);
         }
         if config.blur_model == BlurModel::Exposure {
-            self.enable_exposure(data, config.subframes)
+            self.enable_exposure(data, config.subframes, config.camera_interpolation)
                 .map_err(step("the exposure model"))?;
             done.exposure_s = Some(data.frames.iter().fold((f64::MAX, 0.0f64), |(a, b), f| {
                 (a.min(f.exposure_s), b.max(f.exposure_s))

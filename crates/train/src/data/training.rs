@@ -196,8 +196,14 @@ impl TrainingData {
     /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the frame's
     /// exposure: its own `exposure_s`, else the scene's), interpolated from the SMPL parameters of
     /// every frame of the scene ([`crate::pose::exposure::PoseTrack`]); with a moving camera, the
-    /// cameras at the same times ([`TrainingData::exposure_cameras`]).
-    pub fn enable_exposure(&mut self, data: &Dataset, subframes: usize) -> Result<(), TrainError> {
+    /// cameras at the same times ([`TrainingData::exposure_cameras`]), interpolated between the
+    /// frames' cameras by `camera_interpolation`.
+    pub fn enable_exposure(
+        &mut self,
+        data: &Dataset,
+        subframes: usize,
+        camera_interpolation: crate::config::CameraInterpolation,
+    ) -> Result<(), TrainError> {
         if let Some(f) = data
             .frames
             .iter()
@@ -245,7 +251,7 @@ impl TrainingData {
                 .iter()
                 .map(|f| (f.time_s, f.camera.world_to_camera))
                 .collect();
-            let track = crate::pose::exposure::CameraTrack::new(&keys);
+            let track = crate::pose::exposure::CameraTrack::new(&keys, camera_interpolation);
             self.exposure_cameras = data
                 .frames
                 .iter()

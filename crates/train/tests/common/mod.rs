@@ -115,7 +115,8 @@ pub fn assert_same_bits(a: &[u32], b: &[u32]) {
 pub fn exposure_context(config: &TrainConfig) -> TrainingData {
     let data = load_dataset(&fixture()).unwrap();
     let mut ctx = context();
-    ctx.enable_exposure(&data, config.subframes).unwrap();
+    ctx.enable_exposure(&data, config.subframes, config.camera_interpolation)
+        .unwrap();
     ctx.enable_exposure_events(&data, config).unwrap();
     ctx
 }
