@@ -7,7 +7,7 @@
 use glam::{DQuat, DVec3};
 use smpl_deform::{BodyModel, SmplParams};
 use synth::body::DressedBody;
-use train::config::CameraInterpolation;
+use train::config::TrackTangents;
 use train::pose::exposure::{subframe_times, CameraTrack, PoseTrack};
 
 /// (mean, max) joint-rotation error in degrees over the 24 joints of two poses, and the
@@ -124,7 +124,7 @@ fn matrix_of(r: DQuat, c: DVec3) -> Matrix {
 /// worst rotation error of `interpolation` at the 16 sub-frame times of the interior exposures,
 /// with the RMS and largest turn from mid exposure inside them (degrees), and the worst centre
 /// error (cm).
-fn handheld_track_error(interpolation: CameraInterpolation) -> [f64; 5] {
+fn handheld_track_error(interpolation: TrackTangents) -> [f64; 5] {
     use synth::camera::PinholeCamera;
     use synth::camera_motion::{CameraMotion, CameraPath};
     let (eye, target) = (
@@ -177,8 +177,7 @@ fn handheld_track_error(interpolation: CameraInterpolation) -> [f64; 5] {
 /// alternation (measured: 0.085°).
 #[test]
 fn interpolated_sub_frame_cameras_follow_a_handheld_path() {
-    let [rms, worst, moved_rms, moved, worst_cm] =
-        handheld_track_error(CameraInterpolation::BandLimited);
+    let [rms, worst, moved_rms, moved, worst_cm] = handheld_track_error(TrackTangents::BandLimited);
     eprintln!(
         "band-limited: RMS {rms:.4}° (worst {worst:.4}°) of an RMS turn of {moved_rms:.4}° \
          (largest {moved:.4}°), worst centre {worst_cm:.4} cm"
@@ -187,7 +186,7 @@ fn interpolated_sub_frame_cameras_follow_a_handheld_path() {
     assert!(rms < 0.08 * moved_rms, "{rms}° against {moved_rms}°");
     assert!(worst < 0.15 * moved, "{worst}° against {moved}° of motion");
     assert!(worst_cm < 0.05, "{worst_cm} cm");
-    let [rms, worst, moved_rms, moved, worst_cm] = handheld_track_error(CameraInterpolation::Local);
+    let [rms, worst, moved_rms, moved, worst_cm] = handheld_track_error(TrackTangents::Local);
     eprintln!("local: RMS {rms:.4}° (worst {worst:.4}°) of {moved_rms:.4}°");
     assert!(
         rms < 0.45 * moved_rms && rms > 0.2 * moved_rms,
@@ -213,7 +212,7 @@ fn constant_camera_motion_is_followed_exactly_and_smoothly() {
     let keys: Vec<(f64, Matrix)> = (0..40)
         .map(|k| (k as f64 / 30.0, truth(k as f64 / 30.0)))
         .collect();
-    for interpolation in [CameraInterpolation::BandLimited, CameraInterpolation::Local] {
+    for interpolation in [TrackTangents::BandLimited, TrackTangents::Local] {
         let track = CameraTrack::new(&keys, interpolation);
         for t in [-0.01, 0.004, 0.05, 0.4321, 1.0, 1.3, 1.31] {
             let (deg, cm) = camera_error(&track.at(t), &truth(t));
@@ -234,7 +233,7 @@ fn constant_camera_motion_is_followed_exactly_and_smoothly() {
     let keys: Vec<(f64, Matrix)> = (0..40)
         .map(|k| (k as f64 / 30.0, wobble(k as f64 / 30.0)))
         .collect();
-    let track = CameraTrack::new(&keys, CameraInterpolation::BandLimited);
+    let track = CameraTrack::new(&keys, TrackTangents::BandLimited);
     let (knot, d) = (10.0 / 30.0, 1e-4);
     let (at, before, after) = (
         track.at(knot),
@@ -258,12 +257,12 @@ fn constant_camera_motion_is_followed_exactly_and_smoothly() {
     let mut uneven = keys.clone();
     uneven[20].0 += 0.004;
     let (a, b) = (
-        CameraTrack::new(&uneven, CameraInterpolation::BandLimited),
-        CameraTrack::new(&uneven, CameraInterpolation::Local),
+        CameraTrack::new(&uneven, TrackTangents::BandLimited),
+        CameraTrack::new(&uneven, TrackTangents::Local),
     );
     assert_eq!(a.at(0.69), b.at(0.69));
     assert_ne!(
-        CameraTrack::new(&keys, CameraInterpolation::BandLimited).at(0.69),
-        CameraTrack::new(&keys, CameraInterpolation::Local).at(0.69)
+        CameraTrack::new(&keys, TrackTangents::BandLimited).at(0.69),
+        CameraTrack::new(&keys, TrackTangents::Local).at(0.69)
     );
 }

@@ -63,16 +63,16 @@ pub enum CameraGauge {
     Person,
 }
 
-/// How a moving camera's tangents at the frames' mid-exposure cameras are estimated, for the
-/// cubic Hermite path between them (see [`TrainConfig::camera_interpolation`]).
+/// How a track's tangents at its keys (the frames) are estimated, for the cubic Hermite path
+/// between them (a moving camera's: [`TrainConfig::camera_interpolation`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
-pub enum CameraInterpolation {
+pub enum TrackTangents {
     /// A band-limited differentiator over the eight frames on each side (the ideal one of a
     /// signal below half the frame rate, windowed): follows a hand's 8–12 Hz tremor at 30 fps.
     #[default]
     BandLimited,
-    /// The body's rule: fourth-order central differences (second-order at the ends).
+    /// Fourth-order central differences (second-order at the ends): the body's rule.
     Local,
 }
 

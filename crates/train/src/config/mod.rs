@@ -497,7 +497,7 @@ training_options! {
     /// motion: on the `handheld` benchmark's path it misses 4 % of the in-exposure motion where
     /// `local` (fourth-order central differences, the body's rule and the default before
     /// 2026-12-02) misses 37 % (`docs/BENCHMARKS.md`, "A moving camera").
-    camera_interpolation: CameraInterpolation = CameraInterpolation::BandLimited,
+    camera_interpolation: TrackTangents = TrackTangents::BandLimited,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
     camera_correction_from: usize = 100,

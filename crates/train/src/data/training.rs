@@ -202,7 +202,7 @@ impl TrainingData {
         &mut self,
         data: &Dataset,
         subframes: usize,
-        camera_interpolation: crate::config::CameraInterpolation,
+        camera_interpolation: crate::config::TrackTangents,
     ) -> Result<(), TrainError> {
         if let Some(f) = data
             .frames
