@@ -23,7 +23,7 @@ use train::loss::event::{event_residual, LUMA};
 use train::loss::image::ImageShape;
 use train::loss::photometric::{exposure_loss, ExposureEvents};
 use train::model::{PassCamera, PassPlan, RENDER_CHANNELS};
-use train::pose::exposure::subframe_times;
+use train::pose::exposure::{subframe_times, TrackRules};
 use train::trainer::Trainer;
 
 /// PSNR (dB) of `a` against `b` over the pixels `mask` keeps (all without one); values clamped
@@ -120,7 +120,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     config.event_ignore_mixed = data.recorded("refractory_us") != Some(0.0);
     let body = data.body()?;
     let mut blurred = TrainingData::new(&data, body.clone(), 0)?;
-    blurred.enable_exposure(&data, subframes, config.camera_interpolation)?;
+    blurred.enable_exposure(&data, subframes, TrackRules::of(&config))?;
     blurred.enable_exposure_events(&data, &config)?;
     if true_poses {
         use_true_sub_frame_poses(&data, &mut blurred, subframes)?;

@@ -6,6 +6,7 @@
 
 use std::path::Path;
 use train::data::{load_dataset, TrainingData};
+use train::pose::exposure::TrackRules;
 use train::trainer::Trainer;
 
 mod common;
@@ -52,7 +53,7 @@ fn two_people_context(dir: &Path, config: &train::config::TrainConfig) -> Traini
     let data = load_dataset(dir).unwrap();
     assert_eq!(data.people(), 2);
     let mut ctx = TrainingData::new(&data, data.body().unwrap(), 0).unwrap();
-    ctx.enable_exposure(&data, config.subframes, config.camera_interpolation)
+    ctx.enable_exposure(&data, config.subframes, TrackRules::of(config))
         .unwrap();
     ctx.enable_exposure_events(&data, config).unwrap();
     ctx

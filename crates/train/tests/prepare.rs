@@ -7,6 +7,7 @@ mod common;
 use common::{assert_same_bits, bits, context, exposure_events_config, fixture, tiny_config};
 use train::config::TrainConfig;
 use train::data::{load_dataset, LossNetworks};
+use train::pose::exposure::TrackRules;
 use train::trainer::Trainer;
 use train::TrainError;
 
@@ -20,7 +21,7 @@ fn prepare_equals_the_separate_steps_and_reports_them() {
         .unwrap();
     let mut by_hand = context();
     by_hand
-        .enable_exposure(&data, config.subframes, config.camera_interpolation)
+        .enable_exposure(&data, config.subframes, TrackRules::of(&config))
         .unwrap();
     by_hand.enable_exposure_events(&data, &config).unwrap();
     assert_eq!(
@@ -84,7 +85,7 @@ fn a_step_on_data_not_prepared_for_its_configuration_is_refused() {
     let exposure = exposure_events_config(4);
     let mut poses_only = context();
     poses_only
-        .enable_exposure(&data, exposure.subframes, exposure.camera_interpolation)
+        .enable_exposure(&data, exposure.subframes, TrackRules::of(&exposure))
         .unwrap();
     let lpips = TrainConfig {
         lpips_weight: 0.1,

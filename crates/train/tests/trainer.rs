@@ -5,6 +5,7 @@
 use train::config::TrainConfig;
 use train::data::load_dataset;
 use train::data::TrainingData;
+use train::pose::exposure::TrackRules;
 use train::trainer::Trainer;
 
 mod common;
@@ -406,7 +407,7 @@ fn an_events_file_that_does_not_cover_its_frame_is_refused_at_load_time() {
     let data = load_dataset(dir.path()).unwrap();
     let config = exposure_events_config(8);
     let mut ctx = context();
-    ctx.enable_exposure(&data, config.subframes, config.camera_interpolation)
+    ctx.enable_exposure(&data, config.subframes, TrackRules::of(&config))
         .unwrap();
     let err = ctx
         .enable_exposure_events(&data, &config)
@@ -450,7 +451,7 @@ fn header_less_raw_event_files_need_the_scene_to_state_their_encoding() {
     let config = exposure_events_config(8);
     let load = |data: &train::data::Dataset| {
         let mut ctx = context();
-        ctx.enable_exposure(data, config.subframes, config.camera_interpolation)
+        ctx.enable_exposure(data, config.subframes, TrackRules::of(&config))
             .unwrap();
         ctx.enable_exposure_events(data, &config).map(|()| ctx)
     };

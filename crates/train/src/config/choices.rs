@@ -64,7 +64,8 @@ pub enum CameraGauge {
 }
 
 /// How a track's tangents at its keys (the frames) are estimated, for the cubic Hermite path
-/// between them (a moving camera's: [`TrainConfig::camera_interpolation`]).
+/// between them (a moving camera's: [`TrainConfig::camera_interpolation`]; the body's:
+/// [`TrainConfig::body_interpolation`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum TrackTangents {
@@ -72,7 +73,7 @@ pub enum TrackTangents {
     /// signal below half the frame rate, windowed): follows a hand's 8–12 Hz tremor at 30 fps.
     #[default]
     BandLimited,
-    /// Fourth-order central differences (second-order at the ends): the body's rule.
+    /// Fourth-order central differences (second-order at the ends): the body's default rule.
     Local,
 }
 

@@ -498,6 +498,13 @@ training_options! {
     /// `local` (fourth-order central differences, the body's rule and the default before
     /// 2026-12-02) misses 37 % (`docs/BENCHMARKS.md`, "A moving camera").
     camera_interpolation: TrackTangents = TrackTangents::BandLimited,
+    /// With `blur_model = exposure`: how the body's joint rotations and root translation are
+    /// interpolated inside each exposure between the frames' poses (cubic Hermite curves through
+    /// every frame's pose, as for the camera). `local` (the default): fourth-order central
+    /// differences; `band-limited`: the camera's windowed band-limited differentiator over 8
+    /// frames on each side, which on the generator's motion lowers the sub-frame joint error from
+    /// 0.230° to 0.193° mean (`docs/BENCHMARKS.md`, "Ideal events").
+    body_interpolation: TrackTangents = TrackTangents::Local,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
     camera_correction_from: usize = 100,

@@ -6,6 +6,7 @@
 
 use super::{Dataset, TrainingData};
 use crate::config::{BlurModel, EventPairs, TrainConfig, TrainOn};
+use crate::pose::exposure::TrackRules;
 use crate::TrainError;
 
 /// The frozen networks some losses read; each must be given when `config` needs it.
@@ -81,7 +82,7 @@ impl TrainingData {
             done.edi_warmup = Some(deblurred.map_err(step("the EDI warm-up"))?);
         }
         if config.blur_model == BlurModel::Exposure {
-            self.enable_exposure(data, config.subframes, config.camera_interpolation)
+            self.enable_exposure(data, config.subframes, TrackRules::of(config))
                 .map_err(step("the exposure model"))?;
             done.exposure_s = Some(data.frames.iter().fold((f64::MAX, 0.0f64), |(a, b), f| {
                 (a.min(f.exposure_s), b.max(f.exposure_s))

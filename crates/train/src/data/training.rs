@@ -196,13 +196,13 @@ impl TrainingData {
     /// midpoint-rule times over its exposure `[time_s − E/2, time_s + E/2]` (E the frame's
     /// exposure: its own `exposure_s`, else the scene's), interpolated from the SMPL parameters of
     /// every frame of the scene ([`crate::pose::exposure::PoseTrack`]); with a moving camera, the
-    /// cameras at the same times ([`TrainingData::exposure_cameras`]), interpolated between the
-    /// frames' cameras by `camera_interpolation`.
+    /// cameras at the same times ([`TrainingData::exposure_cameras`]); each track's tangents by
+    /// its rule in `rules`.
     pub fn enable_exposure(
         &mut self,
         data: &Dataset,
         subframes: usize,
-        camera_interpolation: crate::config::TrackTangents,
+        rules: crate::pose::exposure::TrackRules,
     ) -> Result<(), TrainError> {
         if let Some(f) = data
             .frames
@@ -218,7 +218,7 @@ impl TrainingData {
         }
         let keys: Vec<(f64, &smpl_deform::SmplParams)> =
             data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
-        let track = crate::pose::exposure::PoseTrack::new(&keys);
+        let track = crate::pose::exposure::PoseTrack::new(&keys, rules.body);
         let other_tracks: Vec<_> = (0..self.others.len())
             .map(|j| {
                 let keys: Vec<(f64, &smpl_deform::SmplParams)> = data
@@ -226,7 +226,7 @@ impl TrainingData {
                     .iter()
                     .map(|f| (f.time_s, &f.others[j]))
                     .collect();
-                crate::pose::exposure::PoseTrack::new(&keys)
+                crate::pose::exposure::PoseTrack::new(&keys, rules.body)
             })
             .collect();
         let cast = self.cast();
@@ -251,7 +251,7 @@ impl TrainingData {
                 .iter()
                 .map(|f| (f.time_s, f.camera.world_to_camera))
                 .collect();
-            let track = crate::pose::exposure::CameraTrack::new(&keys, camera_interpolation);
+            let track = crate::pose::exposure::CameraTrack::new(&keys, rules.camera);
             self.exposure_cameras = data
                 .frames
                 .iter()

@@ -18,13 +18,40 @@
 //! **Cameras** (a moving camera): the same Hermite curves through the frames' cameras, by default
 //! with band-limited tangents ([`Keys::band_limited_tangent`]): a hand's 8–12 Hz tremor is sampled
 //! at 30 fps near half the frame rate, where central differences under-state its speed by 40–60 %.
-//! The body keeps the local tangents (on the generator's motion band-limited ones lower the
-//! sub-frame joint error from 0.230° to 0.193° mean; not yet measured in training).
+//! The body's track takes either rule (`TrainConfig::body_interpolation`; on the generator's
+//! motion band-limited tangents lower the sub-frame joint error from 0.230° to 0.193° mean).
 
 use glam::{DQuat, DVec3};
 use smpl_deform::SmplParams;
 
 use crate::config::TrackTangents;
+
+/// The tangent rules of the exposure model's two tracks: the body's
+/// (`TrainConfig::body_interpolation`) and a moving camera's (`TrainConfig::camera_interpolation`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TrackRules {
+    /// The body's joints and root translation ([`PoseTrack`]).
+    pub body: TrackTangents,
+    /// The camera's path ([`CameraTrack`]).
+    pub camera: TrackTangents,
+}
+
+impl TrackRules {
+    /// The rules `config` names.
+    pub fn of(config: &crate::config::TrainConfig) -> Self {
+        Self {
+            body: config.body_interpolation,
+            camera: config.camera_interpolation,
+        }
+    }
+}
+
+impl Default for TrackRules {
+    /// The default configuration's rules.
+    fn default() -> Self {
+        Self::of(&crate::config::TrainConfig::default())
+    }
+}
 
 /// The S sub-exposure times (seconds) of a frame at mid-exposure time `time_s` with exposure
 /// `exposure_s` (midpoint rule, see the module documentation).
@@ -207,6 +234,8 @@ impl Keys {
 #[derive(Clone, Debug)]
 pub struct PoseTrack {
     keys: Keys,
+    /// The rule of the tangents at the keys.
+    tangents: TrackTangents,
     /// Per key frame, per joint, the rotation.
     rotations: Vec<Vec<DQuat>>,
     translations: Vec<DVec3>,
@@ -214,8 +243,9 @@ pub struct PoseTrack {
 }
 
 impl PoseTrack {
-    /// The track of `(time_s, params)` key frames, in increasing time (at least one).
-    pub fn new(keys: &[(f64, &SmplParams)]) -> Self {
+    /// The track of `(time_s, params)` key frames, in increasing time (at least one), with
+    /// tangents at the keys by `tangents`.
+    pub fn new(keys: &[(f64, &SmplParams)], tangents: TrackTangents) -> Self {
         let rotations = keys
             .iter()
             .map(|(_, p)| {
@@ -235,6 +265,7 @@ impl PoseTrack {
             keys: Keys {
                 times: keys.iter().map(|(t, _)| *t).collect(),
             },
+            tangents,
             rotations,
             translations: keys
                 .iter()
@@ -252,7 +283,7 @@ impl PoseTrack {
         let i = self.keys.segment(t);
         let transl = self
             .keys
-            .hermite(TrackTangents::Local, &|j| self.translations[j], i, t);
+            .hermite(self.tangents, &|j| self.translations[j], i, t);
         let joints = self.rotations.first().map_or(0, Vec::len);
         let mut pose = Vec::with_capacity(3 * joints);
         for joint in 0..joints {
@@ -267,7 +298,7 @@ impl PoseTrack {
             };
             let base = self.rotations[i][joint];
             let q = (base
-                * DQuat::from_scaled_axis(self.keys.hermite(TrackTangents::Local, &local, i, t)))
+                * DQuat::from_scaled_axis(self.keys.hermite(self.tangents, &local, i, t)))
             .normalize();
             let r = q.to_scaled_axis();
             pose.extend([r.x as f32, r.y as f32, r.z as f32]);
@@ -392,7 +423,7 @@ mod tests {
             .map(|k| (k as f64 * 0.1, params(0.3 * k as f32, 0.05 * k as f32)))
             .collect();
         let refs: Vec<(f64, &SmplParams)> = keys.iter().map(|(t, p)| (*t, p)).collect();
-        let track = PoseTrack::new(&refs);
+        let track = PoseTrack::new(&refs, TrackTangents::Local);
         for (t, p) in &keys {
             let at = track.at(*t);
             assert!((at.pose[50] - p.pose[50]).abs() < 1e-6, "{t}");

@@ -8,6 +8,7 @@ use train::config::{Preset, TrainConfig};
 use train::data::load_dataset;
 use train::data::TrainingData;
 use train::pose::body::Body;
+use train::pose::exposure::TrackRules;
 use train::trainer::Trainer;
 
 /// The tiny checked-in scene.
@@ -115,7 +116,7 @@ pub fn assert_same_bits(a: &[u32], b: &[u32]) {
 pub fn exposure_context(config: &TrainConfig) -> TrainingData {
     let data = load_dataset(&fixture()).unwrap();
     let mut ctx = context();
-    ctx.enable_exposure(&data, config.subframes, config.camera_interpolation)
+    ctx.enable_exposure(&data, config.subframes, TrackRules::of(config))
         .unwrap();
     ctx.enable_exposure_events(&data, config).unwrap();
     ctx

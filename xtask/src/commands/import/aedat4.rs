@@ -113,7 +113,8 @@ fn poses_at_frames(
         .map(|&t| t as f64 * 1e-6)
         .zip(&params)
         .collect();
-    let track = train::pose::exposure::PoseTrack::new(&keys);
+    // Pose times from a tracker need not be evenly spaced: the local rule.
+    let track = train::pose::exposure::PoseTrack::new(&keys, train::config::TrackTangents::Local);
     let (first, last) = (times_us[0], times_us[times_us.len() - 1]);
     frames
         .iter()
