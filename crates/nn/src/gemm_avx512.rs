@@ -401,8 +401,15 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         for case in 0..400 {
             // Shapes of the chunked MLPs and everything around them, edges included; every 10th
-            // case large (several KC blocks of k, split over rayon tasks).
-            let (k, m, n) = if case % 10 == 9 {
+            // case large (several KC blocks of k, split over rayon tasks), and every 10th a weight
+            // gradient's (few rows, a long k).
+            let (k, m, n) = if case % 10 == 4 {
+                (
+                    rng.gen_range(1000..=6000),
+                    rng.gen_range(1..=96),
+                    rng.gen_range(1..=80),
+                )
+            } else if case % 10 == 9 {
                 (
                     rng.gen_range(200..=900),
                     rng.gen_range(100..=700),
