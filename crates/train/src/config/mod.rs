@@ -503,7 +503,8 @@ training_options! {
     /// every frame's pose, as for the camera). `local` (the default): fourth-order central
     /// differences; `band-limited`: the camera's windowed band-limited differentiator over 8
     /// frames on each side, which on the generator's motion lowers the sub-frame joint error from
-    /// 0.230° to 0.193° mean (`docs/BENCHMARKS.md`, "Ideal events").
+    /// 0.230° to 0.193° mean and moves the human box by +0.07 dB on ideal events, +0.02 on the
+    /// default benchmark (`quick`; `docs/notes/2026-12-02-body-tangents-and-serial-step.md`).
     body_interpolation: TrackTangents = TrackTangents::Local,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
