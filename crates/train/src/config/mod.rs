@@ -460,7 +460,8 @@ training_options! {
     /// The camera corrections' rates decay log-linearly from `camera_correction_from` to the last
     /// step, to this fraction (1: constant rates; a lazy Adam's rate is its noise floor). 0.03
     /// scores +0.38 dB full frame over 0.1 with estimated cameras on `handheld-err` (`quick`;
-    /// `docs/notes/2026-12-02-body-tangents-and-serial-step.md`); not measured on exact cameras.
+    /// `docs/notes/2026-12-02-body-tangents-and-serial-step.md`); together with
+    /// `camera_correction_change` off it costs exact cameras 0.43 dB in the human box.
     lr_camera_final_fraction: f32 = 0.1,
     /// λ₀ of the camera-correction prior: weight of ‖ξ_k‖² (radians², m²) pulling each training
     /// frame's twists towards zero.
@@ -471,7 +472,7 @@ training_options! {
     /// Whether camera correction also learns each exposure's change of the camera (with
     /// `blur_model = exposure`); off: the sub-exposure cameras keep the interpolated path and only
     /// move with the mid-exposure twist (+0.10 dB full frame with estimated cameras on
-    /// `handheld-err`, `quick`; not measured on exact cameras).
+    /// `handheld-err`, `quick`; see `lr_camera_final_fraction` for exact cameras).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction_change: bool = true,
     /// With camera correction, what sets the offset common to every frame's camera — a gauge the
