@@ -315,7 +315,7 @@ impl PoseTrack {
 /// interpolated at any time as [`PoseTrack`] interpolates a joint: the rotation by a cubic Hermite
 /// curve in the tangent space of the segment's start rotation, the camera centre (world metres)
 /// by a cubic Hermite curve; the translation follows as `t = −R·c`. The tangents at the keys are
-/// band-limited ([`TrackTangents::BandLimited`], a hand's tremor) or the body's local rule.
+/// band-limited ([`TrackTangents::BandLimited`], a hand's tremor) or local ([`TrackTangents::Local`]).
 #[derive(Clone, Debug)]
 pub struct CameraTrack {
     keys: Keys,
