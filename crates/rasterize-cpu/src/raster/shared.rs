@@ -79,8 +79,10 @@ pub fn render_cov_shared<T: Real>(
         reference_compact: &owner_binned.compact_indices(),
         moving,
     };
+    // The renders are independent: one task each (their tiles balance across the threads better
+    // than one render's few moving tiles do), collected in render order.
     let projected = renders
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(r, splats)| {
             (r != owner)
@@ -107,13 +109,13 @@ pub fn render_cov_shared<T: Real>(
     }
     let skip = (outputs == SharedOutputs::OwnerLists).then_some(&shared_tiles[..]);
     let mut binned: Vec<_> = projected
-        .into_iter()
+        .into_par_iter()
         .zip(renders)
         .map(|(p, splats)| p.map(|p| p.bin(camera, &Inputs::from(splats), skip)))
         .collect();
     let (owner_buf, owner_used) = blend_tiles(&owner_binned, None);
     let mut buffers: Vec<_> = binned
-        .iter()
+        .par_iter()
         .map(|b| {
             b.as_ref().map(|b| {
                 let reused = ReusedTiles {
@@ -175,7 +177,7 @@ pub fn render_cov_shared_backward<T: Real>(
     let summed = SummedCotangents::of(cots)?;
     let summed = summed.as_cotangents();
     renders
-        .iter()
+        .par_iter()
         .zip(outputs)
         .zip(cots)
         .enumerate()

@@ -34,6 +34,7 @@ use rasterize_cpu::{
     render_cov, render_cov_backward, render_cov_shared, render_cov_shared_backward, Camera,
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, SharedOutputs, TileSharing,
 };
+use rayon::prelude::*;
 use smpl_deform::math::Affine;
 use std::time::Instant;
 
@@ -410,30 +411,43 @@ impl Model {
             });
         }
         let first = self.posed_pass(camera.view_centre, reference_pose, latent)?;
-        let mut posed = Vec::with_capacity(poses.len());
-        for (s, &pose) in poses.iter().enumerate() {
-            if s == reference {
-                continue;
-            }
-            if !plan.reposed {
-                posed.push(self.posed_pass(cameras[s].view_centre, pose, latent)?);
-                continue;
-            }
+        let others: Vec<usize> = (0..poses.len()).filter(|&s| s != reference).collect();
+        let mut posed = if plan.reposed {
             let PassCache::Frame(reference_cache) = &first.cache else {
                 unreachable!("Model::posed_pass poses with the networks");
             };
+            // The re-posings are independent, and each is mostly serial work (the copy of the
+            // reference frame, the blend): one task per pass, collected in pass order. Each
+            // pass's share of the wall time is its `pose_seconds`, so that they sum to it.
             let t0 = Instant::now();
-            let (frame, cache) = repose_frame(&first.posed, reference_cache, &pose.bones)?;
-            posed.push(PosedPass {
-                view_centre: cameras[s].view_centre,
-                pose,
-                latent,
-                cache: PassCache::Reposed(cache),
-                channels: interleave_channels(&frame),
-                posed: frame,
-                pose_seconds: t0.elapsed().as_secs_f64(),
-            });
-        }
+            let mut passes = others
+                .par_iter()
+                .map(|&s| {
+                    let (frame, cache) =
+                        repose_frame(&first.posed, reference_cache, &poses[s].bones)?;
+                    Ok(PosedPass {
+                        view_centre: cameras[s].view_centre,
+                        pose: poses[s],
+                        latent,
+                        cache: PassCache::Reposed(cache),
+                        channels: interleave_channels(&frame),
+                        posed: frame,
+                        pose_seconds: 0.0,
+                    })
+                })
+                .collect::<Result<Vec<_>, TrainError>>()?;
+            let share = t0.elapsed().as_secs_f64() / passes.len().max(1) as f64;
+            for p in &mut passes {
+                p.pose_seconds = share;
+            }
+            passes
+        } else {
+            let mut passes = Vec::with_capacity(poses.len());
+            for &s in &others {
+                passes.push(self.posed_pass(cameras[s].view_centre, poses[s], latent)?);
+            }
+            passes
+        };
         posed.insert(reference, first);
         // Tiles are shared only between renders from one camera (a moving camera moves every
         // Gaussian on the image).
@@ -559,22 +573,33 @@ impl Model {
             )));
         };
         let params = self.params();
+        // The re-posed passes' backwards are independent (one task each); their cotangents are
+        // summed in pass order, as one after the other would.
+        let reposed: Vec<Option<(ReposeCotangents<f32>, Vec<Affine<f32>>)>> = passes
+            .par_iter()
+            .zip(posed)
+            .map(|(pass, grads)| {
+                let PassCache::Reposed(cache) = &pass.cache else {
+                    return Ok(None);
+                };
+                repose_frame_backward(
+                    self.config.semantic,
+                    &params,
+                    reference_cache,
+                    &pass.pose.bones,
+                    cache,
+                    &grads.cotangents(),
+                )
+                .map(Some)
+            })
+            .collect::<Result<_, TrainError>>()?;
         let mut summed = ReposeCotangents::zeros(self.set.len(), reference_cache.active.len());
         let mut pass_bones = vec![Vec::new(); passes.len()];
-        for ((pass, grads), bones) in passes.iter().zip(posed).zip(&mut pass_bones) {
-            let PassCache::Reposed(cache) = &pass.cache else {
-                continue;
-            };
-            let (d, d_bones) = repose_frame_backward(
-                self.config.semantic,
-                &params,
-                reference_cache,
-                &pass.pose.bones,
-                cache,
-                &grads.cotangents(),
-            )?;
-            summed.add(&d);
-            *bones = d_bones;
+        for (result, bones) in reposed.into_iter().zip(&mut pass_bones) {
+            if let Some((d, d_bones)) = result {
+                summed.add(&d);
+                *bones = d_bones;
+            }
         }
         let reference_pass = &passes[reference];
         let grads = pose_frame_backward_with(

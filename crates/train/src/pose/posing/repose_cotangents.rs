@@ -4,6 +4,7 @@
 
 use crate::TrainError;
 use nn::Real;
+use rayon::prelude::*;
 use smpl_deform::deform_net::MovedCotangents;
 
 /// Cotangents of a frame pass's internal quantities coming from its re-posings (summed over them);
@@ -45,8 +46,12 @@ impl<T: Real> ReposeCotangents<T> {
 
     /// Adds `other` element by element.
     pub fn add(&mut self, other: &Self) {
+        // Element by element, so the chunks may run in parallel with the bits of a serial loop.
         fn add<T: Real>(a: &mut [T], b: &[T]) {
-            a.iter_mut().zip(b).for_each(|(x, &y)| *x = *x + y);
+            const CHUNK: usize = 1 << 14;
+            a.par_chunks_mut(CHUNK)
+                .zip(b.par_chunks(CHUNK))
+                .for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(x, &y)| *x = *x + y));
         }
         add(self.means.as_flattened_mut(), other.means.as_flattened());
         add(
