@@ -13,6 +13,7 @@
 use gaussians::sh::{num_sh_coeffs, sh_basis, sh_basis_backward, MAX_SH_COEFFS};
 use nn::mlp::{Activation, Mlp, MlpCache};
 use nn::{NnError, Real};
+use rayon::prelude::*;
 
 /// Shape of a colour network's input and hidden layers.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -150,27 +151,35 @@ impl<T: Real> ColourNet<T> {
         let width = c.input_dim();
         let skip = usize::from(!c.include_dc);
         let k = num_sh_coeffs(c.sh_degree);
-        let mut input = Vec::with_capacity(n * width);
-        let mut basis = [T::zero(); MAX_SH_COEFFS];
-        let mut units = Vec::with_capacity(n);
-        for i in 0..n {
-            input.extend_from_slice(&x.features[i * c.feature_dim..(i + 1) * c.feature_dim]);
-            let d = x.directions[i];
-            let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            let unit = if norm > T::zero() {
-                [d[0] / norm, d[1] / norm, d[2] / norm]
-            } else {
-                [T::zero(); 3]
-            };
-            units.push((unit, norm));
-            sh_basis(c.sh_degree, unit, &mut basis);
-            input.extend_from_slice(&basis[skip..k]);
-            input.extend_from_slice(&x.extra[i * c.extra_dim..(i + 1) * c.extra_dim]);
-            input.extend_from_slice(x.latent);
-        }
+        // Rows in parallel: each row's arithmetic is independent of the others.
+        let mut input = vec![T::zero(); n * width];
+        let mut units = vec![([T::zero(); 3], T::zero()); n];
+        input
+            .par_chunks_mut(width.max(1))
+            .zip(units.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (row, unit_norm))| {
+                let mut basis = [T::zero(); MAX_SH_COEFFS];
+                let (f, rest) = row.split_at_mut(c.feature_dim);
+                f.copy_from_slice(&x.features[i * c.feature_dim..(i + 1) * c.feature_dim]);
+                let d = x.directions[i];
+                let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let unit = if norm > T::zero() {
+                    [d[0] / norm, d[1] / norm, d[2] / norm]
+                } else {
+                    [T::zero(); 3]
+                };
+                *unit_norm = (unit, norm);
+                sh_basis(c.sh_degree, unit, &mut basis);
+                let (sh, rest) = rest.split_at_mut(k - skip);
+                sh.copy_from_slice(&basis[skip..k]);
+                let (e, l) = rest.split_at_mut(c.extra_dim);
+                e.copy_from_slice(&x.extra[i * c.extra_dim..(i + 1) * c.extra_dim]);
+                l.copy_from_slice(x.latent);
+            });
         let (logits, mlp_cache) = self.mlp.forward(&input, n)?;
         let rgb: Vec<T> = logits
-            .iter()
+            .par_iter()
             .map(|&z| T::one() / (T::one() + (-z).exp()))
             .collect();
         Ok((
@@ -200,7 +209,7 @@ impl<T: Real> ColourNet<T> {
             });
         }
         let d_logits: Vec<T> = d_rgb
-            .iter()
+            .par_iter()
             .zip(&cache.rgb)
             .map(|(&g, &s)| g * s * (T::one() - s))
             .collect();
@@ -210,35 +219,54 @@ impl<T: Real> ColourNet<T> {
         self.mlp
             .backward(&cache.mlp, &d_logits, &mut d_params, Some(&mut d_input))?;
         let sh_dim = c.sh_dim();
-        let mut grads = ColourGradients {
-            params: d_params,
-            features: Vec::with_capacity(n * c.feature_dim),
-            extra: Vec::with_capacity(n * c.extra_dim),
-            latent: vec![T::zero(); c.latent_dim],
-            directions: Vec::with_capacity(n),
-        };
         let skip = usize::from(!c.include_dc);
-        let mut d_basis = [T::zero(); MAX_SH_COEFFS];
-        for (row, &(unit, norm)) in d_input.chunks_exact(width.max(1)).zip(&cache.units) {
-            let (f, rest) = row.split_at(c.feature_dim);
-            let (d_sh, rest) = rest.split_at(sh_dim);
-            // Through the SH basis and the normalisation: dv = (g − û (û·g)) / |v|.
-            d_basis[..skip].iter_mut().for_each(|v| *v = T::zero());
-            d_basis[skip..skip + sh_dim].copy_from_slice(d_sh);
-            let g = sh_basis_backward(c.sh_degree, unit, &d_basis);
-            grads.directions.push(if norm > T::zero() {
-                let dot = unit[0] * g[0] + unit[1] * g[1] + unit[2] * g[2];
-                [0, 1, 2].map(|a| (g[a] - unit[a] * dot) / norm)
-            } else {
-                [T::zero(); 3]
+        let row_len = width.max(1);
+        // Rows in parallel (each row's gradients are its own); the latent's sum over the rows
+        // stays serial, in row order.
+        let mut directions = vec![[T::zero(); 3]; n];
+        d_input
+            .par_chunks_exact(row_len)
+            .zip(&cache.units)
+            .zip(directions.par_iter_mut())
+            .for_each(|((row, &(unit, norm)), dir)| {
+                let d_sh = &row[c.feature_dim..c.feature_dim + sh_dim];
+                // Through the SH basis and the normalisation: dv = (g − û (û·g)) / |v|.
+                let mut d_basis = [T::zero(); MAX_SH_COEFFS];
+                d_basis[skip..skip + sh_dim].copy_from_slice(d_sh);
+                let g = sh_basis_backward(c.sh_degree, unit, &d_basis);
+                *dir = if norm > T::zero() {
+                    let dot = unit[0] * g[0] + unit[1] * g[1] + unit[2] * g[2];
+                    [0, 1, 2].map(|a| (g[a] - unit[a] * dot) / norm)
+                } else {
+                    [T::zero(); 3]
+                };
             });
-            let (e, l) = rest.split_at(c.extra_dim);
-            grads.features.extend_from_slice(f);
-            grads.extra.extend_from_slice(e);
-            for (acc, &g) in grads.latent.iter_mut().zip(l) {
+        // Each row's slice of the input gradient at `offset`, `len` values, gathered in row order.
+        let gather = |offset: usize, len: usize| -> Vec<T> {
+            let mut out = vec![T::zero(); n * len];
+            if len > 0 {
+                out.par_chunks_mut(len)
+                    .zip(d_input.par_chunks_exact(row_len))
+                    .for_each(|(dst, row)| dst.copy_from_slice(&row[offset..offset + len]));
+            }
+            out
+        };
+        let features = gather(0, c.feature_dim);
+        let extra = gather(c.feature_dim + sh_dim, c.extra_dim);
+        let mut latent = vec![T::zero(); c.latent_dim];
+        let lat = width - c.latent_dim;
+        for row in d_input.chunks_exact(row_len) {
+            for (acc, &g) in latent.iter_mut().zip(&row[lat..]) {
                 *acc = *acc + g;
             }
         }
+        let grads = ColourGradients {
+            params: d_params,
+            features,
+            extra,
+            latent,
+            directions,
+        };
         Ok(grads)
     }
 }
