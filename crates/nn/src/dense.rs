@@ -3,6 +3,7 @@
 //! Must never loop over the inner dimension by hand: all products go through [`crate::gemm`].
 
 use crate::{check_len, gemm, NnError, Real};
+use rayon::prelude::*;
 
 /// Shape of a dense layer applied to a batch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -31,9 +32,8 @@ pub fn dense_forward<T: Real>(
     check_len("dense y", s.batch * s.outputs, y.len())?;
     let beta = if let Some(b) = bias {
         check_len("dense bias", s.outputs, b.len())?;
-        for row in y.chunks_exact_mut(s.outputs.max(1)) {
-            row.copy_from_slice(b);
-        }
+        y.par_chunks_exact_mut(s.outputs.max(1))
+            .for_each(|row| row.copy_from_slice(b));
         T::one()
     } else {
         T::zero()
@@ -103,11 +103,17 @@ pub fn dense_backward<T: Real>(
     }
     if let Some(db) = dbias {
         check_len("dense dbias", s.outputs, db.len())?;
-        for row in dy.chunks_exact(s.outputs.max(1)) {
-            for (d, &g) in db.iter_mut().zip(row) {
-                *d = *d + g;
+        // Column groups in parallel; each column is summed over the rows in increasing order.
+        const GROUP: usize = 8;
+        let outputs = s.outputs.max(1);
+        db.par_chunks_mut(GROUP).enumerate().for_each(|(k, d)| {
+            let first = k * GROUP;
+            for row in dy.chunks_exact(outputs) {
+                for (d, &g) in d.iter_mut().zip(&row[first..]) {
+                    *d = *d + g;
+                }
             }
-        }
+        });
     }
     Ok(())
 }

@@ -47,6 +47,32 @@ fn pack_b(k: usize, n: usize, b: &[f32], rsb: usize, csb: usize, npad: usize, ou
     }
 }
 
+/// [`pack_b`] with the rows copied in parallel (for the large products).
+fn pack_b_parallel(
+    k: usize,
+    n: usize,
+    b: &[f32],
+    rsb: usize,
+    csb: usize,
+    npad: usize,
+    out: &mut Vec<f32>,
+) {
+    out.clear();
+    out.resize(k * npad, 0.0);
+    out.par_chunks_exact_mut(npad)
+        .enumerate()
+        .for_each(|(kk, row)| {
+            let row = &mut row[..n];
+            if csb == 1 {
+                row.copy_from_slice(&b[kk * rsb..kk * rsb + n]);
+            } else {
+                for (j, v) in row.iter_mut().enumerate() {
+                    *v = b[kk * rsb + j * csb];
+                }
+            }
+        });
+}
+
 /// Whether this CPU runs this kernel: it has AVX-512F, and the environment variable
 /// `E_SEM3DGS_PORTABLE_KERNELS` is not set (set, every product goes to `matrixmultiply`, with the
 /// same bits: for measuring one against the other on a CPU, as the rasterizer's kernels are).
@@ -120,15 +146,23 @@ pub(crate) fn try_sgemm(
             let (bv, rsb) = if in_place {
                 (b, rsb)
             } else {
-                pack_b(k, n, b, rsb, csb, npad, &mut packed);
+                pack_b_parallel(k, n, b, rsb, csb, npad, &mut packed);
                 (&packed[..], npad)
             };
-            c.par_chunks_mut(TASK_ROWS * rsc)
+            // A product of few rows (a weight gradient `dYᵀ·X`: m = a layer's width, k = the
+            // batch) is still split in two, so that both threads share it. Each element's sum
+            // does not depend on which rows a task holds: same bits.
+            let task_rows = if m <= TASK_ROWS {
+                m.div_ceil(2).max(1)
+            } else {
+                TASK_ROWS
+            };
+            c.par_chunks_mut(task_rows * rsc)
                 .enumerate()
                 .for_each(|(t, c_rows)| {
-                    let i0 = t * TASK_ROWS;
+                    let i0 = t * task_rows;
                     if i0 < m {
-                        let rows = TASK_ROWS.min(m - i0);
+                        let rows = task_rows.min(m - i0);
                         run(
                             rows,
                             k,

@@ -8,6 +8,7 @@
 
 use crate::{check_len, dense_backward, dense_forward, DenseShape, NnError, Real};
 use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
 
 /// Hidden-layer activation of an [`Mlp`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -153,6 +154,11 @@ impl<T: Real> Mlp<T> {
 
     /// Forward on a `(batch, input_dim)` row-major input; returns `(batch, output_dim)` and the cache.
     pub fn forward(&self, x: &[T], batch: usize) -> Result<(Vec<T>, MlpCache<T>), NnError> {
+        self.forward_owned(x.to_vec(), batch)
+    }
+
+    /// [`Mlp::forward`] on an input the cache may keep (no copy of it).
+    pub fn forward_owned(&self, x: Vec<T>, batch: usize) -> Result<(Vec<T>, MlpCache<T>), NnError> {
         check_len("mlp input", batch * self.input_dim(), x.len())?;
         check_len("mlp params", self.num_params(), self.params.len())?;
         let mut cache = MlpCache {
@@ -160,7 +166,7 @@ impl<T: Real> Mlp<T> {
             inputs: Vec::with_capacity(self.layers()),
             pre_activations: Vec::with_capacity(self.layers()),
         };
-        let mut current = x.to_vec();
+        let mut current = x;
         for l in 0..self.layers() {
             let (i_dim, o_dim) = (self.sizes[l], self.sizes[l + 1]);
             let o = self.layer_offset(l);
@@ -175,7 +181,8 @@ impl<T: Real> Mlp<T> {
             dense_forward(shape, &current, w, Some(b), &mut y)?;
             cache.inputs.push(current);
             if l + 1 < self.layers() {
-                let post: Vec<T> = y.iter().map(|&v| self.activation.apply(v)).collect();
+                // Element-wise: in parallel, with the bits of a serial loop.
+                let post: Vec<T> = y.par_iter().map(|&v| self.activation.apply(v)).collect();
                 cache.pre_activations.push(y);
                 current = post;
             } else {
@@ -197,7 +204,8 @@ impl<T: Real> Mlp<T> {
         let batch = cache.batch;
         check_len("mlp d_out", batch * self.output_dim(), d_out.len())?;
         check_len("mlp d_params", self.num_params(), d_params.len())?;
-        let mut grad = d_out.to_vec();
+        // The gradient at layer l's output: `d_out` itself for the last layer, then owned.
+        let mut owned: Option<Vec<T>> = None;
         let mut d_input = d_input;
         for l in (0..self.layers()).rev() {
             let (i_dim, o_dim) = (self.sizes[l], self.sizes[l + 1]);
@@ -209,32 +217,36 @@ impl<T: Real> Mlp<T> {
                 outputs: o_dim,
             };
             let (dw, db) = d_params[o..o + o_dim * (i_dim + 1)].split_at_mut(o_dim * i_dim);
-            let need_dx = l > 0 || d_input.is_some();
-            let mut dx = if need_dx {
-                vec![T::zero(); batch * i_dim]
-            } else {
-                Vec::new()
-            };
+            let grad = owned.as_deref().unwrap_or(d_out);
+            if l == 0 {
+                // The first layer's input gradient goes straight to `d_input`, if asked for.
+                let dx = match d_input.as_deref_mut() {
+                    Some(di) => {
+                        check_len("mlp d_input", batch * i_dim, di.len())?;
+                        di.par_iter_mut().for_each(|v| *v = T::zero());
+                        Some(di)
+                    }
+                    None => None,
+                };
+                dense_backward(shape, &cache.inputs[l], w, grad, dx, Some(dw), Some(db))?;
+                continue;
+            }
+            let mut dx = vec![T::zero(); batch * i_dim];
             dense_backward(
                 shape,
                 &cache.inputs[l],
                 w,
-                &grad,
-                if need_dx { Some(&mut dx) } else { None },
+                grad,
+                Some(&mut dx),
                 Some(dw),
                 Some(db),
             )?;
-            if l > 0 {
-                // Through the activation of layer l − 1.
-                let pre = &cache.pre_activations[l - 1];
-                for (g, &z) in dx.iter_mut().zip(pre) {
-                    *g = *g * self.activation.derivative(z);
-                }
-                grad = dx;
-            } else if let Some(di) = d_input.as_deref_mut() {
-                check_len("mlp d_input", batch * i_dim, di.len())?;
-                di.copy_from_slice(&dx);
-            }
+            // Through the activation of layer l − 1 (element-wise, in parallel).
+            let pre = &cache.pre_activations[l - 1];
+            dx.par_iter_mut()
+                .zip(pre)
+                .for_each(|(g, &z)| *g = *g * self.activation.derivative(z));
+            owned = Some(dx);
         }
         Ok(())
     }

@@ -177,7 +177,7 @@ impl<T: Real> ColourNet<T> {
                 e.copy_from_slice(&x.extra[i * c.extra_dim..(i + 1) * c.extra_dim]);
                 l.copy_from_slice(x.latent);
             });
-        let (logits, mlp_cache) = self.mlp.forward(&input, n)?;
+        let (logits, mlp_cache) = self.mlp.forward_owned(input, n)?;
         let rgb: Vec<T> = logits
             .par_iter()
             .map(|&z| T::one() / (T::one() + (-z).exp()))
