@@ -100,9 +100,10 @@ pub fn exposure_loss<T: Real>(
     let w = ssim_weight;
     let photometric = (T::one() - w) * l1_value + w * (T::one() - ssim_value);
     let mut d_mean = vec![T::zero(); channels.max(3) * hw];
-    for (o, (&a, &b)) in d_mean.iter_mut().zip(d_l1.iter().zip(&d_ssim)) {
-        *o = (T::one() - w) * a - w * b;
-    }
+    d_mean
+        .par_iter_mut()
+        .zip(d_l1.par_iter().zip(&d_ssim))
+        .for_each(|(o, (&a, &b))| *o = (T::one() - w) * a - w * b);
     if grey {
         d_mean = crate::loss::image::luminance3_backward(&d_mean, hw);
     }
@@ -110,11 +111,14 @@ pub fn exposure_loss<T: Real>(
         vec![d_mean]
     } else {
         let scale = T::one() / T::of(renders.len() as f64);
-        let d: Vec<T> = d_mean.iter().map(|&v| v * scale).collect();
-        vec![d; renders.len()]
+        let d: Vec<T> = d_mean.par_iter().map(|&v| v * scale).collect();
+        (0..renders.len())
+            .into_par_iter()
+            .map(|_| d.clone())
+            .collect()
     };
-    // d(r·M)/dr = M on the three colour planes.
-    for (s, d) in d_renders.iter_mut().enumerate() {
+    // d(r·M)/dr = M on the three colour planes (one task per render).
+    d_renders.par_iter_mut().enumerate().for_each(|(s, d)| {
         if let Some(m) = modulation.get(s).and_then(Option::as_ref) {
             for plane in d[..3 * hw].chunks_mut(hw) {
                 for (v, &g) in plane.iter_mut().zip(m) {
@@ -122,7 +126,7 @@ pub fn exposure_loss<T: Real>(
                 }
             }
         }
-    }
+    });
     let mut event_value = T::zero();
     if let Some(events) = events {
         let last = |s: usize| {
@@ -216,19 +220,17 @@ pub fn mean_image<T: Real>(images: &[&[T]], len: usize) -> Vec<T> {
     if let [image] = images {
         return image[..len].to_vec();
     }
-    let mut sum = vec![T::zero(); len];
-    for image in images {
-        for (x, &y) in sum.iter_mut().zip(image.iter()) {
-            *x = *x + y;
-        }
-    }
+    // Pixel by pixel, the images summed in order: parallel over pixels, the bits of a serial loop.
     let scale = T::one() / T::of(images.len() as f64);
-    sum.iter().map(|&v| v * scale).collect()
+    (0..len)
+        .into_par_iter()
+        .map(|i| images.iter().fold(T::zero(), |x, image| x + image[i]) * scale)
+        .collect()
 }
 
 /// `dst += weight · src`, element by element (a loss's weighted cotangent into an image's).
 pub fn add_scaled<T: Real>(dst: &mut [T], src: &[T], weight: T) {
-    for (o, &g) in dst.iter_mut().zip(src) {
-        *o = *o + weight * g;
-    }
+    dst.par_iter_mut()
+        .zip(src)
+        .for_each(|(o, &g)| *o = *o + weight * g);
 }
