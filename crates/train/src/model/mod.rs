@@ -138,6 +138,9 @@ pub struct ExposurePasses<'a> {
     pub sharing: Option<TileSharing>,
 }
 
+/// One re-posed pass's backward: the reference's internal cotangents and ∂L/∂bones.
+type ReposedBackward = (ReposeCotangents<f32>, Vec<Affine<f32>>);
+
 /// A pass posed but not yet rendered.
 struct PosedPass<'a> {
     view_centre: [f32; 3],
@@ -575,7 +578,7 @@ impl Model {
         let params = self.params();
         // The re-posed passes' backwards are independent (one task each); their cotangents are
         // summed in pass order, as one after the other would.
-        let reposed: Vec<Option<(ReposeCotangents<f32>, Vec<Affine<f32>>)>> = passes
+        let reposed: Vec<Option<ReposedBackward>> = passes
             .par_iter()
             .zip(posed)
             .map(|(pass, grads)| {
