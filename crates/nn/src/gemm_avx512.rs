@@ -36,14 +36,7 @@ fn pack_b(k: usize, n: usize, b: &[f32], rsb: usize, csb: usize, npad: usize, ou
     out.clear();
     out.resize(k * npad, 0.0);
     for (kk, row) in out.chunks_exact_mut(npad).enumerate() {
-        let row = &mut row[..n];
-        if csb == 1 {
-            row.copy_from_slice(&b[kk * rsb..kk * rsb + n]);
-        } else {
-            for (j, v) in row.iter_mut().enumerate() {
-                *v = b[kk * rsb + j * csb];
-            }
-        }
+        pack_row(&mut row[..n], &b[kk * rsb..], csb);
     }
 }
 
@@ -61,16 +54,18 @@ fn pack_b_parallel(
     out.resize(k * npad, 0.0);
     out.par_chunks_exact_mut(npad)
         .enumerate()
-        .for_each(|(kk, row)| {
-            let row = &mut row[..n];
-            if csb == 1 {
-                row.copy_from_slice(&b[kk * rsb..kk * rsb + n]);
-            } else {
-                for (j, v) in row.iter_mut().enumerate() {
-                    *v = b[kk * rsb + j * csb];
-                }
-            }
-        });
+        .for_each(|(kk, row)| pack_row(&mut row[..n], &b[kk * rsb..], csb));
+}
+
+/// One row of op(B): `row[j] = b[j · csb]`.
+fn pack_row(row: &mut [f32], b: &[f32], csb: usize) {
+    if csb == 1 {
+        row.copy_from_slice(&b[..row.len()]);
+    } else {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = b[j * csb];
+        }
+    }
 }
 
 /// Whether this CPU runs this kernel: it has AVX-512F, and the environment variable

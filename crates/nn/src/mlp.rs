@@ -219,11 +219,11 @@ impl<T: Real> Mlp<T> {
             let (dw, db) = d_params[o..o + o_dim * (i_dim + 1)].split_at_mut(o_dim * i_dim);
             let grad = owned.as_deref().unwrap_or(d_out);
             if l == 0 {
-                // The first layer's input gradient goes straight to `d_input`, if asked for.
+                // The first layer's input gradient goes straight to `d_input`, if asked for
+                // (`dense_backward` overwrites it).
                 let dx = match d_input.as_deref_mut() {
                     Some(di) => {
                         check_len("mlp d_input", batch * i_dim, di.len())?;
-                        di.par_iter_mut().for_each(|v| *v = T::zero());
                         Some(di)
                     }
                     None => None,

@@ -260,14 +260,13 @@ impl<T: Real> ColourNet<T> {
                 *acc = *acc + g;
             }
         }
-        let grads = ColourGradients {
+        Ok(ColourGradients {
             params: d_params,
             features,
             extra,
             latent,
             directions,
-        };
-        Ok(grads)
+        })
     }
 }
 
