@@ -317,6 +317,14 @@ training_options! {
     /// 25.89 / 25.27 dB; `docs/notes/benchmarks-history.md`, "Event-generation loss, `quick`
     /// preset").
     event_weight: f32 = 2.0,
+    /// The event weight's decay: from `event_weight_decay_from` to the last step it falls
+    /// log-linearly to this fraction of `event_weight` (1, the default: a constant weight). Early
+    /// on the events lead the renders towards sharpness and drive the person's densification;
+    /// their optimum at the end is blurrier than the photometric term's (the loss audit of
+    /// `docs/notes/2026-12-02-event-weight-decay.md`).
+    event_weight_final_fraction: f32 = 1.0,
+    /// The step where the event weight starts to decay (see `event_weight_final_fraction`).
+    event_weight_decay_from: usize = 0,
     /// Contrast threshold C of the camera (log-intensity units): 0.2, the benchmark simulator's;
     /// `cargo xtask reconstruct` takes the one the scene's generator recorded
     /// (`generator.config.event_threshold` in scene.json) unless this option or the config file

@@ -79,6 +79,9 @@ impl TrainConfig {
     /// The event loss: weight, thresholds, the bound penalty's shape, ε, and its pairs.
     fn validate_events(&self) -> Result<(), TrainError> {
         non_negative("event_weight", self.event_weight)?;
+        if !(self.event_weight_final_fraction > 0.0 && self.event_weight_final_fraction <= 1.0) {
+            return bad("event_weight_final_fraction", "must be in (0, 1]");
+        }
         if !(self.event_threshold > 0.0 && self.event_threshold.is_finite()) {
             return bad("event_threshold", "must be a finite number > 0");
         }

@@ -23,6 +23,7 @@ use crate::model::{
     ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
 };
 use crate::pose::posing::ModelGradients;
+use crate::schedule::correction_rate_scale;
 use crate::TrainError;
 use rasterize_cpu::TileSharing;
 use smpl_deform::math::Affine;
@@ -30,9 +31,18 @@ use std::time::Instant;
 
 /// The configuration step `step` trains with: `config` itself, except during the EDI warm-up
 /// (`step < edi_warmup`), which renders once at mid exposure with no event term (its target is
-/// the frame's EDI deblurring, [`TrainingData::target_image`]).
+/// the frame's EDI deblurring, [`TrainingData::target_image`]), and the event weight, which
+/// decays from `event_weight_decay_from` on when `event_weight_final_fraction` is below 1.
 fn step_config(config: &TrainConfig, step: usize) -> TrainConfig {
     let mut config = config.clone();
+    if config.event_weight_final_fraction < 1.0 {
+        config.event_weight *= correction_rate_scale(
+            config.event_weight_final_fraction,
+            config.event_weight_decay_from,
+            step,
+            config.steps,
+        );
+    }
     if step < config.edi_warmup {
         config.blur_model = BlurModel::None;
         config.event_loss = false;
@@ -689,4 +699,24 @@ fn next_frame<'a>(
         pass,
         terms,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Preset;
+
+    #[test]
+    fn the_event_weight_decays_from_its_step_to_its_final_fraction() {
+        let mut config = TrainConfig::preset(Preset::Quick);
+        let w = config.event_weight;
+        assert_eq!(step_config(&config, config.steps).event_weight, w);
+        config.event_weight_final_fraction = 0.1;
+        config.event_weight_decay_from = 600;
+        assert_eq!(step_config(&config, 300).event_weight, w);
+        let mid = step_config(&config, 900).event_weight;
+        assert!((mid - w * 0.1f32.sqrt()).abs() < 1e-5 * w, "{mid}");
+        let last = step_config(&config, config.steps).event_weight;
+        assert!((last - 0.1 * w).abs() < 1e-5 * w, "{last}");
+    }
 }
