@@ -1,5 +1,5 @@
 //! Learning-rate schedules of the optimisation: the 3DGS position-rate decay and the pose
-//! corrections' rates (density control's cadence is `crate::density`'s).
+//! corrections' rates and the event weight (density control's cadence is `crate::density`'s).
 
 /// The 3DGS position-rate schedule: log-linear from `lr0` to `lr0 · final_fraction` over `steps`.
 pub fn exponential_rate(lr0: f32, final_fraction: f32, step: usize, steps: usize) -> f32 {
@@ -18,9 +18,35 @@ pub fn correction_rate_scale(final_fraction: f32, from: usize, step: usize, step
     )
 }
 
+/// The event weight at `step`: `event_weight`, decaying log-linearly from
+/// `event_weight_decay_from` to `event_weight_final_fraction` of it at the last step (exactly
+/// `event_weight` at every step when the fraction is 1).
+pub fn event_weight_at(config: &crate::config::TrainConfig, step: usize) -> f32 {
+    config.event_weight
+        * correction_rate_scale(
+            config.event_weight_final_fraction,
+            config.event_weight_decay_from,
+            step,
+            config.steps,
+        )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::{Preset, TrainConfig};
+
+    #[test]
+    fn the_event_weight_decays_from_its_step_to_its_final_fraction() {
+        let mut config = TrainConfig::preset(Preset::Quick);
+        let w = config.event_weight;
+        assert_eq!(event_weight_at(&config, config.steps), w);
+        config.event_weight_final_fraction = 0.1;
+        config.event_weight_decay_from = 600;
+        assert_eq!(event_weight_at(&config, 300), w);
+        let last = event_weight_at(&config, config.steps);
+        assert!((last - 0.1 * w).abs() < 1e-5 * w, "{last}");
+    }
 
     #[test]
     fn the_position_rate_decays_log_linearly_to_its_final_fraction() {

@@ -23,7 +23,7 @@ use crate::model::{
     ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
 };
 use crate::pose::posing::ModelGradients;
-use crate::schedule::correction_rate_scale;
+use crate::schedule::event_weight_at;
 use crate::TrainError;
 use rasterize_cpu::TileSharing;
 use smpl_deform::math::Affine;
@@ -35,14 +35,7 @@ use std::time::Instant;
 /// decays from `event_weight_decay_from` on when `event_weight_final_fraction` is below 1.
 fn step_config(config: &TrainConfig, step: usize) -> TrainConfig {
     let mut config = config.clone();
-    if config.event_weight_final_fraction < 1.0 {
-        config.event_weight *= correction_rate_scale(
-            config.event_weight_final_fraction,
-            config.event_weight_decay_from,
-            step,
-            config.steps,
-        );
-    }
+    config.event_weight = event_weight_at(&config, step);
     if step < config.edi_warmup {
         config.blur_model = BlurModel::None;
         config.event_loss = false;
@@ -699,24 +692,4 @@ fn next_frame<'a>(
         pass,
         terms,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::config::Preset;
-
-    #[test]
-    fn the_event_weight_decays_from_its_step_to_its_final_fraction() {
-        let mut config = TrainConfig::preset(Preset::Quick);
-        let w = config.event_weight;
-        assert_eq!(step_config(&config, config.steps).event_weight, w);
-        config.event_weight_final_fraction = 0.1;
-        config.event_weight_decay_from = 600;
-        assert_eq!(step_config(&config, 300).event_weight, w);
-        let mid = step_config(&config, 900).event_weight;
-        assert!((mid - w * 0.1f32.sqrt()).abs() < 1e-5 * w, "{mid}");
-        let last = step_config(&config, config.steps).event_weight;
-        assert!((last - 0.1 * w).abs() < 1e-5 * w, "{last}");
-    }
 }
