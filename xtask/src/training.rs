@@ -189,3 +189,59 @@ pub fn mean_times(recent: &[StepReport]) -> Vec<(&'static str, f64)> {
         ("total", sum(|r| r.times.total())),
     ]
 }
+
+/// Replaces every training frame's sub-exposure poses by the generator's own poses at those times
+/// (`reconstruct --oracle-sub-frame-poses`): a synthetic benchmark's diagnostic upper bound on what
+/// a better in-exposure motion would give. One person only; refused, naming the field, when the
+/// scene records no generator config or the exposure's poses were not prepared.
+pub fn use_oracle_sub_frame_poses(
+    ctx: &mut TrainingData,
+    data: &train::data::Dataset,
+    subframes: usize,
+) -> Result<()> {
+    let scene = data.dir.join("scene.json");
+    let config = data
+        .scene
+        .generator
+        .as_ref()
+        .and_then(|g| g.get("config"))
+        .with_context(|| {
+            format!(
+                "{}: generator.config is absent (--oracle-sub-frame-poses needs a synthetic benchmark)",
+                scene.display()
+            )
+        })?;
+    let cfg: synth::SynthConfig = serde_json::from_value(config.clone())
+        .with_context(|| format!("{}: generator.config", scene.display()))?;
+    anyhow::ensure!(
+        cfg.people <= 1 && ctx.exposure_poses.len() == ctx.frames.len(),
+        "--oracle-sub-frame-poses takes one person and the exposure model (blur_model = exposure)"
+    );
+    let model = smpl_deform::BodyRef::parse(&cfg.body)
+        .and_then(|body| body.load())
+        .with_context(|| format!("{}: generator.config.body", scene.display()))?;
+    let body = synth::body::DressedBody::new(model, vec![0.0; 10])?;
+    let motion = synth::generate::benchmark_motion(&cfg, &body)?;
+    let training = data
+        .frames
+        .iter()
+        .filter(|f| f.split == scene::Split::Train);
+    for (slot, frame) in training.enumerate() {
+        let times =
+            train::pose::exposure::subframe_times(frame.time_s, frame.exposure_s, subframes);
+        ctx.exposure_poses[slot] = times
+            .iter()
+            .map(|&t| {
+                let (pose, transl) = motion.at(t);
+                let params = smpl_deform::SmplParams {
+                    pose,
+                    betas: vec![],
+                    transl,
+                };
+                ctx.body.given(&params)
+            })
+            .collect::<Result<_, _>>()?;
+    }
+    println!("sub-exposure poses: the generator's own (a diagnostic oracle)");
+    Ok(())
+}

@@ -326,6 +326,7 @@ pub fn run(args: Args) -> Result<()> {
             },
             resume: false,
             stop_after: None,
+            oracle_sub_frame_poses: false,
         };
         let outcome = crate::commands::reconstruct::run(run_args).and_then(|()| {
             let path = run_out.join("metrics.json");

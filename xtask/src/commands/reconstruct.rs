@@ -85,6 +85,11 @@ pub struct Args {
     /// Stop after this many steps of this invocation (the run can be resumed later).
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
+    /// A synthetic benchmark's diagnostic: train with the generator's own sub-exposure poses
+    /// instead of the ones interpolated from the frames' (an upper bound on a better in-exposure
+    /// motion; the test frames keep their given poses).
+    #[arg(long, hide = true)]
+    pub oracle_sub_frame_poses: bool,
 }
 
 /// Keeps the log lines of steps before `step` and returns their summed wall time.
@@ -244,6 +249,9 @@ pub fn run(args: Args) -> Result<()> {
     };
     let config = trainer.config().clone();
     prepare_training_data(&mut ctx, &data, &config)?;
+    if args.oracle_sub_frame_poses {
+        crate::training::use_oracle_sub_frame_poses(&mut ctx, &data, config.subframes)?;
+    }
     let config_path = out.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)
         .with_context(|| format!("writing {}", config_path.display()))?;
