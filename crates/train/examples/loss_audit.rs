@@ -278,6 +278,7 @@ fn audit(
             log_eps: config.event_log_eps,
             all_pairs: false,
             pool: 1,
+            reach: 0,
             modulation: blurred.exposure_modulation(slot)?,
         };
         let shape = ImageShape {

@@ -68,6 +68,7 @@ fn value(
             log_eps: 1e-3,
             all_pairs,
             pool: 1,
+            reach: 0,
             modulation,
         }),
         PLANES,
@@ -101,6 +102,7 @@ fn clear_of_l1_kinks(
         log_eps: 1e-3,
         all_pairs,
         pool: 1,
+        reach: 0,
         modulation,
     };
     let out = exposure_loss(&renders, observed, shape, 0.2, Some(events), PLANES, grey);

@@ -370,6 +370,12 @@ training_options! {
     event_residual_cap_huber: bool = false,
     /// With the squared penalty between sub-exposure renders: block side K of its K×K mean (1: per pixel).
     event_pool: u32 = 1,
+    /// Between sub-exposure renders: a pixel whose events sum to one sign is held through the
+    /// pixel within this many pixels of it whose change meets its bound best (the largest change
+    /// for a positive count, the smallest for a negative one), so an edge the model places a
+    /// fraction of a pixel off is not charged at the pixel that fired (`train::loss::event::
+    /// pair_event_loss_reach`); pixels without events stay per pixel. 0: per pixel.
+    event_reach: u32 = 0,
     /// A pixel that fired events of both polarities within an interval says nothing about its net
     /// change there: on a sensor with a refractory period, texture crossing the pixel both ways
     /// drops crossings of either sign, so the net count's sign and size are arbitrary. On: such a

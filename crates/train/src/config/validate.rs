@@ -112,6 +112,16 @@ impl TrainConfig {
                  `event_penalty = squared` and `event_pairs = exposure`",
             );
         }
+        if self.event_reach > 3 {
+            return bad("event_reach", "must be 0 to 3 pixels");
+        }
+        if self.event_reach > 0 && self.event_pool > 1 {
+            return bad(
+                "event_reach",
+                "holds each pixel through its neighbourhood; `event_pool` averages blocks: \
+                 one of them at a time",
+            );
+        }
         if !(self.event_log_eps > 0.0 && self.event_log_eps.is_finite()) {
             return bad("event_log_eps", "must be a finite number > 0");
         }

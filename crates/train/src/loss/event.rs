@@ -165,30 +165,14 @@ pub fn pair_event_loss_with<T: Real>(
     let n = expected.len();
     let (ya, yb) = (clamped_luma(first, n), clamped_luma(second, n));
     let inv = T::one() / T::of(n.max(1) as f64);
-    let two = T::of(2.0);
-    // τ² rounded once from f64 (the truncated form's bits), and τ for the Huber form's pull.
-    let cap = penalty.cap().map(|tau| (T::of(tau * tau), T::of(tau)));
-    let huber = penalty.huber();
+    let (cap, huber) = (rounded_cap(penalty), penalty.huber());
     let mut loss = T::zero();
     let mut d_change = vec![T::zero(); n];
     for i in 0..n {
         let change = (yb[i] + log_eps).ln() - (ya[i] + log_eps).ln();
         let (r, w) = event_residual(change, expected[i], penalty);
-        let g = match cap {
-            Some((cap, tau)) if r * r > cap && huber => {
-                let pull = if r > T::zero() { tau } else { -tau };
-                loss = loss + w * (two * pull * r - cap) * inv;
-                two * w * pull * inv
-            }
-            Some((cap, _)) if r * r > cap => {
-                loss = loss + w * cap * inv;
-                T::zero()
-            }
-            _ => {
-                loss = loss + w * r * r * inv;
-                two * w * r * inv
-            }
-        };
+        let (cost, g) = capped_cost(r, w, cap, huber, inv);
+        loss = loss + cost;
         d_change[i] = g;
     }
     let (d_first, d_second) = renders_backward(&d_change, &ya, &yb, log_eps);
@@ -197,6 +181,104 @@ pub fn pair_event_loss_with<T: Real>(
         d_first,
         d_second,
     }
+}
+
+/// (τ², τ) of a capped penalty in `T`: τ² rounded once from f64 (the truncated form's bits), τ
+/// for the Huber form's pull.
+fn rounded_cap<T: Real>(penalty: EventPenalty) -> Option<(T, T)> {
+    penalty.cap().map(|tau| (T::of(tau * tau), T::of(tau)))
+}
+
+/// One pixel's cost w·r² over `inv` = 1/N and its derivative in the change, capped at w·τ² (flat
+/// beyond, or linear in the Huber form) when `cap` holds (τ², τ).
+fn capped_cost<T: Real>(r: T, w: T, cap: Option<(T, T)>, huber: bool, inv: T) -> (T, T) {
+    let two = T::of(2.0);
+    match cap {
+        Some((cap, tau)) if r * r > cap && huber => {
+            let pull = if r > T::zero() { tau } else { -tau };
+            (w * (two * pull * r - cap) * inv, two * w * pull * inv)
+        }
+        Some((cap, _)) if r * r > cap => (w * cap * inv, T::zero()),
+        _ => (w * r * r * inv, two * w * r * inv),
+    }
+}
+
+/// [`pair_event_loss_with`] with a spatial reach: a pixel whose events sum to one sign is held
+/// through the pixel within `reach` pixels of it (Chebyshev distance, on an image `width` pixels
+/// wide) whose change meets its bound best — the largest change for a positive count, the
+/// smallest for a negative one (the first in row order on a tie) — and its gradient goes there.
+/// A sharp edge the model places a fraction of a pixel off then answers the events it caused from
+/// the pixel it moved into, where the per-pixel term charged the pixel that fired for a change it
+/// did not see; a smooth change is charged as before, as its neighbourhood holds no larger change.
+/// Pixels without events (the dead zone) and unconstrained ones stay per pixel. `reach = 0` is
+/// [`pair_event_loss_with`], bit for bit.
+pub fn pair_event_loss_reach<T: Real>(
+    first: &[T],
+    second: &[T],
+    expected: &[T],
+    log_eps: T,
+    penalty: EventPenalty,
+    (width, reach): (usize, usize),
+) -> PairEventLoss<T> {
+    if reach == 0 || width == 0 {
+        return pair_event_loss_with(first, second, expected, log_eps, penalty);
+    }
+    let n = expected.len();
+    let height = n / width;
+    let (ya, yb) = (clamped_luma(first, n), clamped_luma(second, n));
+    let change: Vec<T> = (0..n)
+        .map(|i| (yb[i] + log_eps).ln() - (ya[i] + log_eps).ln())
+        .collect();
+    let inv = T::one() / T::of(n.max(1) as f64);
+    let (cap, huber) = (rounded_cap(penalty), penalty.huber());
+    let zero = T::zero();
+    let mut loss = zero;
+    let mut d_change = vec![zero; n];
+    for i in 0..n {
+        let e = expected[i];
+        let at = if e > zero || e < zero {
+            best_in_reach(&change, i, (width, height), reach, e > zero)
+        } else {
+            i
+        };
+        let (r, w) = event_residual(change[at], e, penalty);
+        let (cost, g) = capped_cost(r, w, cap, huber, inv);
+        loss = loss + cost;
+        d_change[at] = d_change[at] + g;
+    }
+    let (d_first, d_second) = renders_backward(&d_change, &ya, &yb, log_eps);
+    PairEventLoss {
+        loss,
+        d_first,
+        d_second,
+    }
+}
+
+/// The pixel within `reach` (Chebyshev) of pixel `i` of a `(width, height)` image with the
+/// largest `change` (`largest`) or the smallest, the first in row order on a tie.
+fn best_in_reach<T: Real>(
+    change: &[T],
+    i: usize,
+    (width, height): (usize, usize),
+    reach: usize,
+    largest: bool,
+) -> usize {
+    let (x, y) = (i % width, i / width);
+    let mut best = i;
+    for qy in y.saturating_sub(reach)..(y + reach + 1).min(height) {
+        for qx in x.saturating_sub(reach)..(x + reach + 1).min(width) {
+            let q = qy * width + qx;
+            let better = if largest {
+                change[q] > change[best]
+            } else {
+                change[q] < change[best]
+            };
+            if better || (change[q] == change[best] && q < best) {
+                best = q;
+            }
+        }
+    }
+    best
 }
 
 /// The Rec. 709 luma of a planar (3, H, W) render of `n` pixels, clamped at 0 (as the simulator
@@ -454,5 +536,51 @@ mod tests {
                 assert_eq!(free.d_second[2 * c + 1], held.d_second[2 * c + 1]);
             }
         }
+    }
+
+    #[test]
+    fn a_count_is_met_by_the_neighbour_an_edge_moved_into() {
+        let penalty = EventPenalty::Bound {
+            c_pos: 0.2,
+            c_neg: 0.2,
+            margin: 1.0,
+            dead_zone: 1.0,
+            overshoot: 0.0,
+            cap: f64::INFINITY,
+            huber: false,
+        };
+        // A row of three grey pixels: the middle one fired three positive events (its change is
+        // more than 0.4), the model brightens its right neighbour by 0.5 instead.
+        let eps = 1e-3f64;
+        let planes = |y: [f64; 3]| [y, y, y].concat();
+        let before = planes([0.2; 3]);
+        let brighter = (0.2 + eps) * 0.5f64.exp() - eps;
+        let after = planes([0.2, 0.2, brighter]);
+        let expected = [0.0, 0.6, 0.0];
+        let per_pixel = pair_event_loss_with(&before, &after, &expected, eps, penalty);
+        let held = pair_event_loss_reach(&before, &after, &expected, eps, penalty, (3, 1));
+        // Per pixel: the middle pixel falls 0.4 short, the right one overshoots its dead zone.
+        let dead = 0.5 - 0.2;
+        assert!((per_pixel.loss - (0.16 + dead * dead) / 3.0).abs() < 1e-12);
+        // With reach 1 the middle pixel's bound is met by its neighbour; the neighbour's own
+        // silence still costs, and the middle pixel gets no gradient.
+        assert!(
+            (held.loss - dead * dead / 3.0).abs() < 1e-12,
+            "{}",
+            held.loss
+        );
+        assert!((0..3).all(|c| held.d_second[3 * c + 1] == 0.0));
+        // Reach 0 is the per-pixel term, bit for bit.
+        let zero = pair_event_loss_reach(&before, &after, &expected, eps, penalty, (3, 0));
+        assert_eq!(zero.loss, per_pixel.loss);
+        assert_eq!(zero.d_second, per_pixel.d_second);
+        // A negative count looks for the smallest change: the brightening does not meet it.
+        let negative = [0.0, -0.6, 0.0];
+        let neg = pair_event_loss_reach(&before, &after, &negative, eps, penalty, (3, 1));
+        assert!(
+            (neg.loss - (0.16 + dead * dead) / 3.0).abs() < 1e-12,
+            "{}",
+            neg.loss
+        );
     }
 }

@@ -14,7 +14,7 @@
 //! one render, so the single-render model is the S = 1 case bit for bit); each event pair —
 //! consecutive renders, or every pair — adds its weighted cotangents to its two renders.
 
-use crate::loss::event::{pair_event_loss_pooled, pair_event_loss_with, EventPenalty};
+use crate::loss::event::{pair_event_loss_pooled, pair_event_loss_reach, EventPenalty};
 use crate::loss::image::{l1, ssim, ImageShape};
 use nn::Real;
 use rayon::prelude::*;
@@ -37,6 +37,9 @@ pub struct ExposureEvents<'a, T> {
     /// Side of the pixel blocks the squared penalty pools (`train::loss::event::
     /// pair_event_loss_pooled`); 1: per pixel, with any penalty.
     pub pool: usize,
+    /// The spatial reach of a count, in pixels (`train::loss::event::pair_event_loss_reach`; 0:
+    /// per pixel). Ignored when `pool` > 1.
+    pub reach: usize,
     /// Per render s, the events' modulation M_s of its slice of the exposure (H × W: the mean over
     /// the slice of exp(E(t_s → t))), or `None` (M_s = 1, e.g. a slice no events file covers);
     /// empty: no modulation. The prediction is then the mean of (r_s + ε)·M_s − ε, every channel
@@ -154,12 +157,13 @@ pub fn exposure_loss<T: Real>(
                         events.pool,
                     )
                 } else {
-                    pair_event_loss_with(
+                    pair_event_loss_reach(
                         renders[s],
                         renders[s2],
                         &expected,
                         events.log_eps,
                         events.penalty,
+                        (shape.width, events.reach),
                     )
                 };
                 Some((s, s2, el))

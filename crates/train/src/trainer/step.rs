@@ -614,6 +614,7 @@ fn frame_losses(
             log_eps: config.event_log_eps,
             all_pairs: config.exposure_pairs == ExposurePairs::All,
             pool: config.event_pool as usize,
+            reach: config.event_reach as usize,
             modulation: if modulated {
                 data.exposure_modulation(slot)?
             } else {
