@@ -483,6 +483,16 @@ training_options! {
     /// λ_s of the camera-correction prior: weight of ‖ξ_k − ξ_{k±1}‖² between consecutive training
     /// frames' twists.
     camera_correction_smooth_weight: f32 = 1e-2,
+    /// λ of a prior on each training frame's mid-exposure camera twist in the tracker's units,
+    /// λ·(‖ω‖²/σ_ω² + ‖v‖²/σ_v²) with σ_ω = `camera_tracker_error_deg` and σ_v =
+    /// `camera_tracker_error_cm` (`train::pose::camera_correction::tracker_prior_terms`): a
+    /// correction the images cannot tell from another is settled in the proportion the tracker
+    /// errs in. 0 (the default): no such prior.
+    camera_tracker_prior_weight: f32 = 0.0,
+    /// σ_ω of the tracker prior: the tracker's typical rotation error (degrees).
+    camera_tracker_error_deg: f32 = 0.5,
+    /// σ_v of the tracker prior: the tracker's typical camera-centre error (centimetres).
+    camera_tracker_error_cm: f32 = 1.0,
     /// Whether camera correction also learns each exposure's change of the camera (with
     /// `blur_model = exposure`); off: the sub-exposure cameras keep the interpolated path and only
     /// move with the mid-exposure twist (+0.10 dB full frame with estimated cameras on

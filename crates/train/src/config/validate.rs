@@ -182,6 +182,10 @@ impl TrainConfig {
                 "camera_correction_smooth_weight",
                 self.camera_correction_smooth_weight,
             ),
+            (
+                "camera_tracker_prior_weight",
+                self.camera_tracker_prior_weight,
+            ),
             ("skinning_weight", self.skinning_weight),
             ("aiap_position_weight", self.aiap_position_weight),
             ("aiap_covariance_weight", self.aiap_covariance_weight),
@@ -189,6 +193,14 @@ impl TrainConfig {
         for (name, v) in rates {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(name, "must be a finite non-negative number");
+            }
+        }
+        for (name, v) in [
+            ("camera_tracker_error_deg", self.camera_tracker_error_deg),
+            ("camera_tracker_error_cm", self.camera_tracker_error_cm),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(name, "must be a finite positive number");
             }
         }
         Ok(())

@@ -5,8 +5,8 @@
 use crate::config::TrainConfig;
 use crate::model::{corrected_camera, FramePass, Model, PassCamera, PosedGradients};
 use crate::pose::camera_correction::{
-    correction_backward, smoothing_weights, twist_at, twist_backward, CAMERA_CORRECTION_VALUES,
-    TWIST_VALUES,
+    correction_backward, smoothing_weights, tracker_prior_terms, twist_at, twist_backward,
+    CAMERA_CORRECTION_VALUES, TWIST_VALUES,
 };
 use crate::pose::correction::{exposure_offset, knot_prior_terms, CorrectionPrior};
 use crate::TrainError;
@@ -159,9 +159,18 @@ impl CameraGradient {
                 *r += v as f32;
             }
         }
+        let tracker = (
+            config.camera_tracker_prior_weight,
+            config.camera_tracker_error_deg.to_radians(),
+            config.camera_tracker_error_cm / 100.0,
+        );
         for &slot in &slots {
             let row = &mut values[slot * n..(slot + 1) * n];
             prior_value += knot_prior_terms(&model.camera_corrections, n, slot, prior, row);
+            if tracker.0 > 0.0 {
+                let own = &model.camera_corrections[slot * n..(slot + 1) * n];
+                prior_value += tracker_prior_terms(own, tracker, row);
+            }
         }
         if !config.camera_correction_change {
             for row in values.chunks_mut(n) {
