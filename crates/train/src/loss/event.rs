@@ -236,7 +236,7 @@ pub fn pair_event_loss_reach<T: Real>(
     let mut d_change = vec![zero; n];
     for i in 0..n {
         let e = expected[i];
-        let at = if e > zero || e < zero {
+        let at = if !e.is_nan() && e != zero {
             best_in_reach(&change, i, (width, height), reach, e > zero)
         } else {
             i
