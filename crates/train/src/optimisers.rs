@@ -60,7 +60,8 @@ fn network_rate(config: &TrainConfig, group: &str) -> f32 {
 
 /// `adam` with the pose corrections' rates: `lr_pose_correction` for the body joints,
 /// `lr_pose_correction_root` for the root's orientation and translation, 0 for the change over the
-/// exposure when `pose_correction_change` is off.
+/// exposure when `pose_correction_change` is off and for the mid-exposure part when
+/// `pose_correction_mid` is off.
 fn correction_adam(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<f32> {
     let mut rates = vec![f64::from(config.lr_pose_correction); CORRECTION_VALUES];
     for k in root_indices() {
@@ -68,6 +69,9 @@ fn correction_adam(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<
     }
     if !config.pose_correction_change {
         rates[POSE_VALUES..].fill(0.0);
+    }
+    if !config.pose_correction_mid {
+        rates[..POSE_VALUES].fill(0.0);
     }
     // One rate per column of the rows (`CORRECTION_VALUES`): this cannot fail.
     adam.with_column_rates(rates)

@@ -273,6 +273,38 @@ fn the_change_over_the_exposure_is_learned_only_when_asked() {
 }
 
 #[test]
+fn without_the_mid_exposure_part_only_the_change_is_learned() {
+    let config = TrainConfig {
+        blur_model: BlurModel::Exposure,
+        subframes: 3,
+        pose_correction_change: true,
+        pose_correction_mid: false,
+        ..correction_config(8)
+    };
+    let ctx = exposure_context(&config);
+    let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+    t.run(&ctx, 8, |_, _| Ok(())).unwrap();
+    let slots = t.model.pose_corrections.chunks(CORRECTION_VALUES);
+    assert!(
+        slots
+            .clone()
+            .flat_map(|s| &s[..POSE_VALUES])
+            .all(|&v| v == 0.0),
+        "the mid-exposure corrections stay zero"
+    );
+    assert!(
+        slots.flat_map(|s| &s[POSE_VALUES..]).any(|&v| v != 0.0),
+        "the change over the exposure is learned"
+    );
+    let nothing = TrainConfig {
+        pose_correction_change: false,
+        ..config
+    };
+    let refused = nothing.validate().unwrap_err().to_string();
+    assert!(refused.contains("pose_correction_mid"), "{refused}");
+}
+
+#[test]
 fn corrections_on_knots_step_only_the_knots_of_the_trained_frames() {
     let ctx = context();
     let config = TrainConfig {

@@ -434,6 +434,12 @@ training_options! {
     /// noise (`docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction_change: bool = false,
+    /// Whether pose correction learns each frame's mid-exposure correction; off: only the change
+    /// over the exposure is learned (with `pose_correction_change`), so the given poses stay the
+    /// poses at mid exposure and the corrections only reshape the motion inside each exposure
+    /// (exact poses whose in-exposure motion the interpolation misses, e.g. a kink between frames).
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    pose_correction_mid: bool = true,
     /// Whether pose correction also corrects the root (global orientation and translation); off:
     /// only the 23 body joints are corrected.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]

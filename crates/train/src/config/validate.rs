@@ -244,6 +244,12 @@ impl TrainConfig {
                 );
             }
         }
+        if self.pose_correction && !self.pose_correction_mid && !self.pose_correction_change {
+            return bad(
+                "pose_correction_mid",
+                "off with pose_correction_change off leaves pose correction nothing to learn",
+            );
+        }
         if self.pose_correction_knot_every == 0 {
             return bad(
                 "pose_correction_knot_every",
