@@ -1,0 +1,176 @@
+//! How far the exposure model's sub-exposure poses are from the motion that made a synthetic
+//! benchmark, before and after a run's learned pose correction. For every training frame and each
+//! of S sub-exposure times (the midpoint rule of `train::pose::exposure`), three poses: the truth
+//! (the generator's motion at that time, rebuilt from `scene.json`'s `generator.config`), the
+//! poses interpolated between the frames' given poses (what training renders without correction,
+//! with the run's `body_interpolation`), and those corrected by the run's pose correction at the
+//! render's exposure offset. Reports, over the 23 body joints (root excluded) and over the
+//! sub-exposure times other than mid exposure: the mean and RMS geodesic angle between each
+//! joint's local rotation and the truth's (degrees), the share of the interpolation's squared
+//! error the correction removes, and the worst joint; and the root translation's RMS error (mm).
+//!
+//! ```text
+//! cargo run --release -p train --example sub_frame_pose_error -- DATA MODEL_DIR [SUBFRAMES]
+//! ```
+
+use glam::DQuat;
+use scene::Split;
+use train::data::load_dataset;
+use train::pose::correction::{corrected_params, exposure_offset};
+use train::pose::exposure::{subframe_times, PoseTrack};
+
+/// Joints per SMPL pose (the root is joint 0).
+const JOINTS: usize = 24;
+
+/// The rotation of axis-angle `v` (radians).
+fn rotation(v: &[f32]) -> DQuat {
+    let v = glam::DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+    let angle = v.length();
+    if angle < 1e-12 {
+        DQuat::IDENTITY
+    } else {
+        DQuat::from_axis_angle(v / angle, angle)
+    }
+}
+
+/// Geodesic angle (degrees) between the rotations of axis-angles `a` and `b`.
+fn angle_deg(a: &[f32], b: &[f32]) -> f64 {
+    let d = rotation(a).inverse() * rotation(b);
+    (2.0 * d.w.abs().min(1.0).acos()).to_degrees()
+}
+
+/// Joint-angle and translation errors of one set of poses against the truth.
+#[derive(Default)]
+struct Errors {
+    sum: f64,
+    sum_sq: f64,
+    count: usize,
+    worst: (f64, usize, u32),
+    transl_sq: f64,
+    transl_count: usize,
+}
+
+impl Errors {
+    fn add(
+        &mut self,
+        pose: &[f32],
+        transl: [f32; 3],
+        truth: &[f32],
+        truth_transl: [f32; 3],
+        frame: u32,
+    ) {
+        for j in 1..JOINTS {
+            let e = angle_deg(&pose[3 * j..3 * j + 3], &truth[3 * j..3 * j + 3]);
+            self.sum += e;
+            self.sum_sq += e * e;
+            self.count += 1;
+            if e > self.worst.0 {
+                self.worst = (e, j, frame);
+            }
+        }
+        let d: f64 = (0..3)
+            .map(|k| (f64::from(transl[k]) - f64::from(truth_transl[k])).powi(2))
+            .sum();
+        self.transl_sq += d;
+        self.transl_count += 1;
+    }
+
+    fn report(&self, name: &str) {
+        let n = self.count.max(1) as f64;
+        println!(
+            "{name:<28} joints mean {:.4}° RMS {:.4}° (worst {:.2}°, joint {} of frame {}); root translation RMS {:.3} mm",
+            self.sum / n,
+            (self.sum_sq / n).sqrt(),
+            self.worst.0,
+            self.worst.1,
+            self.worst.2,
+            1e3 * (self.transl_sq / self.transl_count.max(1) as f64).sqrt()
+        );
+    }
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (data_dir, model_dir, subframes) = match args.as_slice() {
+        [d, m] => (d, m, 9),
+        [d, m, s] => (d, m, s.parse()?),
+        _ => return Err("usage: sub_frame_pose_error DATA MODEL_DIR [SUBFRAMES]".into()),
+    };
+    let data = load_dataset(std::path::Path::new(data_dir))?;
+    let loaded = train::export::load_model(std::path::Path::new(model_dir))?;
+    let model = &loaded.model;
+    let config = data
+        .scene
+        .generator
+        .as_ref()
+        .and_then(|g| g.get("config"))
+        .ok_or_else(|| format!("{data_dir}: no generator.config (not a synthetic benchmark)"))?;
+    let cfg: synth::SynthConfig = serde_json::from_value(config.clone())?;
+    if cfg.people > 1 {
+        return Err("one person only".into());
+    }
+    let smpl = smpl_deform::BodyRef::parse(&cfg.body)?.load()?;
+    let body = synth::body::DressedBody::new(smpl, vec![0.0; 10])?;
+    let motion = synth::generate::benchmark_motion(&cfg, &body)?;
+    let keys: Vec<(f64, &smpl_deform::SmplParams)> =
+        data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
+    let track = PoseTrack::new(&keys, loaded.manifest.config.body_interpolation);
+    let corrections = !model.pose_corrections.is_empty();
+    let (mut given, mut corrected) = (Errors::default(), Errors::default());
+    let training = data.frames.iter().filter(|f| f.split == Split::Train);
+    for (slot, frame) in training.enumerate() {
+        let correction = corrections.then(|| model.training_correction(slot).0);
+        let times = subframe_times(frame.time_s, frame.exposure_s, subframes);
+        for (s, &t) in times.iter().enumerate() {
+            if 2 * s + 1 == subframes {
+                continue; // mid exposure: the given pose is the truth's key
+            }
+            let (truth, truth_transl) = motion.at(t);
+            let interpolated = track.at(t);
+            if std::env::var_os("SUB_FRAME_POSE_ERROR_JOINTS").is_some() {
+                let worst = (1..JOINTS)
+                    .map(|j| {
+                        let e = angle_deg(
+                            &interpolated.pose[3 * j..3 * j + 3],
+                            &truth[3 * j..3 * j + 3],
+                        );
+                        (e, j)
+                    })
+                    .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a });
+                println!(
+                    "  frame {} sub {s}: worst joint {} {:.3}°",
+                    frame.index, worst.1, worst.0
+                );
+            }
+            given.add(
+                &interpolated.pose,
+                interpolated.transl,
+                &truth,
+                truth_transl,
+                frame.index,
+            );
+            if let Some(c) = &correction {
+                let p = corrected_params(&interpolated, c, exposure_offset(s, subframes));
+                corrected.add(&p.pose, p.transl, &truth, truth_transl, frame.index);
+            }
+        }
+    }
+    println!(
+        "{} training frames, {subframes} sub-exposure times each (mid exposure excluded)",
+        data.frames
+            .iter()
+            .filter(|f| f.split == Split::Train)
+            .count()
+    );
+    given.report("interpolated (given)");
+    if corrections {
+        corrected.report("with the run's correction");
+        println!(
+            "squared joint error removed by the correction: {:.1} %",
+            100.0 * (1.0 - corrected.sum_sq / given.sum_sq.max(f64::MIN_POSITIVE))
+        );
+    } else {
+        println!("the run learned no pose correction");
+    }
+    Ok(())
+}
