@@ -89,6 +89,58 @@ impl Errors {
     }
 }
 
+/// The corrections of one frame's sub-exposure poses that fit the truth best in least squares,
+/// per axis-angle value (the additive form of `train::pose::correction`, zero at mid exposure):
+/// a change linear in the exposure offset, and a linear plus a quadratic term. Adds their errors
+/// to `fits[0]` and `fits[1]`.
+fn best_fits(
+    track: &PoseTrack,
+    motion: &synth::motion::Motion,
+    times: &[f64],
+    frame: u32,
+    fits: &mut [Errors; 2],
+) {
+    let count = times.len();
+    let samples: Vec<(f64, smpl_deform::SmplParams, (Vec<f32>, [f32; 3]))> = times
+        .iter()
+        .enumerate()
+        .filter(|(s, _)| 2 * s + 1 != count)
+        .map(|(s, &t)| {
+            let o = f64::from(exposure_offset(s, count));
+            (o, track.at(t), motion.at(t))
+        })
+        .collect();
+    let values = samples.first().map_or(0, |s| s.1.pose.len());
+    // Normal equations of the bases (o) and (o, o²), the same for every value.
+    let (s11, s12, s22) = samples
+        .iter()
+        .fold((0.0, 0.0, 0.0), |(a, b, c), (o, _, _)| {
+            (a + o * o, b + o * o * o, c + o * o * o * o)
+        });
+    let det = s11 * s22 - s12 * s12;
+    let mut linear = vec![0.0f64; values];
+    let mut quadratic = vec![[0.0f64; 2]; values];
+    for k in 0..values {
+        let (r1, r2) = samples.iter().fold((0.0, 0.0), |(a, b), (o, p, (q, _))| {
+            let r = f64::from(q[k]) - f64::from(p.pose[k]);
+            (a + o * r, b + o * o * r)
+        });
+        linear[k] = r1 / s11;
+        quadratic[k] = [(s22 * r1 - s12 * r2) / det, (s11 * r2 - s12 * r1) / det];
+    }
+    for (o, p, (q, qt)) in &samples {
+        let fitted = |f: &dyn Fn(usize) -> f64| -> Vec<f32> {
+            (0..values)
+                .map(|k| (f64::from(p.pose[k]) + f(k)) as f32)
+                .collect()
+        };
+        let a = fitted(&|k| linear[k] * o);
+        let b = fitted(&|k| quadratic[k][0] * o + quadratic[k][1] * o * o);
+        fits[0].add(&a, p.transl, q, *qt, frame);
+        fits[1].add(&b, p.transl, q, *qt, frame);
+    }
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (data_dir, model_dir, subframes) = match args.as_slice() {
@@ -117,10 +169,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let track = PoseTrack::new(&keys, loaded.manifest.config.body_interpolation);
     let corrections = !model.pose_corrections.is_empty();
     let (mut given, mut corrected) = (Errors::default(), Errors::default());
+    let mut fits = [Errors::default(), Errors::default()];
     let training = data.frames.iter().filter(|f| f.split == Split::Train);
     for (slot, frame) in training.enumerate() {
         let correction = corrections.then(|| model.training_correction(slot).0);
         let times = subframe_times(frame.time_s, frame.exposure_s, subframes);
+        best_fits(&track, &motion, &times, frame.index, &mut fits);
         for (s, &t) in times.iter().enumerate() {
             if 2 * s + 1 == subframes {
                 continue; // mid exposure: the given pose is the truth's key
@@ -163,6 +217,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .count()
     );
     given.report("interpolated (given)");
+    fits[0].report("best change (linear)");
+    fits[1].report("best linear + quadratic");
     if corrections {
         corrected.report("with the run's correction");
         println!(
