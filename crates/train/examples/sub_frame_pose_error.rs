@@ -206,6 +206,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if let Some(c) = &correction {
                 let p = corrected_params(&interpolated, c, exposure_offset(s, subframes));
                 corrected.add(&p.pose, p.transl, &truth, truth_transl, frame.index);
+                if std::env::var_os("SUB_FRAME_POSE_ERROR_JOINTS").is_some() {
+                    for j in [4, 5] {
+                        let r = 3 * j..3 * j + 3;
+                        println!(
+                            "    knee {j}: interpolated {:.3}° corrected {:.3}°",
+                            angle_deg(&interpolated.pose[r.clone()], &truth[r.clone()]),
+                            angle_deg(&p.pose[r.clone()], &truth[r])
+                        );
+                    }
+                }
             }
         }
     }
