@@ -89,6 +89,10 @@ impl Errors {
     }
 }
 
+/// One sub-exposure time of a frame: its exposure offset, the interpolated pose and the truth's
+/// pose and translation.
+type Sample = (f64, smpl_deform::SmplParams, (Vec<f32>, [f32; 3]));
+
 /// The corrections of one frame's sub-exposure poses that fit the truth best in least squares,
 /// per axis-angle value (the additive form of `train::pose::correction`, zero at mid exposure):
 /// a change linear in the exposure offset, and a linear plus a quadratic term. Adds their errors
@@ -101,7 +105,7 @@ fn best_fits(
     fits: &mut [Errors; 2],
 ) {
     let count = times.len();
-    let samples: Vec<(f64, smpl_deform::SmplParams, (Vec<f32>, [f32; 3]))> = times
+    let samples: Vec<Sample> = times
         .iter()
         .enumerate()
         .filter(|(s, _)| 2 * s + 1 != count)
