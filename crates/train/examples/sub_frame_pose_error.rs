@@ -8,6 +8,10 @@
 //! sub-exposure times other than mid exposure: the mean and RMS geodesic angle between each
 //! joint's local rotation and the truth's (degrees), the share of the interpolation's squared
 //! error the correction removes, and the worst joint; and the root translation's RMS error (mm).
+//! Also the same figures for the corrections that fit the truth best per frame (least squares):
+//! a change linear in the exposure offset (the form `--pose-correction-change` learns) and a
+//! linear plus quadratic one — the ceilings of what such a correction can remove. With
+//! `SUB_FRAME_POSE_ERROR_JOINTS` set, every sub-exposure time's worst joint and the knees' errors.
 //!
 //! ```text
 //! cargo run --release -p train --example sub_frame_pose_error -- DATA MODEL_DIR [SUBFRAMES]
