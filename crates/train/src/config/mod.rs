@@ -438,6 +438,12 @@ training_options! {
     /// over the exposure is learned (with `pose_correction_change`), so the given poses stay the
     /// poses at mid exposure and the corrections only reshape the motion inside each exposure
     /// (exact poses whose in-exposure motion the interpolation misses, e.g. a kink between frames).
+    /// Off, with `--pose-correction-change on --pose-correction-knot-every 1
+    /// --lr-pose-correction 1e-2 --lr-pose-correction-root 1e-3
+    /// --lr-pose-correction-final-fraction 0.1` and `--body-interpolation band-limited`, at
+    /// `quick`: 36.16 / 31.85 dB full frame / human box on the default benchmark against 35.99 /
+    /// 31.66 for the default, 36.13 / 31.83 against 36.01 / 31.70 with ideal events
+    /// (`docs/notes/2026-12-04-learned-in-exposure-motion.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction_mid: bool = true,
     /// Whether pose correction also corrects the root (global orientation and translation); off:
