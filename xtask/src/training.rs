@@ -199,29 +199,15 @@ pub fn use_oracle_sub_frame_poses(
     data: &train::data::Dataset,
     subframes: usize,
 ) -> Result<()> {
-    let scene = data.dir.join("scene.json");
-    let config = data
-        .scene
-        .generator
-        .as_ref()
-        .and_then(|g| g.get("config"))
-        .with_context(|| {
-            format!(
-                "{}: generator.config is absent (--oracle-sub-frame-poses needs a synthetic benchmark)",
-                scene.display()
-            )
-        })?;
-    let cfg: synth::SynthConfig = serde_json::from_value(config.clone())
-        .with_context(|| format!("{}: generator.config", scene.display()))?;
     anyhow::ensure!(
-        cfg.people <= 1 && ctx.exposure_poses.len() == ctx.frames.len(),
-        "--oracle-sub-frame-poses takes one person and the exposure model (blur_model = exposure)"
+        ctx.exposure_poses.len() == ctx.frames.len(),
+        "--oracle-sub-frame-poses takes the exposure model (blur_model = exposure)"
     );
-    let model = smpl_deform::BodyRef::parse(&cfg.body)
-        .and_then(|body| body.load())
-        .with_context(|| format!("{}: generator.config.body", scene.display()))?;
-    let body = synth::body::DressedBody::new(model, vec![0.0; 10])?;
-    let motion = synth::generate::benchmark_motion(&cfg, &body)?;
+    let motion = synth::generate::recorded_motion(
+        &data.dir.join("scene.json"),
+        data.scene.generator.as_ref(),
+    )
+    .context("--oracle-sub-frame-poses needs a one-person synthetic benchmark")?;
     let training = data
         .frames
         .iter()

@@ -49,6 +49,14 @@ pub enum SynthError {
         /// What is wrong, naming the frame and field.
         reason: String,
     },
+    /// A scene's `generator.config` is absent or not a benchmark this crate can rebuild.
+    #[error("{path}: generator.config: {reason}")]
+    GeneratorConfig {
+        /// The scene file (`scene.json`).
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// Reading or writing JSON failed.
     #[error("{path}: JSON error: {source}")]
     Json {

@@ -267,3 +267,37 @@ fn camera_errors_change_only_the_written_poses_and_keep_the_truth_aside() {
         .join(synth::camera_error::TRUE_CAMERAS_FILE)
         .exists());
 }
+
+#[test]
+fn the_recorded_motion_is_the_generators_and_bad_configs_are_refused_by_field() {
+    let scene = Path::new("scene.json");
+    let cfg = SynthConfig::preset(Preset::Default);
+    let generator = serde_json::json!({ "config": cfg });
+    let motion = synth::generate::recorded_motion(scene, Some(&generator)).unwrap();
+    let body = synth::body::DressedBody::new(
+        smpl_deform::BodyRef::parse(&cfg.body)
+            .unwrap()
+            .load()
+            .unwrap(),
+        vec![0.0; 10],
+    )
+    .unwrap();
+    let direct = synth::generate::benchmark_motion(&cfg, &body).unwrap();
+    assert_eq!(motion.at(0.37), direct.at(0.37));
+    for (generator, needle) in [
+        (None, "absent"),
+        (
+            Some(serde_json::json!({ "config": { "frames": "many" } })),
+            "expected u32",
+        ),
+        (
+            Some(serde_json::json!({ "config": SynthConfig { people: 2, ..cfg.clone() } })),
+            "one person",
+        ),
+    ] {
+        let e = synth::generate::recorded_motion(scene, generator.as_ref()).unwrap_err();
+        let text = e.to_string();
+        assert!(text.contains("scene.json: generator.config"), "{text}");
+        assert!(text.contains(needle), "{text}");
+    }
+}

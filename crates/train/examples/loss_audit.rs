@@ -198,16 +198,10 @@ fn use_true_sub_frame_poses(
     blurred: &mut TrainingData,
     subframes: usize,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let config = data
-        .scene
-        .generator
-        .as_ref()
-        .and_then(|g| g.get("config"))
-        .ok_or("--true-poses: the scene records no generator config")?;
-    let cfg: synth::SynthConfig = serde_json::from_value(config.clone())?;
-    let body =
-        synth::body::DressedBody::new(smpl_deform::BodyModel::builtin_makehuman()?, vec![0.0; 10])?;
-    let motion = synth::generate::benchmark_motion(&cfg, &body)?;
+    let motion = synth::generate::recorded_motion(
+        &data.dir.join("scene.json"),
+        data.scene.generator.as_ref(),
+    )?;
     let training = data
         .frames
         .iter()

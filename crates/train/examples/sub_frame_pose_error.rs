@@ -17,8 +17,8 @@
 //! cargo run --release -p train --example sub_frame_pose_error -- DATA MODEL_DIR [SUBFRAMES]
 //! ```
 
-use glam::DQuat;
 use scene::Split;
+use synth::pose_metrics::{angle_of, quat_of};
 use train::data::load_dataset;
 use train::pose::correction::{corrected_params, exposure_offset};
 use train::pose::exposure::{subframe_times, PoseTrack};
@@ -26,21 +26,16 @@ use train::pose::exposure::{subframe_times, PoseTrack};
 /// Joints per SMPL pose (the root is joint 0).
 const JOINTS: usize = 24;
 
-/// The rotation of axis-angle `v` (radians).
-fn rotation(v: &[f32]) -> DQuat {
-    let v = glam::DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
-    let angle = v.length();
-    if angle < 1e-12 {
-        DQuat::IDENTITY
-    } else {
-        DQuat::from_axis_angle(v / angle, angle)
-    }
+/// Geodesic angle (degrees) between the rotations of axis-angles `a` and `b` (three values each).
+fn angle_deg(a: &[f32], b: &[f32]) -> f64 {
+    let q = |v: &[f32]| quat_of([v[0], v[1], v[2]]);
+    angle_of(q(a).inverse() * q(b)).to_degrees()
 }
 
-/// Geodesic angle (degrees) between the rotations of axis-angles `a` and `b`.
-fn angle_deg(a: &[f32], b: &[f32]) -> f64 {
-    let d = rotation(a).inverse() * rotation(b);
-    (2.0 * d.w.abs().min(1.0).acos()).to_degrees()
+/// Whether sub-exposure time `s` of `count` is mid exposure (where the given pose is the truth's
+/// key, so it is left out).
+fn is_mid(s: usize, count: usize) -> bool {
+    2 * s + 1 == count
 }
 
 /// Joint-angle and translation errors of one set of poses against the truth.
@@ -112,7 +107,7 @@ fn best_fits(
     let samples: Vec<Sample> = times
         .iter()
         .enumerate()
-        .filter(|(s, _)| 2 * s + 1 != count)
+        .filter(|&(s, _)| !is_mid(s, count))
         .map(|(s, &t)| {
             let o = f64::from(exposure_offset(s, count));
             (o, track.at(t), motion.at(t))
@@ -159,33 +154,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let data = load_dataset(std::path::Path::new(data_dir))?;
     let loaded = train::export::load_model(std::path::Path::new(model_dir))?;
     let model = &loaded.model;
-    let config = data
-        .scene
-        .generator
-        .as_ref()
-        .and_then(|g| g.get("config"))
-        .ok_or_else(|| format!("{data_dir}: no generator.config (not a synthetic benchmark)"))?;
-    let cfg: synth::SynthConfig = serde_json::from_value(config.clone())?;
-    if cfg.people > 1 {
-        return Err("one person only".into());
-    }
-    let smpl = smpl_deform::BodyRef::parse(&cfg.body)?.load()?;
-    let body = synth::body::DressedBody::new(smpl, vec![0.0; 10])?;
-    let motion = synth::generate::benchmark_motion(&cfg, &body)?;
+    let motion = synth::generate::recorded_motion(
+        &data.dir.join("scene.json"),
+        data.scene.generator.as_ref(),
+    )?;
     let keys: Vec<(f64, &smpl_deform::SmplParams)> =
         data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
     let track = PoseTrack::new(&keys, loaded.manifest.config.body_interpolation);
     let corrections = !model.pose_corrections.is_empty();
     let (mut given, mut corrected) = (Errors::default(), Errors::default());
     let mut fits = [Errors::default(), Errors::default()];
-    let training = data.frames.iter().filter(|f| f.split == Split::Train);
-    for (slot, frame) in training.enumerate() {
+    let training: Vec<_> = data
+        .frames
+        .iter()
+        .filter(|f| f.split == Split::Train)
+        .collect();
+    for (slot, frame) in training.iter().enumerate() {
         let correction = corrections.then(|| model.training_correction(slot).0);
         let times = subframe_times(frame.time_s, frame.exposure_s, subframes);
         best_fits(&track, &motion, &times, frame.index, &mut fits);
         for (s, &t) in times.iter().enumerate() {
-            if 2 * s + 1 == subframes {
-                continue; // mid exposure: the given pose is the truth's key
+            if is_mid(s, subframes) {
+                continue;
             }
             let (truth, truth_transl) = motion.at(t);
             let interpolated = track.at(t);
@@ -229,10 +219,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     println!(
         "{} training frames, {subframes} sub-exposure times each (mid exposure excluded)",
-        data.frames
-            .iter()
-            .filter(|f| f.split == Split::Train)
-            .count()
+        training.len()
     );
     given.report("interpolated (given)");
     fits[0].report("best change (linear)");

@@ -114,6 +114,29 @@ pub fn benchmark_motion(cfg: &SynthConfig, body: &DressedBody) -> Result<Motion>
     motion_from(cfg, body, &mut ChaCha8Rng::seed_from_u64(cfg.seed))
 }
 
+/// The motion of the one-person benchmark a scene records: `generator` (the `generator` object
+/// of the scene file `scene`, named in errors) holds the settings it was made with as `config`;
+/// the body they name is loaded and [`benchmark_motion`] rebuilds the motion from them.
+pub fn recorded_motion(scene: &Path, generator: Option<&serde_json::Value>) -> Result<Motion> {
+    let bad = |reason: String| SynthError::GeneratorConfig {
+        path: scene.to_path_buf(),
+        reason,
+    };
+    let config = generator
+        .and_then(|g| g.get("config"))
+        .ok_or_else(|| bad("absent (not a synthetic benchmark)".into()))?;
+    let cfg: SynthConfig =
+        serde_json::from_value(config.clone()).map_err(|e| bad(e.to_string()))?;
+    if cfg.people > 1 {
+        return Err(bad(format!(
+            "{} people: the motion is rebuilt for one person only",
+            cfg.people
+        )));
+    }
+    let model = BodyRef::parse(&cfg.body)?.load()?;
+    benchmark_motion(&cfg, &DressedBody::new(model, vec![0.0; 10])?)
+}
+
 /// [`benchmark_motion`] drawing its phases from `rng` (the generator's own stream, first draws).
 fn motion_from(cfg: &SynthConfig, body: &DressedBody, rng: &mut ChaCha8Rng) -> Result<Motion> {
     let phases: [f32; 4] = std::array::from_fn(|_| rng.gen_range(0.0..std::f32::consts::TAU));
