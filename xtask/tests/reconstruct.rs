@@ -543,6 +543,68 @@ fn ablate_writes_a_table_json_and_grid_and_records_failed_runs() {
 }
 
 #[test]
+fn ablate_runs_every_row_once_per_seed_and_reports_the_spread() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_config(dir.path());
+    let out = dir.path().join("ablate");
+    let o = xtask()
+        .arg("ablate")
+        .arg("--data")
+        .arg(fixture())
+        .arg("--out")
+        .arg(&out)
+        .arg("--config")
+        .arg(&config)
+        .args(["--only", "one-hot", "--seeds", "0,1"])
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "ablate failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for seed in [0, 1] {
+        let metrics = out.join(format!("one-hot/seed-{seed}/metrics.json"));
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&metrics).unwrap()).unwrap();
+        assert_eq!(m["seed"].as_u64(), Some(seed), "{}", metrics.display());
+    }
+    let md = std::fs::read_to_string(out.join("ablation.md")).unwrap();
+    assert!(md.contains("| 2 | `one-hot/seed-1` |"), "{md}");
+    assert!(
+        md.contains("## Over seeds") && md.contains("| `one-hot` | 2/2 |"),
+        "{md}"
+    );
+    let over: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("ablation_over_seeds.json")).unwrap(),
+    )
+    .unwrap();
+    let psnr = &over[0]["measures"]["test_psnr_full"];
+    let per_seed: Vec<f64> = psnr["per_seed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["value"].as_f64().unwrap())
+        .collect();
+    assert_eq!(per_seed.len(), 2);
+    // Different seeds train different models; the summary is their mean and range.
+    assert_ne!(per_seed[0], per_seed[1]);
+    let mean = psnr["mean"].as_f64().unwrap();
+    assert!((mean - (per_seed[0] + per_seed[1]) / 2.0).abs() < 1e-9);
+    assert_eq!(psnr["max"].as_f64().unwrap(), per_seed[0].max(per_seed[1]));
+    // A seed given twice is refused before anything runs.
+    let o = xtask()
+        .args(["ablate", "--only", "one-hot", "--seeds", "2,2", "--data"])
+        .arg(fixture())
+        .arg("--out")
+        .arg(dir.path().join("refused"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("seed 2 is given twice"));
+}
+
+#[test]
 fn the_perceptual_loss_runs_from_the_command_line_and_is_recorded() {
     let dir = tempfile::tempdir().unwrap();
     let config = write_config(dir.path());
