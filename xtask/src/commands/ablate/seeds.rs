@@ -1,7 +1,7 @@
 //! `ablate --seeds`: every row once per seed, and each measure's mean and range over the seeds, so
 //! that a difference between two rows can be read against the spread of one row.
 
-use super::{format_measure, Outcome, Run, COLUMNS};
+use super::{format_measure, push_measure_header, Outcome, Run, COLUMNS};
 use anyhow::{Context, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -76,12 +76,7 @@ pub(super) fn write_over_seeds(out: &Path, results: &[Outcome<'_>]) -> Result<()
         "\n## Over seeds\n\nEach measure's mean over the seeds whose run finished, and its range \
          (min–max).\n\n| run | finished |",
     );
-    for (_, title) in COLUMNS {
-        md.push_str(&format!(" {title} |"));
-    }
-    md.push_str("\n| --- | ---: |");
-    md.push_str(&" ---: |".repeat(COLUMNS.len()));
-    md.push('\n');
+    push_measure_header(&mut md, "| --- | ---: |");
     let mut json = Vec::new();
     for row in results.chunk_by(|a, b| row_and_seed(&a.0).0 == row_and_seed(&b.0).0) {
         let name = row_and_seed(&row[0].0).0;
