@@ -442,9 +442,10 @@ training_options! {
     /// --lr-pose-correction 1e-2 --lr-pose-correction-root 1e-3
     /// --lr-pose-correction-final-fraction 0.1` and `--body-interpolation band-limited`, at
     /// `quick`: 36.16 / 31.85 dB full frame / human box on the default benchmark against 35.99 /
-    /// 31.66 for the default, 36.13 / 31.83 against 36.01 / 31.70 with ideal events, 36.02 /
-    /// 31.70 against 36.00 / 31.68 on the noisy sensor
-    /// (`docs/notes/2026-12-04-learned-in-exposure-motion.md`).
+    /// 31.66 for the default (mean of seeds 0–2: 36.05 / 31.72 against 35.93 / 31.60), 36.13 /
+    /// 31.83 against 36.01 / 31.70 with ideal events, 36.02 / 31.70 against 36.00 / 31.68 on the
+    /// noisy sensor (`docs/notes/2026-12-04-learned-in-exposure-motion.md`,
+    /// `docs/notes/2026-12-04-seed-spread.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction_mid: bool = true,
     /// Whether pose correction also corrects the root (global orientation and translation); off:
