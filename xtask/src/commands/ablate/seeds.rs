@@ -79,41 +79,9 @@ pub(super) fn write_over_seeds(out: &Path, results: &[Outcome<'_>]) -> Result<()
     push_measure_header(&mut md, "| --- | ---: |");
     let mut json = Vec::new();
     for row in results.chunk_by(|a, b| row_and_seed(&a.0).0 == row_and_seed(&b.0).0) {
-        let name = row_and_seed(&row[0].0).0;
-        let finished: Vec<(Option<u64>, &serde_json::Value)> = row
-            .iter()
-            .filter_map(|(label, _, _, m)| Some((row_and_seed(label).1, m.as_ref().ok()?)))
-            .collect();
-        md.push_str(&format!("| `{name}` | {}/{} |", finished.len(), row.len()));
-        let mut measures = serde_json::Map::new();
-        for (key, _) in COLUMNS {
-            let values: Vec<(Option<u64>, f64)> = finished
-                .iter()
-                .filter_map(|(seed, m)| Some((*seed, m[key].as_f64()?)))
-                .collect();
-            let spread = Spread::of(&values.iter().map(|v| v.1).collect::<Vec<_>>());
-            let cell = spread.map_or_else(
-                || "—".to_string(),
-                |s| {
-                    let f = |v| format_measure(key, v);
-                    format!("{} ({}–{})", f(s.mean), f(s.min), f(s.max))
-                },
-            );
-            md.push_str(&format!(" {cell} |"));
-            if let Some(s) = spread {
-                measures.insert(
-                    key.to_string(),
-                    serde_json::json!({
-                        "mean": s.mean, "min": s.min, "max": s.max,
-                        "per_seed": values.iter().map(|(seed, v)| serde_json::json!({"seed": seed, "value": v})).collect::<Vec<_>>(),
-                    }),
-                );
-            }
-        }
-        md.push('\n');
-        json.push(serde_json::json!({
-            "run": name, "finished": finished.len(), "runs": row.len(), "measures": measures,
-        }));
+        let (line, entry) = summarise_row(row);
+        md.push_str(&line);
+        json.push(entry);
     }
     let md_path = out.join("ablation.md");
     std::fs::OpenOptions::new()
@@ -126,6 +94,43 @@ pub(super) fn write_over_seeds(out: &Path, results: &[Outcome<'_>]) -> Result<()
         .with_context(|| format!("writing {}", json_path.display()))?;
     print!("{md}");
     Ok(())
+}
+
+/// One row's seeds (`row`, the same row label): its line of the over-seeds table and its
+/// `ablation_over_seeds.json` entry.
+fn summarise_row(row: &[Outcome<'_>]) -> (String, serde_json::Value) {
+    let name = row_and_seed(&row[0].0).0;
+    let finished: Vec<(Option<u64>, &serde_json::Value)> = row
+        .iter()
+        .filter_map(|(label, _, _, m)| Some((row_and_seed(label).1, m.as_ref().ok()?)))
+        .collect();
+    let mut line = format!("| `{name}` | {}/{} |", finished.len(), row.len());
+    let mut measures = serde_json::Map::new();
+    for (key, _) in COLUMNS {
+        let values: Vec<(Option<u64>, f64)> = finished
+            .iter()
+            .filter_map(|(seed, m)| Some((*seed, m[key].as_f64()?)))
+            .collect();
+        let Some(s) = Spread::of(&values.iter().map(|v| v.1).collect::<Vec<_>>()) else {
+            line.push_str(" — |");
+            continue;
+        };
+        let f = |v| format_measure(key, v);
+        line.push_str(&format!(" {} ({}–{}) |", f(s.mean), f(s.min), f(s.max)));
+        let per_seed: Vec<_> = values
+            .iter()
+            .map(|(seed, v)| serde_json::json!({"seed": seed, "value": v}))
+            .collect();
+        measures.insert(
+            key.to_string(),
+            serde_json::json!({"mean": s.mean, "min": s.min, "max": s.max, "per_seed": per_seed}),
+        );
+    }
+    line.push('\n');
+    let entry = serde_json::json!({
+        "run": name, "finished": finished.len(), "runs": row.len(), "measures": measures,
+    });
+    (line, entry)
 }
 
 #[cfg(test)]
