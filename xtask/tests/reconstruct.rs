@@ -541,10 +541,16 @@ fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
         "\"event_loss\": true",
         "\"event_pairs\": \"exposure\"",
         "\"event_modulation\": true",
+        "\"exposure_motion\": \"learned\"",
+        "\"body_interpolation\": \"band-limited\"",
     ] {
         assert!(metrics.contains(field), "{field}: {metrics}");
     }
     assert!(stdout.contains("event modulation:"), "{stdout}");
+    assert!(
+        stdout.contains("change over each exposure is learned"),
+        "{stdout}"
+    );
     // The fixture's sensor has a 1 ms refractory period: mixed-polarity pixels are left free.
     let used = std::fs::read_to_string(out.join("config.json")).unwrap();
     assert!(used.contains("\"event_ignore_mixed\": true"), "{used}");
@@ -558,6 +564,19 @@ fn the_exposure_model_and_the_sharp_ceiling_run_from_the_command_line() {
     assert!(!String::from_utf8_lossy(&o.stdout).contains("event modulation:"));
     let metrics = std::fs::read_to_string(plain.join("metrics.json")).unwrap();
     assert!(metrics.contains("\"event_modulation\": false"), "{metrics}");
+    // So can the learned in-exposure motion (the previous default's given motion).
+    let given = dir.path().join("given-motion");
+    let o = reconstruct(
+        &given,
+        &config,
+        &["--subframes", "3", "--exposure-motion", "given"],
+    );
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("change over each exposure is learned"));
+    let metrics = std::fs::read_to_string(given.join("metrics.json")).unwrap();
+    assert!(
+        metrics.contains("\"exposure_motion\": \"given\""),
+        "{metrics}"
+    );
     let sharp = dir.path().join("sharp");
     reconstruct(
         &sharp,

@@ -220,6 +220,18 @@ impl<T: Real> RowAdam<T> {
         rows: &[usize],
         rate_scale: f64,
     ) -> Result<(), NnError> {
+        self.step_rows_column_scaled(params, grads, rows, |_| rate_scale)
+    }
+
+    /// [`RowAdam::step_rows`] with column `j`'s rate multiplied by `column_scale(j)` (schedules
+    /// that differ between parts of a row; a constant gives [`RowAdam::step_rows_scaled`]' bits).
+    pub fn step_rows_column_scaled(
+        &mut self,
+        params: &mut [T],
+        grads: &[T],
+        rows: &[usize],
+        column_scale: impl Fn(usize) -> f64,
+    ) -> Result<(), NnError> {
         check_len("row adam params", self.m.len(), params.len())?;
         check_len("row adam grads", self.m.len(), grads.len())?;
         let mut done: Vec<usize> = Vec::with_capacity(rows.len());
@@ -248,7 +260,7 @@ impl<T: Real> RowAdam<T> {
                 c.beta2,
                 c.eps,
                 self.row_len,
-                |j| T::of(rates.as_ref().map_or(c.lr, |r| r[j]) * rate_scale),
+                |j| T::of(rates.as_ref().map_or(c.lr, |r| r[j]) * column_scale(j)),
             )?;
         }
         Ok(())

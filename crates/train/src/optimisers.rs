@@ -4,7 +4,7 @@
 //! the pose corrections, which only the step's frames may move; with their checkpoint form.
 
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
-use crate::config::TrainConfig;
+use crate::config::{ExposureMotion, TrainConfig};
 use crate::model::{Model, NETWORK_GROUPS};
 use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::correction::{root_indices, CORRECTION_VALUES, POSE_VALUES};
@@ -38,6 +38,16 @@ const CAMERA_GAUGE_ADAM: &str = "camera_gauge_adam";
 /// The name of the pose-correction group in [`NETWORK_GROUPS`].
 const CORRECTION_GROUP: &str = "pose_correction";
 
+/// A step's schedule factors of the pose rows' rates (`train::schedule::correction_rate_scale`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseRateScales {
+    /// Of the mid-exposure part (`lr_pose_correction_final_fraction`'s decay).
+    pub mid: f32,
+    /// Of the change over the exposure (`lr_exposure_motion_final_fraction`'s decay when it is
+    /// learned as the in-exposure motion, else the mid part's).
+    pub change: f32,
+}
+
 /// Step counts of a checkpoint's optimisers (stored in its JSON metadata).
 #[derive(Clone, Debug, PartialEq)]
 pub struct OptimiserSteps {
@@ -58,23 +68,35 @@ fn network_rate(config: &TrainConfig, group: &str) -> f32 {
     }
 }
 
-/// `adam` with the pose corrections' rates: `lr_pose_correction` for the body joints,
-/// `lr_pose_correction_root` for the root's orientation and translation, 0 for the change over the
-/// exposure when `pose_correction_change` is off and for the mid-exposure part when
-/// `pose_correction_mid` is off.
+/// `adam` with the pose rows' rates: the mid-exposure part at `lr_pose_correction` for the body
+/// joints and `lr_pose_correction_root` for the root's orientation and translation when pose
+/// correction learns it (on, with `pose_correction_mid`), else 0; the change over the exposure at
+/// `lr_exposure_motion` / `lr_exposure_motion_root` with `exposure_motion = learned`, else at the
+/// pose correction's rates with `pose_correction_change`, else 0.
 fn correction_adam(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<f32> {
-    let mut rates = vec![f64::from(config.lr_pose_correction); CORRECTION_VALUES];
-    for k in root_indices() {
-        rates[k] = f64::from(config.lr_pose_correction_root);
-    }
-    if !config.pose_correction_change {
-        rates[POSE_VALUES..].fill(0.0);
-    }
-    if !config.pose_correction_mid {
-        rates[..POSE_VALUES].fill(0.0);
-    }
+    let part = |joints: f32, root: f32| {
+        let mut rates = vec![f64::from(joints); POSE_VALUES];
+        for k in root_indices().filter(|&k| k < POSE_VALUES) {
+            rates[k] = f64::from(root);
+        }
+        rates
+    };
+    let fitter = part(config.lr_pose_correction, config.lr_pose_correction_root);
+    let off = vec![0.0; POSE_VALUES];
+    let mid = if config.pose_correction && config.pose_correction_mid {
+        fitter.clone()
+    } else {
+        off.clone()
+    };
+    let change = if config.exposure_motion == ExposureMotion::Learned {
+        part(config.lr_exposure_motion, config.lr_exposure_motion_root)
+    } else if config.pose_correction && config.pose_correction_change {
+        fitter
+    } else {
+        off
+    };
     // One rate per column of the rows (`CORRECTION_VALUES`): this cannot fail.
-    adam.with_column_rates(rates)
+    adam.with_column_rates([mid, change].concat())
         .unwrap_or_else(|e| unreachable!("{e}"))
 }
 
@@ -181,19 +203,27 @@ impl Optimisers {
         Ok(self.networks[k].step(params, grads)?)
     }
 
-    /// One lazy Adam step of the pose corrections' knots `slots` (those of the step's frames; one
-    /// per training slot by default) at `rate_scale` times their rates; every other knot keeps its
-    /// correction and moments.
+    /// One lazy Adam step of the pose rows' knots `slots` (those of the step's frames; one per
+    /// training slot by default), the mid-exposure part at `scales.mid` times its rates and the
+    /// change over the exposure at `scales.change` times its; every other knot keeps its values
+    /// and moments.
     pub fn step_pose_corrections(
         &mut self,
         corrections: &mut [f32],
         grads: &[f32],
         slots: &[usize],
-        rate_scale: f32,
+        scales: PoseRateScales,
     ) -> Result<(), TrainError> {
+        let (mid, change) = (f64::from(scales.mid), f64::from(scales.change));
         Ok(self
             .corrections
-            .step_rows_scaled(corrections, grads, slots, f64::from(rate_scale))?)
+            .step_rows_column_scaled(corrections, grads, slots, |j| {
+                if j < POSE_VALUES {
+                    mid
+                } else {
+                    change
+                }
+            })?)
     }
 
     /// One lazy Adam step of the camera corrections of the training slots `slots` at `rate_scale`

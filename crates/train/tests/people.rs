@@ -110,7 +110,7 @@ fn two_people_resume_bit_identically() {
 }
 
 #[test]
-fn pose_correction_with_two_people_is_refused() {
+fn pose_correction_and_learned_exposure_motion_with_two_people_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let config = train::config::TrainConfig {
         pose_correction: true,
@@ -121,4 +121,12 @@ fn pose_correction_with_two_people_is_refused() {
         panic!("pose correction of two people was accepted");
     };
     assert!(e.to_string().contains("corrects one person"), "{e}");
+    let learned_motion = train::config::TrainConfig {
+        exposure_motion: train::config::ExposureMotion::Learned,
+        ..exposure_events_config(4)
+    };
+    let Err(e) = Trainer::new(&ctx, learned_motion) else {
+        panic!("the learned in-exposure motion of two people was accepted");
+    };
+    assert!(e.to_string().contains("--exposure-motion learned"), "{e}");
 }

@@ -19,7 +19,10 @@ use image::{Rgb, RgbImage};
 use std::path::Path;
 use std::path::PathBuf;
 use train::blend::SemanticMode;
-use train::config::{BlurModel, EventPairs, EventPenaltyKind, FlowSource, TrainOn, TrainOptions};
+use train::config::{
+    BlurModel, EventPairs, EventPenaltyKind, ExposureMotion, FlowSource, TrackTangents, TrainOn,
+    TrainOptions,
+};
 
 /// Arguments of `ablate`.
 #[derive(clap::Args, Debug)]
@@ -36,7 +39,8 @@ pub struct Args {
     pub training: crate::commands::reconstruct::TrainingArgs,
     /// Run only these (comma separated names from the table: semantic-none, semantic-scalar,
     /// one-hot, event-loss, flow-gt, flow-events, flow-sharp-net, exposure,
-    /// exposure-events-squared, exposure-events, edi-cascade, sharp-ceiling).
+    /// exposure-events-squared, exposure-events-unmodulated, exposure-events-given-motion,
+    /// exposure-events, edi-cascade, sharp-ceiling).
     #[arg(long, value_delimiter = ',')]
     pub only: Option<Vec<String>>,
     /// Run the blur-level study (paper Figure 5) instead of the ablation set: one-hot, event-loss,
@@ -67,7 +71,7 @@ pub(crate) struct Run {
     options: fn() -> TrainOptions,
 }
 
-const RUNS: [Run; 13] = [
+const RUNS: [Run; 14] = [
     Run {
         name: "semantic-none",
         what: "no semantics (every Gaussian deformed), no events",
@@ -195,9 +199,28 @@ const RUNS: [Run; 13] = [
         },
     },
     Run {
+        name: "exposure-events-given-motion",
+        what: "one-hot + exposure model + events between sub-exposure renders, counts as lower \
+               bounds, each render modulated by its slice's events, the in-exposure motion \
+               interpolated with local tangents and not learned (the previous default)",
+        options: || TrainOptions {
+            semantic: Some(SemanticMode::OneHot),
+            blur_model: Some(BlurModel::Exposure),
+            event_loss: Some(true),
+            event_pairs: Some(EventPairs::Exposure),
+            event_penalty: Some(EventPenaltyKind::Bound),
+            event_modulation: Some(true),
+            exposure_motion: Some(ExposureMotion::Given),
+            body_interpolation: Some(TrackTangents::Local),
+            flow_loss: Some(false),
+            ..TrainOptions::default()
+        },
+    },
+    Run {
         name: "exposure-events",
         what: "one-hot + exposure model + events between sub-exposure renders, counts as lower \
-               bounds, each render modulated by its slice's events (the default)",
+               bounds, each render modulated by its slice's events, the change over each \
+               exposure learned (the default)",
         options: || TrainOptions {
             semantic: Some(SemanticMode::OneHot),
             blur_model: Some(BlurModel::Exposure),

@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use train::config::{BlurModel, FlowSource, Preset, TrainConfig, TrainOptions};
+use train::config::{BlurModel, ExposureMotion, FlowSource, Preset, TrainConfig, TrainOptions};
 use train::data::TrainingData;
 use train::trainer::{StepReport, Trainer};
 use train::TrainError;
@@ -144,7 +144,8 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
 /// of one threshold when it recorded a sensor without a refractory period, and the event loss between sub-exposure renders and the
 /// events' modulation of each render's slice when the blur model is `exposure` and every frame
 /// has events (a scene without events trains with the exposure
-/// model alone, and says so).
+/// model alone, and says so), and the learned in-exposure motion with the exposure model when the
+/// scene has one person.
 fn scene_defaults(
     mut config: TrainConfig,
     training: &TrainingArgs,
@@ -185,6 +186,21 @@ fn scene_defaults(
             println!(
                 "events: each sub-exposure render is modulated by the events of its slice of the \
                  exposure (--event-modulation off to train without)"
+            );
+        }
+    }
+    if config.blur_model == BlurModel::Exposure && !training.sets("exposure_motion")? {
+        if data.people() == 1 {
+            config.exposure_motion = ExposureMotion::Learned;
+            println!(
+                "exposure model: the body's change over each exposure is learned per frame \
+                 (--exposure-motion given to keep the interpolated poses' motion)"
+            );
+        } else {
+            println!(
+                "exposure model: the scene has {} people, so their motion inside each exposure \
+                 is the given poses' (the learned in-exposure motion moves one person)",
+                data.people()
             );
         }
     }
@@ -403,6 +419,8 @@ pub fn run(args: Args) -> Result<()> {
             "event_threshold_neg": config.event_threshold_neg,
             "event_penalty": config.event_penalty,
             "event_modulation": config.event_modulation,
+            "exposure_motion": config.exposure_motion,
+            "body_interpolation": config.body_interpolation,
             "lpips_weight": config.lpips_weight,
             "pose_correction": config.pose_correction,
             "pose_error": pose_error,

@@ -77,6 +77,19 @@ pub enum TrackTangents {
     Local,
 }
 
+/// Where the body's motion inside each exposure comes from, with `blur_model = exposure` (see
+/// [`TrainConfig::exposure_motion`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExposureMotion {
+    /// The sub-exposure poses interpolated between the given frames' poses, as they are.
+    #[default]
+    Given,
+    /// The interpolated poses plus a learned per-frame change over the exposure
+    /// (`train::pose::correction`'s change part), the given pose kept at mid exposure.
+    Learned,
+}
+
 /// Which screen-space gradient feeds densification (see [`TrainConfig::density_gradient`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]

@@ -106,6 +106,12 @@ macro_rules! training_options {
         }
     }
 
+    /// Whether the model carries pose-correction rows (`train::pose::correction`): for the
+    /// fitter's `pose_correction`, or for the change part alone with `exposure_motion = learned`.
+    pub fn carries_pose_rows(&self) -> bool {
+        self.pose_correction || self.exposure_motion == ExposureMotion::Learned
+    }
+
             /// The `quick` preset: every option's declared default.
             fn quick() -> Self {
                 Self { $($name: $default,)* }
@@ -435,17 +441,10 @@ training_options! {
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction_change: bool = false,
     /// Whether pose correction learns each frame's mid-exposure correction; off: only the change
-    /// over the exposure is learned (with `pose_correction_change`), so the given poses stay the
-    /// poses at mid exposure and the corrections only reshape the motion inside each exposure
-    /// (exact poses whose in-exposure motion the interpolation misses, e.g. a kink between frames).
-    /// Off, with `--pose-correction-change on --pose-correction-knot-every 1
-    /// --lr-pose-correction 1e-2 --lr-pose-correction-root 1e-3
-    /// --lr-pose-correction-final-fraction 0.1` and `--body-interpolation band-limited`, at
-    /// `quick`: 36.16 / 31.85 dB full frame / human box on the default benchmark against 35.99 /
-    /// 31.66 for the default (mean of seeds 0–2: 36.05 / 31.72 against 35.93 / 31.60), 36.13 /
-    /// 31.83 against 36.01 / 31.70 with ideal events, 36.02 / 31.70 against 36.00 / 31.68 on the
-    /// noisy sensor (`docs/notes/2026-12-04-learned-in-exposure-motion.md`,
-    /// `docs/notes/2026-12-04-seed-spread.md`).
+    /// over the exposure is learned (with `pose_correction_change` or `exposure_motion =
+    /// learned`), so the given poses stay the poses at mid exposure. `--exposure-motion learned`
+    /// alone is `--pose-correction on --pose-correction-mid off --pose-correction-change on
+    /// --pose-correction-knot-every 1` at its own rates, bit for bit.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     pose_correction_mid: bool = true,
     /// Whether pose correction also corrects the root (global orientation and translation); off:
@@ -469,6 +468,28 @@ training_options! {
     /// A frame's Adam step is about its rate whatever its gradient's size, so the rate is the
     /// corrections' noise floor; the decay lets them settle.
     lr_pose_correction_final_fraction: f32 = 1.0,
+    /// With `blur_model = exposure`: whether the body's motion inside each exposure is the given
+    /// poses' interpolation (`given`) or that plus a change over the exposure learned per training
+    /// frame (`learned`: the change part of `train::pose::correction`, with its prior, from
+    /// `pose_correction_from`; the given pose stays the pose at mid exposure, so held-out frames
+    /// and reports are unchanged). It reshapes the motion the interpolation misses between
+    /// frames. `cargo xtask reconstruct` chooses `learned` when the blur model is `exposure` and
+    /// the scene has one person, unless `--exposure-motion` or the config file sets it; the
+    /// library default is `given` (the previous default, and the paper's configuration). At
+    /// `quick`, mean of seeds 0–2: 36.05 / 31.72 dB full frame / human box on the default
+    /// benchmark against 35.93 / 31.60 given (better box PSNR in 8 of 9 paired runs over three
+    /// benchmarks, lower box LPIPS in all 9; `docs/notes/2026-12-04-seed-spread.md`). With
+    /// `pose_correction` the change lives on the correction's knots; one person only.
+    exposure_motion: ExposureMotion = ExposureMotion::Given,
+    /// Adam learning rate of the learned in-exposure motion's body joints (radians of change over
+    /// an exposure, per step of a frame).
+    lr_exposure_motion: f32 = 1e-2,
+    /// Adam learning rate of the learned in-exposure motion's root (global orientation, radians;
+    /// translation, metres).
+    lr_exposure_motion_root: f32 = 1e-3,
+    /// The learned in-exposure motion's rates decay log-linearly from `pose_correction_from` to
+    /// the last step, to this fraction of `lr_exposure_motion` / `lr_exposure_motion_root`.
+    lr_exposure_motion_final_fraction: f32 = 0.1,
     /// Learned camera correction (`train::pose::camera_correction`), for a moving camera whose
     /// poses come from a tracker (SLAM, SfM, COLMAP): per training frame a rigid twist of its
     /// camera at mid exposure (rotation about the camera centre, radians; shift, metres; camera
@@ -548,12 +569,13 @@ training_options! {
     camera_interpolation: TrackTangents = TrackTangents::BandLimited,
     /// With `blur_model = exposure`: how the body's joint rotations and root translation are
     /// interpolated inside each exposure between the frames' poses (cubic Hermite curves through
-    /// every frame's pose, as for the camera). `local` (the default): fourth-order central
-    /// differences; `band-limited`: the camera's windowed band-limited differentiator over 8
-    /// frames on each side, which on the generator's motion lowers the sub-frame joint error from
-    /// 0.230° to 0.193° mean and moves the human box by +0.07 dB on ideal events, +0.02 on the
-    /// default benchmark (`quick`; `docs/notes/2026-12-02-body-tangents-and-serial-step.md`).
-    body_interpolation: TrackTangents = TrackTangents::Local,
+    /// every frame's pose, as for the camera). `band-limited` (the default since 2026-12-05): the
+    /// camera's windowed band-limited differentiator over 8 frames on each side, which on the
+    /// generator's motion lowers the sub-frame joint error from 0.230° to 0.193° mean and moves
+    /// the human box by +0.07 dB on ideal events, +0.02 on the default benchmark (`quick`;
+    /// `docs/notes/2026-12-02-body-tangents-and-serial-step.md`); `local` (the default before):
+    /// fourth-order central differences.
+    body_interpolation: TrackTangents = TrackTangents::BandLimited,
     /// The camera corrections stay zero before this step (the first steps' model is a blur of
     /// Gaussians whose gradients do not yet say where the room's edges are).
     camera_correction_from: usize = 100,

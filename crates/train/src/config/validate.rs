@@ -2,7 +2,7 @@
 //! The checks run in groups — sizes, loss weights, events, initialisation, rates, schedules — and
 //! the first problem found is reported.
 
-use super::{BlurModel, EventPairs, TrainConfig};
+use super::{BlurModel, EventPairs, ExposureMotion, TrainConfig};
 use crate::TrainError;
 
 /// A refusal naming the field.
@@ -164,6 +164,8 @@ impl TrainConfig {
             ("lr_latent", self.lr_latent),
             ("lr_pose_correction", self.lr_pose_correction),
             ("lr_pose_correction_root", self.lr_pose_correction_root),
+            ("lr_exposure_motion", self.lr_exposure_motion),
+            ("lr_exposure_motion_root", self.lr_exposure_motion_root),
             (
                 "pose_correction_zero_weight",
                 self.pose_correction_zero_weight,
@@ -235,6 +237,10 @@ impl TrainConfig {
                 "lr_pose_correction_final_fraction",
                 self.lr_pose_correction_final_fraction,
             ),
+            (
+                "lr_exposure_motion_final_fraction",
+                self.lr_exposure_motion_final_fraction,
+            ),
             ("lr_camera_final_fraction", self.lr_camera_final_fraction),
         ] {
             if !(v.is_finite() && v > 0.0) {
@@ -244,10 +250,22 @@ impl TrainConfig {
                 );
             }
         }
-        if self.pose_correction && !self.pose_correction_mid && !self.pose_correction_change {
+        let learned_motion = self.exposure_motion == ExposureMotion::Learned;
+        if learned_motion && self.blur_model != BlurModel::Exposure {
+            return bad(
+                "exposure_motion",
+                "`learned` reshapes the motion inside each exposure: it needs blur_model = exposure",
+            );
+        }
+        if self.pose_correction
+            && !self.pose_correction_mid
+            && !self.pose_correction_change
+            && !learned_motion
+        {
             return bad(
                 "pose_correction_mid",
-                "off with pose_correction_change off leaves pose correction nothing to learn",
+                "off with pose_correction_change off and exposure_motion given leaves pose correction \
+                 nothing to learn",
             );
         }
         if self.pose_correction_knot_every == 0 {

@@ -24,9 +24,14 @@ pub struct ModelConfig {
     pub background: [f32; 3],
     /// Near clipping plane of the rasterizer (m).
     pub near_plane: f64,
-    /// The model carries learned per-knot pose corrections.
+    /// The model's pose rows correct a fitter's poses (`TrainConfig::pose_correction`; what the
+    /// reports call corrected poses).
     pub pose_correction: bool,
-    /// Training frames per pose-correction knot.
+    /// The model carries learned per-knot pose rows (`TrainConfig::carries_pose_rows`: for pose
+    /// correction or for the learned in-exposure motion alone).
+    pub pose_rows: bool,
+    /// Training frames per pose-row knot: `pose_correction_knot_every` with pose correction, else
+    /// 1 (the learned in-exposure motion is per frame).
     pub pose_correction_knot_every: usize,
     /// The model carries learned per-training-frame camera corrections.
     pub camera_correction: bool,
@@ -54,7 +59,12 @@ impl From<&TrainConfig> for ModelConfig {
             background: config.background,
             near_plane: config.near_plane,
             pose_correction: config.pose_correction,
-            pose_correction_knot_every: config.pose_correction_knot_every,
+            pose_rows: config.carries_pose_rows(),
+            pose_correction_knot_every: if config.pose_correction {
+                config.pose_correction_knot_every
+            } else {
+                1
+            },
             camera_correction: config.camera_correction,
             camera_gauge: config.camera_correction
                 && config.camera_gauge == crate::config::CameraGauge::Person,

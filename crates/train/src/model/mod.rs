@@ -57,8 +57,9 @@ pub struct Model {
     pub latents: Vec<f32>,
     /// Frame number of each latent slot (the training frames in time order).
     pub frame_indices: Vec<u32>,
-    /// Per-training-frame pose corrections, (frames, [`CORRECTION_VALUES`]) (`train::pose::correction`);
-    /// empty when `pose_correction` is off.
+    /// Per-knot pose corrections, (knots, [`CORRECTION_VALUES`]) (`train::pose::correction`): the
+    /// fitter's correction and/or the learned in-exposure motion; empty without either
+    /// (`ModelConfig::pose_rows`).
     pub pose_corrections: Vec<f32>,
     /// Per-training-frame camera corrections, (frames, [`CAMERA_CORRECTION_VALUES`])
     /// (`train::pose::camera_correction`); empty when `camera_correction` is off.
@@ -210,7 +211,7 @@ pub struct PosedGradients {
 
 impl Model {
     /// A model from its parts, checked against `config` (semantic logits, features, latents), with
-    /// zero pose corrections when `config.pose_correction` is on.
+    /// zero pose rows when `config.pose_rows` is on.
     pub fn new(
         config: ModelConfig,
         set: GaussianSet,
@@ -245,7 +246,7 @@ impl Model {
                 found: latents.len(),
             });
         }
-        let pose_corrections = if config.pose_correction {
+        let pose_corrections = if config.pose_rows {
             let knots = knot_slots(frame_indices.len(), config.pose_correction_knot_every);
             vec![0.0; knots.len() * CORRECTION_VALUES]
         } else {

@@ -19,12 +19,12 @@ mod terms;
 pub use report::{StageTimes, StepReport};
 pub use terms::warm_up_skinning;
 
-use crate::config::TrainConfig;
+use crate::config::{ExposureMotion, TrainConfig};
 use crate::data::TrainingData;
 use crate::density::{DensityStrategy, StepStatistics};
 use crate::init::{initialise_people, BodySurface, InitConfig};
 use crate::model::{Model, ModelConfig};
-use crate::optimisers::Optimisers;
+use crate::optimisers::{Optimisers, PoseRateScales};
 use crate::pose::posing::ModelGradients;
 use crate::schedule::{correction_rate_scale, exponential_rate};
 use crate::TrainError;
@@ -70,9 +70,14 @@ impl Trainer {
     /// Initialises the model (paper §4.2) for `data` and fresh optimiser state.
     pub fn new(data: &TrainingData, config: TrainConfig) -> Result<Self, TrainError> {
         config.validate()?;
-        if config.pose_correction && !data.others.is_empty() {
+        if config.carries_pose_rows() && !data.others.is_empty() {
+            let what = if config.pose_correction {
+                "pose correction (--pose-correction on) corrects"
+            } else {
+                "the learned in-exposure motion (--exposure-motion learned) moves"
+            };
             return Err(TrainError::Config(format!(
-                "pose correction (--pose-correction on) corrects one person; the scene has {}",
+                "{what} one person; the scene has {}",
                 data.cast().len()
             )));
         }
@@ -245,12 +250,18 @@ impl Trainer {
             latent_grads[next_slot * d..(next_slot + 1) * d].copy_from_slice(g);
         }
         let nonrigid_frozen = step < config.nonrigid_from;
-        let rate_scale = correction_rate_scale(
-            config.lr_pose_correction_final_fraction,
-            config.pose_correction_from,
-            step,
-            config.steps,
-        );
+        let pose_scale = |fraction| {
+            correction_rate_scale(fraction, config.pose_correction_from, step, config.steps)
+        };
+        let mid = pose_scale(config.lr_pose_correction_final_fraction);
+        let pose_scales = PoseRateScales {
+            mid,
+            change: if config.exposure_motion == ExposureMotion::Learned {
+                pose_scale(config.lr_exposure_motion_final_fraction)
+            } else {
+                mid
+            },
+        };
         self.optimisers
             .step_gaussians(&mut self.model.set, &set_grads, &rates)?;
         let [nonrigid, skinning, human_colour, scene_colour, latents, corrections] =
@@ -277,7 +288,7 @@ impl Trainer {
             if name == "pose_correction" {
                 if let Some((_, knots)) = &correction_update {
                     self.optimisers
-                        .step_pose_corrections(params, g, knots, rate_scale)?;
+                        .step_pose_corrections(params, g, knots, pose_scales)?;
                 }
                 continue;
             }

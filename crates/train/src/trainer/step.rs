@@ -109,7 +109,7 @@ impl Trainer {
 
         // Frame k: its passes (poses corrected by the frame's pose correction once it learns) and
         // the losses of their mean.
-        let correcting = config.pose_correction && step >= config.pose_correction_from;
+        let correcting = config.carries_pose_rows() && step >= config.pose_correction_from;
         let corrected = if correcting {
             let exposure = config.blur_model == BlurModel::Exposure;
             Some(CorrectedPoses::of(model, data, slot, exposure)?)
