@@ -100,6 +100,30 @@ fn a_learning_correction_moves_the_trained_frames_cameras_whatever_the_thread_co
     assert!(rows
         .clone()
         .any(|row| row[..TWIST_VALUES].iter().any(|&v| v != 0.0)));
+    // Without the mid-exposure twist: only the change over the exposure moves.
+    let mut t = Trainer::new(
+        &ctx,
+        TrainConfig {
+            camera_correction_mid: false,
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    t.run(&ctx, 12, |_, _| Ok(())).unwrap();
+    let rows = t.model.camera_corrections.chunks(CAMERA_CORRECTION_VALUES);
+    assert!(rows
+        .clone()
+        .all(|row| row[..TWIST_VALUES].iter().all(|&v| v == 0.0)));
+    assert!(rows
+        .clone()
+        .any(|row| row[TWIST_VALUES..].iter().any(|&v| v != 0.0)));
+    let nothing = TrainConfig {
+        camera_correction_mid: false,
+        camera_correction_change: false,
+        ..config
+    };
+    let refused = nothing.validate().unwrap_err().to_string();
+    assert!(refused.contains("camera_correction_mid"), "{refused}");
 }
 
 #[test]

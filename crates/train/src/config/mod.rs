@@ -540,6 +540,11 @@ training_options! {
     /// `handheld-err`, `quick`; see `lr_camera_final_fraction` for exact cameras).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction_change: bool = true,
+    /// Whether camera correction learns each frame's mid-exposure twist; off: the given cameras
+    /// stay the mid-exposure cameras and only their change over each exposure is learned (the
+    /// camera's in-exposure motion, for exact cameras).
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    camera_correction_mid: bool = true,
     /// With camera correction, what sets the offset common to every frame's camera — a gauge the
     /// static room cannot see, since it can turn with the cameras and fit the images as well:
     /// `free` (every frame's twist learns from every Gaussian) or `person` (the frames' twists are

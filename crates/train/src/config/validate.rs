@@ -268,6 +268,12 @@ impl TrainConfig {
                  nothing to learn",
             );
         }
+        if self.camera_correction && !self.camera_correction_mid && !self.camera_correction_change {
+            return bad(
+                "camera_correction_mid",
+                "off with camera_correction_change off leaves camera correction nothing to learn",
+            );
+        }
         if self.pose_correction_knot_every == 0 {
             return bad(
                 "pose_correction_knot_every",

@@ -172,9 +172,12 @@ impl CameraGradient {
                 prior_value += tracker_prior_terms(own, tracker, row);
             }
         }
-        if !config.camera_correction_change {
-            for row in values.chunks_mut(n) {
+        for row in values.chunks_mut(n) {
+            if !config.camera_correction_change {
                 row[n / 2..].fill(0.0);
+            }
+            if !config.camera_correction_mid {
+                row[..n / 2].fill(0.0);
             }
         }
         Self {
