@@ -56,7 +56,7 @@ pub struct Args {
     /// Run every row once per seed (comma separated, e.g. `0,1,2`; overrides --seed), each in
     /// `OUT/<run>/seed-<s>/`, and report each measure's mean and range over the seeds beside the
     /// per-run table (`ablation.md`, `ablation_over_seeds.json`). On the default benchmark at
-    /// `quick`, seeds 0, 1 and 2 of the default span 0.23 dB in the human box (0.32 dB with
+    /// `quick`, seeds 0, 1 and 2 of the default span 0.30 dB in the human box (0.49 dB with
     /// ideal events, 0.40 dB on the noisy sensor): a smaller difference between two rows of one
     /// seed is not a finding.
     #[arg(long, value_delimiter = ',')]
