@@ -41,7 +41,7 @@ enum Command {
     /// unconstrained and the event term at weight 2 (`--event-loss off`: the exposure model
     /// alone), and with one person the body's change over each exposure learned per frame around
     /// the band-limited interpolation of the given poses. The previous default is `--exposure-motion
-    /// given --body-interpolation local`; before it `--event-weight 1`, then also `--subframes 5
+    /// given --body-interpolation local --lr-means 1.6e-4`; before it `--event-weight 1`, then also `--subframes 5
     /// --event-ignore-mixed off`, then also `--event-residual-cap 0`; the squared event loss is `--event-penalty squared
     /// --event-weight 0.3 --event-modulation off`. The 2-D cascade baseline (every
     /// frame deblurred by EDI first) is `--train-on edi --blur-model none --event-loss off`. The

@@ -202,7 +202,8 @@ const RUNS: [Run; 14] = [
         name: "exposure-events-given-motion",
         what: "one-hot + exposure model + events between sub-exposure renders, counts as lower \
                bounds, each render modulated by its slice's events, the in-exposure motion \
-               interpolated with local tangents and not learned (the previous default)",
+               interpolated with local tangents and not learned, 3DGS's position rate (the \
+               previous default)",
         options: || TrainOptions {
             semantic: Some(SemanticMode::OneHot),
             blur_model: Some(BlurModel::Exposure),
@@ -212,6 +213,7 @@ const RUNS: [Run; 14] = [
             event_modulation: Some(true),
             exposure_motion: Some(ExposureMotion::Given),
             body_interpolation: Some(TrackTangents::Local),
+            lr_means: Some(1.6e-4),
             flow_loss: Some(false),
             ..TrainOptions::default()
         },
