@@ -40,7 +40,9 @@ enum Command {
     /// each pixel's cost capped at one threshold, a pixel that fired both polarities left
     /// unconstrained and the event term at weight 2 (`--event-loss off`: the exposure model
     /// alone), and with one person the body's change over each exposure learned per frame around
-    /// the band-limited interpolation of the given poses. The previous default is `--exposure-motion
+    /// the band-limited interpolation of the given poses; when the camera moves, each training
+    /// frame's camera corrected from the images (`--camera-correction off` keeps the given
+    /// cameras). The previous default is `--exposure-motion
     /// given --body-interpolation local --lr-means 1.6e-4`; before it `--event-weight 1`, then also `--subframes 5
     /// --event-ignore-mixed off`, then also `--event-residual-cap 0`; the squared event loss is `--event-penalty squared
     /// --event-weight 0.3 --event-modulation off`. The 2-D cascade baseline (every

@@ -1,7 +1,7 @@
 //! `cargo xtask reconstruct`'s defaults that depend on the scene, on edited copies of the tiny
 //! fixture: a scene without events trains the exposure model alone, and a sensor recorded without
 //! a refractory period holds mixed-polarity pixels to their counts and bounds a count of n by n − 1
-//! thresholds unless the user says otherwise.
+//! thresholds, and a moving camera is corrected from the images, unless the user says otherwise.
 #![allow(clippy::unwrap_used)]
 
 mod common;
@@ -55,4 +55,55 @@ fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
     let (stdout, used) = run("margin", &["--event-bound-margin", "0.5"]);
     assert!(!stdout.contains("n - 1"), "{stdout}");
     assert!(used.contains("\"event_bound_margin\": 0.5"), "{used}");
+}
+
+/// A copy of the tiny fixture whose camera moves: scene format 2, each frame's camera the scene's
+/// shifted sideways by 2 mm per frame.
+fn moving_camera_fixture(dir: &std::path::Path) -> std::path::PathBuf {
+    fixture_with_scene(dir, "moving-camera", |scene| {
+        scene["format_version"] = serde_json::json!(2);
+        let pose = scene["camera"]["world_to_camera"].clone();
+        for (i, frame) in scene["frames"]
+            .as_array_mut()
+            .unwrap()
+            .iter_mut()
+            .enumerate()
+        {
+            let mut own = pose.clone();
+            let t = own[0][3].as_f64().unwrap() + 0.002 * i as f64;
+            own[0][3] = serde_json::json!(t);
+            frame["world_to_camera"] = own;
+        }
+    })
+}
+
+#[test]
+fn a_moving_camera_is_corrected_from_the_images_unless_the_user_chooses() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    let scene_dir = moving_camera_fixture(dir.path());
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let args = [&["--subframes", "3"], extra].concat();
+        let stdout = reconstruct_with(&scene_dir, &out, &config, &args);
+        let used = std::fs::read_to_string(out.join("config.json")).unwrap();
+        (stdout, used)
+    };
+    let (stdout, used) = run("default", &[]);
+    assert!(stdout.contains("the camera moves"), "{stdout}");
+    assert!(used.contains("\"camera_correction\": true"), "{used}");
+    let (stdout, used) = run("given", &["--camera-correction", "off"]);
+    assert!(!stdout.contains("the camera moves"), "{stdout}");
+    assert!(used.contains("\"camera_correction\": false"), "{used}");
+    // A camera that stays put keeps the given cameras.
+    let (stdout, used) = {
+        let out = dir.path().join("static");
+        let stdout = reconstruct_with(&common::fixture(), &out, &config, &["--subframes", "3"]);
+        (
+            stdout,
+            std::fs::read_to_string(out.join("config.json")).unwrap(),
+        )
+    };
+    assert!(!stdout.contains("the camera moves"), "{stdout}");
+    assert!(used.contains("\"camera_correction\": false"), "{used}");
 }

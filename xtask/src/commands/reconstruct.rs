@@ -144,8 +144,8 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
 /// of one threshold when it recorded a sensor without a refractory period, and the event loss between sub-exposure renders and the
 /// events' modulation of each render's slice when the blur model is `exposure` and every frame
 /// has events (a scene without events trains with the exposure
-/// model alone, and says so), and the learned in-exposure motion with the exposure model when the
-/// scene has one person.
+/// model alone, and says so), the learned in-exposure motion with the exposure model when the
+/// scene has one person, and learned camera correction when the camera moves.
 fn scene_defaults(
     mut config: TrainConfig,
     training: &TrainingArgs,
@@ -203,6 +203,15 @@ fn scene_defaults(
                 data.people()
             );
         }
+    }
+    // A moving camera's poses come from a tracker, whose errors the images can correct (and
+    // exact cameras lose little to it): learn the corrections unless the user chose.
+    if data.camera_moves && !training.sets("camera_correction")? {
+        config.camera_correction = true;
+        println!(
+            "cameras: the camera moves, so each training frame's camera is corrected from the \
+             images (--camera-correction off to keep the given cameras)"
+        );
     }
     if config.blur_model == BlurModel::Exposure && !training.sets("event_loss")? {
         config.event_loss = with_events;
