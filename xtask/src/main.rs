@@ -35,7 +35,7 @@ enum Command {
     ///
     /// Every training option below overrides the preset and the --config file. The default is the
     /// best method measured within the `quick` preset's time budget: the physical model of the blur (each training frame the mean of 9 renders
-    /// over its exposure; 5 at `full`) with the events between those renders when the scene has events, their
+    /// over its exposure) with the events between those renders when the scene has events, their
     /// counts read as lower bounds on the change as a sensor with a refractory period gives them,
     /// each pixel's cost capped at one threshold, a pixel that fired both polarities left
     /// unconstrained and the event term at weight 2 (`--event-loss off`: the exposure model

@@ -183,8 +183,8 @@ training_options! {
     aiap_position_weight: f32 = 1.0,
     /// Weight of the AIAP loss on human Gaussians' covariances.
     aiap_covariance_weight: f32 = 100.0,
-    /// Position learning rate at step 0 (× scene extent), metres per step. `quick`: 4.8e-4, three
-    /// times 3DGS's 1.6e-4 (which `full`'s five times longer schedule keeps): at `quick`, +0.04 /
+    /// Position learning rate at step 0 (× scene extent), metres per step: 4.8e-4, three times
+    /// 3DGS's 1.6e-4 (both presets since 2026-12-05; `full` had 1.6e-4): at `quick`, +0.04 /
     /// +0.28 / +0.31 dB in the human box on seeds 0 / 1 / 2 of the default benchmark, +0.26 on
     /// `handheld` (`docs/notes/2026-12-05-learned-motion-default.md`).
     lr_means: f32 = 4.8e-4,
@@ -250,8 +250,8 @@ training_options! {
     /// Renders per exposure with `blur_model = exposure` (midpoint rule over the exposure). `quick`
     /// takes 9: with the events' cap and mixed pixels unconstrained, 35.81 / 31.47 dB (full frame /
     /// human box) against 34.79 / 30.38 with 5, in 8 min 28 s of wall time against 5 min 12 s
-    /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` keeps 5 for its 90-minute budget (9 with
-    /// `--deform-hidden 64`: 38.25 / 33.62 dB against 37.18 / 32.54, in 117 instead of 92 min).
+    /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` takes 9 too since 2026-12-05 (with 5 and
+    /// twice the network width it scored 37.18 / 32.54 dB in 92 min; 9 gave 38.25 / 33.62).
     subframes: usize = 9,
     /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,
     /// skinning weights and both colours are evaluated at the mid-exposure pose and each
@@ -605,19 +605,18 @@ impl TrainConfig {
             Preset::Quick => quick,
             Preset::Full => Self {
                 steps: 6000,
-                lr_means: 1.6e-4,
                 human_gaussians: 10_000,
                 scene_gaussians: 40_000,
-                max_gaussians: 150_000,
-                deform_hidden: 128,
+                // With at most 100k Gaussians (150k before 2026-12-05) the nine renders per
+                // exposure and `quick`'s rates and widths fit the 90-minute budget: 5000 steps
+                // took 46 min on Zen 5 (`docs/notes/2026-12-05-full-preset-in-budget.md`).
+                max_gaussians: 100_000,
                 skinning_until: 1500,
                 nonrigid_from: 1000,
                 densify_from: 500,
                 densify_until: 4000,
                 opacity_reset_every: 3000,
                 checkpoint_every: 1000,
-                // 9 renders (width 64) took 117 min for +1.08 dB in the box (2026-12-01).
-                subframes: 5,
                 ..quick
             },
         }
