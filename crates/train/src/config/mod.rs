@@ -502,8 +502,8 @@ training_options! {
     /// the twist interpolated from their neighbouring training frames. Off in the presets;
     /// `cargo xtask reconstruct` turns it on when the scene's camera moves: on the `handheld`
     /// benchmark (`quick`) it recovers 7 dB full frame of a tracker's 0.5° / 1 cm camera error, and
-    /// with exact cameras it lifts the room outside the person's box by 0.6 dB for 0.6 dB inside
-    /// it (`docs/BENCHMARKS.md`).
+    /// with exact cameras it lifts the room outside the person's box by 0.6 dB for 0.9 dB inside
+    /// it (0.45 dB full frame; `docs/BENCHMARKS.md`).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction: bool = false,
     /// Adam learning rate of the camera corrections' rotations (radians per step of a frame; a
