@@ -8,6 +8,20 @@ mod common;
 
 use common::{fixture_with_scene, reconstruct_with, tiny_config};
 
+/// Runs `reconstruct` with 3 renders per exposure and `extra` on `scene` into `out`: its standard
+/// output and the configuration it used (`config.json`).
+fn run_three_renders(
+    scene: &std::path::Path,
+    out: &std::path::Path,
+    config: &std::path::Path,
+    extra: &[&str],
+) -> (String, String) {
+    let args = [&["--subframes", "3"], extra].concat();
+    let stdout = reconstruct_with(scene, out, config, &args);
+    let used = std::fs::read_to_string(out.join("config.json")).unwrap();
+    (stdout, used)
+}
+
 #[test]
 fn a_scene_without_events_trains_the_exposure_model_alone_and_says_so() {
     let dir = tempfile::tempdir().unwrap();
@@ -36,11 +50,7 @@ fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
         scene["generator"]["config"]["refractory_us"] = serde_json::json!(0);
     });
     let run = |name: &str, extra: &[&str]| {
-        let out = dir.path().join(name);
-        let args = [&["--subframes", "3"], extra].concat();
-        let stdout = reconstruct_with(&scene_dir, &out, &config, &args);
-        let used = std::fs::read_to_string(out.join("config.json")).unwrap();
-        (stdout, used)
+        run_three_renders(&scene_dir, &dir.path().join(name), &config, extra)
     };
     let (stdout, used) = run("default", &[]);
     assert!(stdout.contains("no refractory period"), "{stdout}");
@@ -83,11 +93,7 @@ fn a_moving_camera_is_corrected_from_the_images_unless_the_user_chooses() {
     let config = tiny_config(dir.path());
     let scene_dir = moving_camera_fixture(dir.path());
     let run = |name: &str, extra: &[&str]| {
-        let out = dir.path().join(name);
-        let args = [&["--subframes", "3"], extra].concat();
-        let stdout = reconstruct_with(&scene_dir, &out, &config, &args);
-        let used = std::fs::read_to_string(out.join("config.json")).unwrap();
-        (stdout, used)
+        run_three_renders(&scene_dir, &dir.path().join(name), &config, extra)
     };
     let (stdout, used) = run("default", &[]);
     assert!(stdout.contains("the camera moves"), "{stdout}");
@@ -96,14 +102,8 @@ fn a_moving_camera_is_corrected_from_the_images_unless_the_user_chooses() {
     assert!(!stdout.contains("the camera moves"), "{stdout}");
     assert!(used.contains("\"camera_correction\": false"), "{used}");
     // A camera that stays put keeps the given cameras.
-    let (stdout, used) = {
-        let out = dir.path().join("static");
-        let stdout = reconstruct_with(&common::fixture(), &out, &config, &["--subframes", "3"]);
-        (
-            stdout,
-            std::fs::read_to_string(out.join("config.json")).unwrap(),
-        )
-    };
+    let (stdout, used) =
+        run_three_renders(&common::fixture(), &dir.path().join("static"), &config, &[]);
     assert!(!stdout.contains("the camera moves"), "{stdout}");
     assert!(used.contains("\"camera_correction\": false"), "{used}");
 }

@@ -204,8 +204,9 @@ fn scene_defaults(
             );
         }
     }
-    // A moving camera's poses come from a tracker, whose errors the images can correct (and
-    // exact cameras lose little to it): learn the corrections unless the user chose.
+    // A moving camera's poses come from a tracker, whose errors the images can correct (worth
+    // 7 dB on `handheld-err`; exact cameras lose 0.45 dB full frame to it): learn the corrections
+    // unless the user chose.
     if data.camera_moves && !training.sets("camera_correction")? {
         config.camera_correction = true;
         println!(
