@@ -14,7 +14,7 @@ mod validate;
 pub use choices::*;
 
 use crate::blend::SemanticMode;
-use crate::init::{InitMode, SemanticInit};
+use crate::init::{InitMode, SceneInit, SemanticInit};
 use crate::TrainError;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -142,6 +142,10 @@ training_options! {
     human_gaussians: usize = 6_000,
     /// Initial scene Gaussians (uniform in the visible part of the scene cube).
     scene_gaussians: usize = 20_000,
+    /// Where the initial scene Gaussians start (`volume`: uniform in the scene cube; `stereo`: half
+    /// on the surfaces a plane sweep over the training frames finds, which needs a moving camera).
+    /// `cargo xtask reconstruct` chooses `stereo` when the scene's camera moves.
+    scene_init: SceneInit = SceneInit::Volume,
     /// Density control never grows the set beyond this many Gaussians.
     max_gaussians: usize = 45_000,
     /// λ_logit, the magnitude of the initial one-hot logits (paper: 3).

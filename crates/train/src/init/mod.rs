@@ -22,6 +22,8 @@ use gaussians::GaussianSet;
 use rand::{Rng, SeedableRng};
 use rasterize_cpu::Camera;
 
+pub mod stereo;
+
 /// Where the initial Gaussians come from (`--init`).
 #[derive(
     Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
@@ -36,6 +38,19 @@ pub enum InitMode {
     Random,
     /// Body surface samples only.
     SmplOnly,
+}
+
+/// Where the scene's initial Gaussians are drawn (`--scene-init`).
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneInit {
+    /// Uniform in the visible part of the scene cube (the paper).
+    Volume,
+    /// Half on the surfaces a plane sweep over the training frames finds ([`stereo`]; needs a
+    /// moving camera, and is the cube alone without one), half in the cube.
+    Stereo,
 }
 
 /// Initial semantic logits (`--semantic-init`).
@@ -79,6 +94,10 @@ pub struct InitConfig {
     pub opacity: f32,
     /// Seed of every sample.
     pub seed: u64,
+    /// Points on the static scene's surfaces (world, m; [`stereo::surface_points`]): up to half of
+    /// the scene samples are taken from them, evenly through the list, the rest drawn in the cube.
+    /// Empty: every scene sample from the cube.
+    pub scene_surface: Vec<[f32; 3]>,
 }
 
 impl Default for InitConfig {
@@ -96,6 +115,7 @@ impl Default for InitConfig {
             feature_dim: 32,
             opacity: 0.1,
             seed: 0,
+            scene_surface: Vec::new(),
         }
     }
 }
@@ -248,6 +268,11 @@ pub fn initialise_people(
     // setup cannot loop forever.
     let mut tries = 0usize;
     let max_tries = scene_n.saturating_mul(200).max(1000);
+    let on_surfaces = (scene_n / 2).min(config.scene_surface.len());
+    points.extend(
+        (0..on_surfaces)
+            .map(|k| config.scene_surface[k * config.scene_surface.len() / on_surfaces]),
+    );
     let (lo, hi) = cube;
     while points.len() < human + scene_n && tries < max_tries {
         tries += 1;
@@ -366,6 +391,39 @@ mod tests {
         assert!(model.set.means[300..]
             .iter()
             .all(|&p| visible(&[camera()], p)));
+    }
+
+    #[test]
+    fn surface_points_take_half_the_scene_samples_and_leave_the_rest_as_before() {
+        let (v, f, w) = cube_mesh();
+        let base = InitConfig {
+            human_count: 30,
+            scene_count: 40,
+            feature_dim: 2,
+            ..InitConfig::default()
+        };
+        let plain = initialise(&v, &f, &w, &[camera()], &[[0.0; 3]], &base);
+        let surface: Vec<[f32; 3]> = (0..100).map(|k| [0.01 * k as f32, 0.0, 1.0]).collect();
+        let config = InitConfig {
+            scene_surface: surface.clone(),
+            ..base.clone()
+        };
+        let model = initialise(&v, &f, &w, &[camera()], &[[0.0; 3]], &config);
+        assert_eq!(model.set.len(), plain.set.len());
+        // The human samples are untouched; 20 scene samples come from the list, evenly (every 5th).
+        assert_eq!(model.set.means[..30], plain.set.means[..30]);
+        let taken: Vec<[f32; 3]> = (0..20).map(|k| surface[5 * k]).collect();
+        assert_eq!(model.set.means[30..50], taken[..]);
+        // The other 20 are drawn in the cube as the first 20 draws of the plain init.
+        assert_eq!(model.set.means[50..], plain.set.means[30..50]);
+        // Fewer points than half the budget: all of them, the rest from the cube.
+        let few = InitConfig {
+            scene_surface: surface[..3].to_vec(),
+            ..base
+        };
+        let model = initialise(&v, &f, &w, &[camera()], &[[0.0; 3]], &few);
+        assert_eq!(model.set.means[30..33], surface[..3]);
+        assert_eq!(model.set.len(), 70);
     }
 
     #[test]
