@@ -1,7 +1,8 @@
 //! `cargo xtask reconstruct`'s defaults that depend on the scene, on edited copies of the tiny
 //! fixture: a scene without events trains the exposure model alone, and a sensor recorded without
 //! a refractory period holds mixed-polarity pixels to their counts and bounds a count of n by n − 1
-//! thresholds, and a moving camera is corrected from the images, unless the user says otherwise.
+//! thresholds, and a moving camera is corrected from the images and its scene Gaussians start on
+//! swept surfaces, unless the user says otherwise.
 #![allow(clippy::unwrap_used)]
 
 mod common;
@@ -88,7 +89,7 @@ fn moving_camera_fixture(dir: &std::path::Path) -> std::path::PathBuf {
 }
 
 #[test]
-fn a_moving_camera_is_corrected_from_the_images_unless_the_user_chooses() {
+fn a_moving_camera_is_corrected_and_its_scene_swept_unless_the_user_chooses() {
     let dir = tempfile::tempdir().unwrap();
     let config = tiny_config(dir.path());
     let scene_dir = moving_camera_fixture(dir.path());
@@ -96,14 +97,22 @@ fn a_moving_camera_is_corrected_from_the_images_unless_the_user_chooses() {
         run_three_renders(&scene_dir, &dir.path().join(name), &config, extra)
     };
     let (stdout, used) = run("default", &[]);
-    assert!(stdout.contains("the camera moves"), "{stdout}");
+    assert!(stdout.contains("camera is corrected"), "{stdout}");
     assert!(used.contains("\"camera_correction\": true"), "{used}");
+    assert!(stdout.contains("plane sweep"), "{stdout}");
+    assert!(used.contains("\"scene_init\": \"stereo\""), "{used}");
     let (stdout, used) = run("given", &["--camera-correction", "off"]);
-    assert!(!stdout.contains("the camera moves"), "{stdout}");
+    assert!(!stdout.contains("camera is corrected"), "{stdout}");
     assert!(used.contains("\"camera_correction\": false"), "{used}");
+    assert!(used.contains("\"scene_init\": \"stereo\""), "{used}");
+    let (stdout, used) = run("volume", &["--scene-init", "volume"]);
+    assert!(!stdout.contains("plane sweep"), "{stdout}");
+    assert!(used.contains("\"scene_init\": \"volume\""), "{used}");
+    assert!(used.contains("\"camera_correction\": true"), "{used}");
     // A camera that stays put keeps the given cameras.
     let (stdout, used) =
         run_three_renders(&common::fixture(), &dir.path().join("static"), &config, &[]);
     assert!(!stdout.contains("the camera moves"), "{stdout}");
     assert!(used.contains("\"camera_correction\": false"), "{used}");
+    assert!(used.contains("\"scene_init\": \"volume\""), "{used}");
 }

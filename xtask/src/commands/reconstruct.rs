@@ -145,7 +145,8 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
 /// events' modulation of each render's slice when the blur model is `exposure` and every frame
 /// has events (a scene without events trains with the exposure
 /// model alone, and says so), the learned in-exposure motion with the exposure model when the
-/// scene has one person, and learned camera correction when the camera moves.
+/// scene has one person, and learned camera correction and scene Gaussians started on swept
+/// surfaces (`--scene-init stereo`) when the camera moves.
 fn scene_defaults(
     mut config: TrainConfig,
     training: &TrainingArgs,
@@ -212,6 +213,15 @@ fn scene_defaults(
         println!(
             "cameras: the camera moves, so each training frame's camera is corrected from the \
              images (--camera-correction off to keep the given cameras)"
+        );
+    }
+    // A moving camera sees the room with parallax: scene Gaussians must start near its surfaces.
+    if data.camera_moves && !training.sets("scene_init")? {
+        config.scene_init = train::init::SceneInit::Stereo;
+        println!(
+            "scene: the camera moves, so half the initial scene Gaussians start on the surfaces a \
+             plane sweep over the training frames finds (--scene-init volume to draw them all in \
+             the scene cube)"
         );
     }
     if config.blur_model == BlurModel::Exposure && !training.sets("event_loss")? {
