@@ -1,12 +1,12 @@
 //! `--scene-init stereo` on the tiny fixture: with a fixed camera it changes no bit; with a moving
 //! one it starts scene Gaussians on the swept surfaces and trains the same bits on one and two
-//! threads.
+//! threads; the person's box it leaves out holds the person.
 #![allow(clippy::unwrap_used)]
 
 use train::config::TrainConfig;
 use train::data::TrainingData;
 use train::init::SceneInit;
-use train::trainer::Trainer;
+use train::trainer::{person_box, Trainer};
 
 mod common;
 use common::*;
@@ -65,4 +65,38 @@ fn a_moving_camera_starts_scene_gaussians_on_surfaces_whatever_the_thread_count(
         .filter(|(a, b)| a != b)
         .count();
     assert!(moved > 0, "no scene Gaussian starts on a swept surface");
+}
+
+#[test]
+fn the_box_left_out_holds_the_persons_mask() {
+    let ctx = context();
+    let data = train::data::load_dataset(&fixture()).unwrap();
+    let w = ctx.camera.width as usize;
+    let mut checked = 0;
+    for f in &ctx.frames {
+        let frame = data.frames.iter().find(|d| d.index == f.index).unwrap();
+        let Some(mask) = &frame.mask else { continue };
+        let [x0, y0, x1, y1] = person_box(&ctx, f).unwrap();
+        let mut pixels = 0;
+        for (i, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
+            let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            assert!(
+                x0 <= x && x < x1 && y0 <= y && y < y1,
+                "frame {}: pixel ({x}, {y}) outside {:?}",
+                f.index,
+                [x0, y0, x1, y1]
+            );
+            pixels += 1;
+        }
+        // Not the whole image: the box is the person's, grown by 15 cm (the fixture's person
+        // stands tall in a small image, so only its width is narrow).
+        assert!(
+            pixels > 0 && x1 - x0 < 0.75 * w as f64,
+            "frame {}: box {:?}",
+            f.index,
+            [x0, y0, x1, y1]
+        );
+        checked += 1;
+    }
+    assert!(checked > 0);
 }

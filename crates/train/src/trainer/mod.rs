@@ -106,9 +106,10 @@ fn scene_surface(data: &TrainingData, config: &TrainConfig, roots: &[[f32; 3]]) 
 /// and the blur of a limb's motion.
 const PERSON_MARGIN_M: f64 = 0.15;
 
-/// The pixel box of every person of frame `f`: the canonical body vertices (every fourth) moved
-/// rigidly by the bone that weighs most on each, projected and grown by [`PERSON_MARGIN_M`].
-fn person_box(data: &TrainingData, f: &TrainingFrame) -> Option<[f64; 4]> {
+/// The pixel box (x0, y0, x1, y1) of every person of training frame `f` of `data`: the canonical
+/// body vertices (every fourth) moved rigidly by the bone that weighs most on each, projected by
+/// the frame's camera and grown by [`PERSON_MARGIN_M`]; what `--scene-init stereo` leaves out.
+pub fn person_box(data: &TrainingData, f: &TrainingFrame) -> Option<[f64; 4]> {
     let bodies = std::iter::once(&data.body).chain(&data.others);
     let mut posed = Vec::new();
     for (person, body) in bodies.enumerate() {
