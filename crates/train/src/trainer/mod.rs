@@ -14,16 +14,17 @@ mod checkpoint;
 mod correction;
 mod report;
 mod step;
+mod surfaces;
 mod terms;
 
 pub use report::{StageTimes, StepReport};
+pub use surfaces::person_box;
 pub use terms::warm_up_skinning;
 
 use crate::config::{ExposureMotion, TrainConfig};
-use crate::data::{TrainingData, TrainingFrame};
+use crate::data::TrainingData;
 use crate::density::{DensityStrategy, StepStatistics};
-use crate::init::stereo::{self, SweepConfig, SweepView};
-use crate::init::{initialise_people, BodySurface, InitConfig, InitMode, SceneInit};
+use crate::init::{initialise_people, BodySurface, InitConfig};
 use crate::model::{Model, ModelConfig};
 use crate::optimisers::{Optimisers, PoseRateScales};
 use crate::pose::posing::ModelGradients;
@@ -34,8 +35,6 @@ use gaussians::density::DensityStats;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use smpl_deform::math::affine_apply;
-use smpl_deform::NUM_JOINTS;
 use terms::AiapNeighbours;
 
 /// Identifier stored in every checkpoint of this trainer.
@@ -60,71 +59,6 @@ pub struct Trainer {
     /// update, over the whole run (checkpointed); a Gaussian never moves between people by
     /// densification, whose children inherit their parent's logits.
     pub person_changes: u64,
-}
-
-/// Points on the static scene's surfaces for the initial scene Gaussians
-/// ([`crate::init::stereo`]) when `config.scene_init` asks for them and the camera moves; empty
-/// otherwise. Each frame's people are left out of its points ([`person_box`]). The sweep reaches from a quarter of the nearest camera–person distance to
-/// twice the farthest (the scene cube's depth).
-fn scene_surface(data: &TrainingData, config: &TrainConfig, roots: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    let moves = data.frames.iter().any(|f| f.camera != data.camera);
-    if config.scene_init != SceneInit::Stereo || !moves || config.init != InitMode::SmplCube {
-        return Vec::new();
-    }
-    let distance = |f: &TrainingFrame, p: [f32; 3]| {
-        let c = f.camera.center_world();
-        (0..3)
-            .map(|a| (f64::from(p[a]) - c[a]).powi(2))
-            .sum::<f64>()
-            .sqrt()
-    };
-    let (mut nearest, mut farthest) = (f64::INFINITY, 0.0f64);
-    for p in roots {
-        for f in &data.frames {
-            nearest = nearest.min(distance(f, *p));
-            farthest = farthest.max(distance(f, *p));
-        }
-    }
-    let views: Vec<SweepView<'_>> = data
-        .frames
-        .iter()
-        .map(|f| SweepView {
-            image: &f.image,
-            camera: &f.camera,
-            exclude: person_box(data, f),
-        })
-        .collect();
-    let sweep = SweepConfig {
-        near: (0.25 * nearest).max(0.05),
-        far: (2.0 * farthest).max(0.5 * nearest + 1.0),
-        ..SweepConfig::default()
-    };
-    stereo::surface_points(&views, &sweep)
-}
-
-/// How far beyond its posed skeleton's vertices a person may reach in a frame (m): clothing, hair
-/// and the blur of a limb's motion.
-const PERSON_MARGIN_M: f64 = 0.15;
-
-/// The pixel box (x0, y0, x1, y1) of every person of training frame `f` of `data`: the canonical
-/// body vertices (every fourth) moved rigidly by the bone that weighs most on each, projected by
-/// the frame's camera and grown by [`PERSON_MARGIN_M`]; what `--scene-init stereo` leaves out.
-pub fn person_box(data: &TrainingData, f: &TrainingFrame) -> Option<[f64; 4]> {
-    let bodies = std::iter::once(&data.body).chain(&data.others);
-    let mut posed = Vec::new();
-    for (person, body) in bodies.enumerate() {
-        let weights = &body.model.weights;
-        for (v, x) in body.canonical.posed.vertices.iter().enumerate().step_by(4) {
-            let row = &weights[v * NUM_JOINTS..(v + 1) * NUM_JOINTS];
-            let bone = (0..NUM_JOINTS)
-                .max_by(|&a, &b| row[a].total_cmp(&row[b]))
-                .unwrap_or(0);
-            if let Some(t) = f.pose.prepared.bones.get(person * NUM_JOINTS + bone) {
-                posed.push(affine_apply(t, *x));
-            }
-        }
-    }
-    stereo::pixel_box(&f.camera, posed, PERSON_MARGIN_M)
 }
 
 /// Scene extent of an initial cube: half its diagonal.
@@ -184,7 +118,7 @@ impl Trainer {
                 opacity: config.initial_opacity,
                 max_initial_scale: config.max_initial_scale,
                 seed: config.seed,
-                scene_surface: scene_surface(data, &config, &roots),
+                scene_surface: surfaces::scene_surface(data, &config, &roots),
                 ..InitConfig::default()
             },
         );
