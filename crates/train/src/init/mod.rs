@@ -48,7 +48,7 @@ pub enum InitMode {
 pub enum SceneInit {
     /// Uniform in the visible part of the scene cube (the paper).
     Volume,
-    /// Half on the surfaces a plane sweep over the training frames finds ([`stereo`]; needs a
+    /// Half on the surfaces a plane sweep over the training frames finds (`init::stereo`; needs a
     /// moving camera, and is the cube alone without one), half in the cube.
     Stereo,
 }
