@@ -160,7 +160,7 @@ pub fn scene_cube(
         for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
             let px = u * f64::from(cam.width);
             let py = v * f64::from(cam.height);
-            grow(unproject(cam, px, py, f64::from(depth)));
+            grow(unproject(cam, px, py, f64::from(depth)).map(|v| v as f32));
         }
     }
     for &b in body_positions {
@@ -170,13 +170,14 @@ pub fn scene_cube(
     (lo, hi)
 }
 
-/// World point at view depth `z` (m) behind pixel position (x, y).
-fn unproject(cam: &Camera, x: f64, y: f64, z: f64) -> [f32; 3] {
+/// World point at view depth `z` (m) behind pixel position (x, y) (pixels, the image's corner at
+/// (0, 0)).
+fn unproject(cam: &Camera, x: f64, y: f64, z: f64) -> [f64; 3] {
     let p_cam = [(x - cam.cx) / cam.fx * z, (y - cam.cy) / cam.fy * z, z];
     let m = &cam.world_to_camera;
     // p_world = Rᵀ (p_cam − t).
     let d = [p_cam[0] - m[0][3], p_cam[1] - m[1][3], p_cam[2] - m[2][3]];
-    std::array::from_fn(|a| (m[0][a] * d[0] + m[1][a] * d[1] + m[2][a] * d[2]) as f32)
+    std::array::from_fn(|a| m[0][a] * d[0] + m[1][a] * d[1] + m[2][a] * d[2])
 }
 
 /// True when some camera sees `p` in front of its near plane and inside its image.

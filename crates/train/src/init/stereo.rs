@@ -45,12 +45,9 @@ pub fn pixel_box(
     points: impl IntoIterator<Item = [f32; 3]>,
     margin: f64,
 ) -> Option<[f64; 4]> {
-    let (r, t) = rigid(camera);
     let mut out: Option<[f64; 4]> = None;
     for p in points {
-        let p = p.map(f64::from);
-        let q: [f64; 3] =
-            std::array::from_fn(|a| r[a][0] * p[0] + r[a][1] * p[1] + r[a][2] * p[2] + t[a]);
+        let q = to_view(camera, p.map(f64::from));
         if q[2] <= margin.max(1e-3) {
             return Some([
                 f64::NEG_INFINITY,
@@ -141,45 +138,31 @@ fn spread(n: usize, count: usize) -> Vec<usize> {
     out
 }
 
-/// Rec. 709 luma of a planar (3, H, W) image of `n` pixels.
-fn luma(image: &[f32], n: usize) -> Vec<f32> {
-    (0..n)
-        .map(|i| 0.2126 * image[i] + 0.7152 * image[n + i] + 0.0722 * image[2 * n + i])
-        .collect()
-}
-
-/// A camera's rotation rows and translation.
-fn rigid(camera: &Camera) -> ([[f64; 3]; 3], [f64; 3]) {
+/// The view-space point of world point `p` (m).
+fn to_view(camera: &Camera, p: [f64; 3]) -> [f64; 3] {
     let m = &camera.world_to_camera;
-    (
-        std::array::from_fn(|r| [m[r][0], m[r][1], m[r][2]]),
-        [m[0][3], m[1][3], m[2][3]],
-    )
+    std::array::from_fn(|a| m[a][0] * p[0] + m[a][1] * p[1] + m[a][2] * p[2] + m[a][3])
 }
 
 /// The world point at view depth `z` behind pixel centre (x + 0.5, y + 0.5) of `camera`.
 fn unproject(camera: &Camera, x: usize, y: usize, z: f64) -> [f64; 3] {
-    let (r, t) = rigid(camera);
-    let c = [
-        (x as f64 + 0.5 - camera.cx) / camera.fx * z - t[0],
-        (y as f64 + 0.5 - camera.cy) / camera.fy * z - t[1],
-        z - t[2],
-    ];
-    std::array::from_fn(|a| r[0][a] * c[0] + r[1][a] * c[1] + r[2][a] * c[2])
+    super::unproject(camera, x as f64 + 0.5, y as f64 + 0.5, z)
 }
 
 /// Bilinear luma of `camera`'s image at world point `p`, or `None` when the point is behind the
-/// camera or outside the pixel centres' hull.
+/// camera or outside the pixel centres' hull (unlike `synth::flow::sample_bilinear`, which clamps
+/// at the border: here a point the view does not see must not match).
 fn sample(camera: &Camera, grey: &[f32], p: [f64; 3]) -> Option<f32> {
-    let (r, t) = rigid(camera);
-    let q: [f64; 3] =
-        std::array::from_fn(|a| r[a][0] * p[0] + r[a][1] * p[1] + r[a][2] * p[2] + t[a]);
+    let q = to_view(camera, p);
     if q[2] <= 1e-3 {
         return None;
     }
     let u = camera.fx * q[0] / q[2] + camera.cx - 0.5;
     let v = camera.fy * q[1] / q[2] + camera.cy - 0.5;
     let (w, h) = (camera.width as usize, camera.height as usize);
+    if w < 2 || h < 2 || grey.len() < w * h {
+        return None;
+    }
     if !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) {
         return None;
     }
@@ -302,15 +285,22 @@ fn pick_depth(costs: &[f32], config: &SweepConfig) -> Option<f64> {
 
 /// World points on the static scene's surfaces seen by `views` (one per accepted pixel of the
 /// reference frames, row-major per reference, references in sequence order). Empty when there are
-/// fewer than two views.
+/// fewer than two views or an image is not (3, H, W) for its camera.
 pub fn surface_points(views: &[SweepView<'_>], config: &SweepConfig) -> Vec<[f32; 3]> {
     if views.len() < 2 || config.depths < 3 {
         return Vec::new();
     }
-    let greys: Vec<Vec<f32>> = views
+    // The simulator's grey (Rec. 709 luma); an image of the wrong size gives no points.
+    let greys: Option<Vec<Vec<f32>>> = views
         .par_iter()
-        .map(|v| luma(v.image, (v.camera.width * v.camera.height) as usize))
+        .map(|v| {
+            let (w, h) = (v.camera.width as usize, v.camera.height as usize);
+            events::grey_from_rgb(v.image, w, h).ok()
+        })
         .collect();
+    let Some(greys) = greys else {
+        return Vec::new();
+    };
     let mut points = Vec::new();
     for reference in spread(views.len(), config.references) {
         let others: Vec<usize> = spread(views.len(), config.views + 1)
