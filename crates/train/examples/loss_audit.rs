@@ -258,6 +258,7 @@ fn audit(
             reposed: true,
             share_static_tiles: false,
             joint_backward_only: false,
+            static_layer: false,
         };
         let passes =
             model.forward_passes(&cameras, &poses, poses.len() / 2, model.latent(slot), plan)?;

@@ -60,6 +60,7 @@ pub(super) fn try_backward_tile(
 
 /// Runs [`forward_tile`] and returns `true`, or returns `false` (doing nothing) if this CPU lacks
 /// AVX-512F.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn try_forward_tile(
     list: &[PairSplat<f32>],
     channels: &[f32],
@@ -68,12 +69,13 @@ pub(super) fn try_forward_tile(
     size: [usize; 2],
     buf: &mut [f32],
     used: &mut u32,
+    alive: &mut [f32],
 ) -> bool {
     if !available() {
         return false;
     }
     // SAFETY: the CPU has AVX-512F (checked above), the kernel's only requirement.
-    unsafe { forward_tile(list, channels, c, origin, size, buf, used) };
+    unsafe { forward_tile(list, channels, c, origin, size, buf, used, alive) };
     true
 }
 
@@ -267,6 +269,7 @@ fn backward_tile(
 }
 
 /// [`super::kernels::forward_tile`] for f32, one register per row. Same arguments and output.
+#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f")]
 fn forward_tile(
     list: &[PairSplat<f32>],
@@ -276,15 +279,16 @@ fn forward_tile(
     size: [usize; 2],
     buf: &mut [f32],
     used: &mut u32,
+    alive: &mut [f32],
 ) {
     buf[BUF_T..BUF_T + TILE_PIXELS].fill(1.0);
+    alive[..TILE_PIXELS].fill(1.0);
     *used = list.len() as u32;
     if list.is_empty() {
         return;
     }
     let (tbuf, rest) = buf.split_at_mut(BUF_D);
     let (dbuf, cbuf) = rest.split_at_mut(TILE_PIXELS);
-    let mut alive = [1.0f32; TILE_PIXELS];
     let mut n_done = 0u32;
     let n_pixels = (size[0] * size[1]) as u32;
     let ox: f32 = lit(origin[0] as f64);
@@ -423,7 +427,17 @@ mod tests {
                 let channels = &st.pair_channels[range.start * c..range.end * c];
                 let (mut buf_p, mut buf_v) = (vec![0.0f32; stride], vec![0.0f32; stride]);
                 let (mut used_p, mut used_v) = (0u32, 0u32);
-                forward_tile(list, channels, c, origin, size, &mut buf_p, &mut used_p);
+                let (mut alive_p, mut alive_v) = ([0.0f32; TILE_PIXELS], [0.0f32; TILE_PIXELS]);
+                forward_tile(
+                    list,
+                    channels,
+                    c,
+                    origin,
+                    size,
+                    &mut buf_p,
+                    &mut used_p,
+                    &mut alive_p,
+                );
                 assert!(try_forward_tile(
                     list,
                     channels,
@@ -431,9 +445,11 @@ mod tests {
                     origin,
                     size,
                     &mut buf_v,
-                    &mut used_v
+                    &mut used_v,
+                    &mut alive_v,
                 ));
                 assert_eq!(used_p, used_v, "tile {tile}");
+                assert_eq!(alive_p, alive_v, "tile {tile}");
                 assert!(buf_p
                     .iter()
                     .zip(&buf_v)

@@ -11,6 +11,7 @@ use gaussians::covariance::{covariance_3d_backward, Mat3};
 use super::forward::ForwardState;
 use super::inputs::{Inputs, Shapes};
 use super::kernels::{backward_tile, BackwardScratch, BUF_T};
+use super::layer::StaticLayer;
 use super::{Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats};
 use crate::project::{project_cov_backward, CameraParams, ProjectedGrad};
 use crate::{Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
@@ -77,14 +78,40 @@ pub(super) enum SharedTiles<'a, T> {
     Some {
         shared: &'a [bool],
         summed: Option<&'a Cotangents<'a, T>>,
+        /// The owner's replay of the static layers (`super::layer`); `None` for the others.
+        layer: Option<LayerReplay<'a, T>>,
     },
 }
 
+/// What the owner's backward needs to replay the static layers once (`super::layer`).
+pub(super) struct LayerReplay<'a, T> {
+    pub(super) layer: &'a StaticLayer<T>,
+    pub(super) owner: usize,
+    pub(super) cot: &'a Cotangents<'a, T>,
+    pub(super) background: &'a [T],
+}
+
+impl<T> Clone for LayerReplay<'_, T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T> Copy for LayerReplay<'_, T> {}
+
 impl<'a, T> SharedTiles<'a, T> {
+    /// The layer replay of the owner's backward, if any.
+    fn layer(&self) -> Option<LayerReplay<'a, T>> {
+        match *self {
+            SharedTiles::Some { layer, .. } => layer,
+            SharedTiles::None => None,
+        }
+    }
+
     /// The cotangent tile `tile` replays with, or `None` when it is skipped.
     fn cotangent(&self, tile: usize, cot: &'a Cotangents<'a, T>) -> Option<&'a Cotangents<'a, T>> {
         match *self {
-            SharedTiles::Some { shared, summed } if shared[tile] => summed,
+            SharedTiles::Some { shared, summed, .. } if shared[tile] => summed,
             _ => Some(cot),
         }
     }
@@ -177,7 +204,40 @@ pub(super) fn backward_inputs<'a, T: Real>(
                 TILE_SIZE.min(width - origin[0]),
                 TILE_SIZE.min(height - origin[1]),
             ];
-            backward_tile_dispatch(st, tile, c, origin, size, width, cot, scratch, out);
+            let geometry = TileGeometry {
+                c,
+                origin,
+                size,
+                width,
+            };
+            let buf = &st.tile_buf[tile * stride..(tile + 1) * stride];
+            let used = st.used[tile] as usize;
+            let replay = TileReplay {
+                range: range.clone(),
+                buf,
+                used,
+                background: &st.background,
+            };
+            backward_tile_dispatch(st, &replay, &geometry, cot, scratch, out);
+            let Some(lr) = tiles.layer() else {
+                return;
+            };
+            if let Some((head, buf, used)) = lr.layer.tile(tile, lr.owner, c) {
+                let replay = TileReplay {
+                    range: range.start + head..range.end,
+                    buf,
+                    used,
+                    background: lr.background,
+                };
+                backward_tile_dispatch(
+                    st,
+                    &replay,
+                    &geometry,
+                    lr.cot,
+                    scratch,
+                    &mut out[head * slot..],
+                );
+            }
         },
     );
 
@@ -305,33 +365,48 @@ pub(super) fn backward_inputs<'a, T: Real>(
     Ok(out)
 }
 
-/// One tile's backward (`tile`'s pairs of `st`, `out` their gradient slots): the AVX-512 kernel
-/// when the CPU has AVX-512F and `T` is f32 (same bits, faster), else the portable
-/// [`backward_tile`].
-#[allow(clippy::too_many_arguments)]
-fn backward_tile_dispatch<T: Real>(
-    st: &ForwardState<T>,
-    tile: usize,
+/// Where a tile's replay sits: the image's channels, the tile's origin and size, the image width.
+struct TileGeometry {
     c: usize,
     origin: [usize; 2],
     size: [usize; 2],
     width: usize,
+}
+
+/// One replay of a tile: the pairs `range` of the forward's lists, the blend's buffer `buf`, the
+/// entries it used and the background it was blended against.
+struct TileReplay<'a, T> {
+    range: std::ops::Range<usize>,
+    buf: &'a [T],
+    used: usize,
+    background: &'a [T],
+}
+
+/// One tile's backward (`replay`'s pairs of `st`, `out` their gradient slots): the AVX-512 kernel
+/// when the CPU has AVX-512F and `T` is f32 (same bits, faster), else the portable
+/// [`backward_tile`].
+fn backward_tile_dispatch<T: Real>(
+    st: &ForwardState<T>,
+    replay: &TileReplay<'_, T>,
+    g: &TileGeometry,
     cot: &Cotangents<'_, T>,
     s: &mut BackwardScratch<T>,
     out: &mut [T],
 ) {
-    let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
-    let stride = (2 + c) * TILE_PIXELS;
-    let buf = tile * stride..(tile + 1) * stride;
-    let used = st.used[tile] as usize;
+    let (range, c) = (replay.range.clone(), g.c);
     #[cfg(target_arch = "x86_64")]
     {
         use std::any::Any;
         let st32 = (st as &dyn Any).downcast_ref::<ForwardState<f32>>();
         let s32 = (&mut *s as &mut dyn Any).downcast_mut::<BackwardScratch<f32>>();
-        if let (Some(st), Some(s), Some(image), Some(out)) =
-            (st32, s32, T::as_f32(cot.image), T::as_f32_mut(&mut *out))
-        {
+        if let (Some(st), Some(s), Some(image), Some(out), Some(buf), Some(bg)) = (
+            st32,
+            s32,
+            T::as_f32(cot.image),
+            T::as_f32_mut(&mut *out),
+            T::as_f32(replay.buf),
+            T::as_f32(replay.background),
+        ) {
             let cot = Cotangents {
                 image,
                 alpha: cot.alpha.and_then(T::as_f32),
@@ -340,13 +415,13 @@ fn backward_tile_dispatch<T: Real>(
             if avx512::try_backward_tile(
                 &st.pair_splats[range.clone()],
                 &st.pair_channels[range.start * c..range.end * c],
-                &st.background,
+                bg,
                 c,
-                origin,
-                size,
-                width,
-                &st.tile_buf[buf.clone()],
-                used,
+                g.origin,
+                g.size,
+                g.width,
+                buf,
+                replay.used,
                 &cot,
                 s,
                 out,
@@ -358,13 +433,13 @@ fn backward_tile_dispatch<T: Real>(
     backward_tile(
         &st.pair_splats[range.clone()],
         &st.pair_channels[range.start * c..range.end * c],
-        &st.background,
+        replay.background,
         c,
-        origin,
-        size,
-        width,
-        &st.tile_buf[buf],
-        used,
+        g.origin,
+        g.size,
+        g.width,
+        replay.buf,
+        replay.used,
         cot,
         s,
         out,

@@ -54,14 +54,18 @@ pub(super) fn trim_rect<T: Real>(p: &mut Projected<T>, width: usize, height: usi
 /// Parallel: jobs over contiguous chunks of `visible` bin their Gaussians by tile (a local counting
 /// sort); every tile then gathers its entries from the jobs and sorts them. The key (depth, index)
 /// is a total order, so the lists are the same for any chunking and thread count. The tiles flagged
-/// in `skip` get empty lists (the others' lists are unchanged).
+/// in `skip` get empty lists, and with `cut` a tile lists only the Gaussians at view depth
+/// ≤ `cut[tile]` (the others' lists are unchanged).
 pub(super) fn bin_and_sort<T: Real>(
     visible: &[Projected<T>],
     gx: usize,
     n_tiles: usize,
     skip: Option<&[bool]>,
+    cut: Option<&[T]>,
 ) -> (Vec<usize>, Vec<u32>) {
-    let listed = |t: usize| skip.is_none_or(|s| !s[t]);
+    let listed = |t: usize, depth: T| {
+        skip.is_none_or(|s| !s[t]) && cut.is_none_or(|c| depth <= c[t])
+    };
     let max_jobs = (BIN_COUNTER_BUDGET / (n_tiles + 1)).clamp(1, MAX_BIN_JOBS);
     let chunk = BIN_CHUNK.max(visible.len().div_ceil(max_jobs));
     // 1. Per job: its entries grouped by tile, and where each tile's group starts.
@@ -75,7 +79,7 @@ pub(super) fn bin_and_sort<T: Real>(
                     let row = ty as usize * gx;
                     for tx in p.rect[0]..p.rect[2] {
                         let t = row + tx as usize;
-                        if listed(t) {
+                        if listed(t, p.depth) {
                             starts[t + 1] += 1;
                         }
                     }
@@ -93,7 +97,7 @@ pub(super) fn bin_and_sort<T: Real>(
                     let row = ty as usize * gx;
                     for tx in p.rect[0]..p.rect[2] {
                         let t = row + tx as usize;
-                        if listed(t) {
+                        if listed(t, p.depth) {
                             entries[cursor[t]] = key;
                             cursor[t] += 1;
                         }
@@ -201,12 +205,12 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .expect("thread pool");
-            let got = pool.install(|| super::bin_and_sort(&visible, gx, n_tiles, None));
+            let got = pool.install(|| super::bin_and_sort(&visible, gx, n_tiles, None, None));
             assert_eq!(got, expected, "{threads} threads");
         }
         // Skipped tiles get empty lists; every other tile keeps its list.
         let skip: Vec<bool> = (0..n_tiles).map(|t| t % 3 == 1).collect();
-        let (offsets, list) = super::bin_and_sort(&visible, gx, n_tiles, Some(&skip));
+        let (offsets, list) = super::bin_and_sort(&visible, gx, n_tiles, Some(&skip), None);
         let (all_offsets, all_list) = &expected;
         for t in 0..n_tiles {
             let got = &list[offsets[t]..offsets[t + 1]];

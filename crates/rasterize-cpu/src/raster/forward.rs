@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use super::binning::{bin_and_sort, trim_rect};
 use super::inputs::{background, validate, Inputs};
 use super::kernels::{forward_tile, PairSplat, BUF_C, BUF_D, BUF_T};
+use super::layer::LayerView;
 use super::{CovSplats, RenderOutput, RenderSettings, Splats};
 use crate::project::{CameraParams, Projected};
 use crate::{Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
@@ -69,7 +70,7 @@ fn render_inputs<T: Real>(
     settings: &RenderSettings,
 ) -> Result<RenderOutput<T>, RasterError> {
     let binned = bin_pass(camera, splats, settings)?;
-    let (tile_buf, used) = blend_tiles(&binned, None);
+    let (tile_buf, used, _) = blend_tiles(&binned, None, None);
     Ok(binned.into_output(tile_buf, used))
 }
 
@@ -128,7 +129,7 @@ pub(super) fn bin_pass<T: Real>(
     splats: &Inputs<'_, T>,
     settings: &RenderSettings,
 ) -> Result<Binned<T>, RasterError> {
-    Ok(project_pass(camera, splats, settings, None)?.bin(camera, splats, None))
+    Ok(project_pass(camera, splats, settings, None)?.bin(camera, splats, None, None))
 }
 
 /// A request checked and projected, not yet binned.
@@ -190,12 +191,14 @@ pub(super) fn project_pass<T: Real>(
 
 impl<T: Real> ProjectedPass<T> {
     /// Bins the projection into tiles (no list for the tiles flagged in `skip`: another render
-    /// blends and differentiates them) and gathers each pair's data in list order.
+    /// blends and differentiates them; with `cut`, no entry deeper than the tile's cut: another
+    /// render blends those) and gathers each pair's data in list order.
     pub(super) fn bin(
         self,
         camera: &Camera,
         splats: &Inputs<'_, T>,
         skip: Option<&[bool]>,
+        cut: Option<&[T]>,
     ) -> Binned<T> {
         bin_projected(
             camera,
@@ -203,7 +206,7 @@ impl<T: Real> ProjectedPass<T> {
             splats,
             self.projection,
             self.background,
-            skip,
+            (skip, cut),
         )
     }
 }
@@ -215,6 +218,27 @@ impl<T> Projection<T> {
             .iter()
             .zip(&self.inria_rects)
             .map(|(&id, &rect)| (id, rect))
+    }
+
+    /// Raises `deepest[tile]` to the view depth of every visible Gaussian flagged in `moving`
+    /// whose (trimmed) rectangle holds the tile; `gx` tiles per row.
+    pub(super) fn raise_moving_depths(&self, moving: &[bool], gx: usize, deepest: &mut [Option<T>])
+    where
+        T: Real,
+    {
+        for (p, &id) in self.visible.iter().zip(&self.visible_ids) {
+            if !moving[id as usize] {
+                continue;
+            }
+            for ty in p.rect[1]..p.rect[3] {
+                for tx in p.rect[0]..p.rect[2] {
+                    let d = &mut deepest[ty as usize * gx + tx as usize];
+                    if d.is_none_or(|d| p.depth > d) {
+                        *d = Some(p.depth);
+                    }
+                }
+            }
+        }
     }
 
     /// Per input Gaussian (`n` of them): its compact index (`u32::MAX` where culled).
@@ -235,14 +259,14 @@ fn bin_projected<T: Real>(
     splats: &Inputs<'_, T>,
     projection: Projection<T>,
     background: Vec<T>,
-    skip: Option<&[bool]>,
+    (skip, cut): (Option<&[bool]>, Option<&[T]>),
 ) -> Binned<T> {
     let c = splats.num_channels;
     let [gx, gy] = cam.grid;
     let (gx, gy) = (gx as usize, gy as usize);
     // Counting sort by tile (stable in input order), then each tile by (depth, input index),
     // which equals INRIA's stable radix sort on (tile, depth).
-    let (tile_offsets, tile_list) = bin_and_sort(&projection.visible, gx, gx * gy, skip);
+    let (tile_offsets, tile_list) = bin_and_sort(&projection.visible, gx, gx * gy, skip, cut);
     let visible = &projection.visible;
     let pair_splats: Vec<PairSplat<T>> = tile_list
         .par_iter()
@@ -280,7 +304,7 @@ fn bin_projected<T: Real>(
         pair_channels,
         background,
         n: splats.len(),
-        partial_lists: skip.is_some(),
+        partial_lists: skip.is_some() || cut.is_some(),
     }
 }
 
@@ -301,46 +325,108 @@ impl<T> Binned<T> {
     pub(super) fn grid(&self) -> (usize, usize) {
         (self.gx, self.tile_offsets.len() - 1)
     }
+
+    /// The request's projection.
+    pub(super) fn projection(&self) -> &Projection<T> {
+        &self.projection
+    }
+
+    /// Length of tile `tile`'s list.
+    pub(super) fn list_len(&self, tile: usize) -> usize {
+        self.tile_offsets[tile + 1] - self.tile_offsets[tile]
+    }
+
+    /// Marks every tile's list as unusable by this render's own backward (its outputs hold work
+    /// another render's backward differentiates).
+    pub(super) fn mark_partial(&mut self) {
+        self.partial_lists = true;
+    }
+}
+
+impl<T: Real> Binned<T> {
+    /// How many entries of tile `tile`'s list lie at view depth ≤ `depth` (a prefix: the list is
+    /// sorted by depth).
+    pub(super) fn entries_within(&self, tile: usize, depth: T) -> usize {
+        let range = self.tile_offsets[tile]..self.tile_offsets[tile + 1];
+        self.pair_splats[range].partition_point(|p| p.depth <= depth)
+    }
+
+    /// Blends the entries `entries` of tile `tile`'s list (indices within the list) into `buf`
+    /// ([`forward_tile`]'s outputs, `alive` included).
+    pub(super) fn blend_entries(
+        &self,
+        tile: usize,
+        entries: std::ops::Range<usize>,
+        buf: &mut [T],
+        used: &mut u32,
+        alive: &mut [T],
+    ) {
+        let start = self.tile_offsets[tile];
+        let origin = [(tile % self.gx) * TILE_SIZE, (tile / self.gx) * TILE_SIZE];
+        let size = [
+            TILE_SIZE.min(self.width - origin[0]),
+            TILE_SIZE.min(self.height - origin[1]),
+        ];
+        forward_tile_dispatch(
+            &self.pair_splats,
+            &self.pair_channels,
+            start + entries.start..start + entries.end,
+            self.c,
+            origin,
+            size,
+            buf,
+            used,
+            alive,
+        );
+    }
 }
 
 /// Blends every tile in parallel into per-tile buffers ([T_final | depth | channel sums] per
-/// pixel) and the count of list entries each used; `reused` tiles are copied instead.
+/// pixel) and the count of list entries each used; `reused` tiles are copied instead. With `layer`,
+/// a layered tile blends only its head and composites the static layer behind it; the third vector
+/// then holds, per tile × 256 pixels, the transmittance with which each pixel sees its layer
+/// (`super::layer`; empty without `layer`).
 pub(super) fn blend_tiles<T: Real>(
     b: &Binned<T>,
     reused: Option<&ReusedTiles<'_, T>>,
-) -> (Vec<T>, Vec<u32>) {
+    layer: Option<&LayerView<'_, T>>,
+) -> (Vec<T>, Vec<u32>, Vec<T>) {
     let stride = (2 + b.c) * TILE_PIXELS;
     let n_tiles = b.tile_offsets.len() - 1;
     let mut tile_buf = vec![T::zero(); n_tiles * stride];
     let mut used = vec![0u32; n_tiles];
+    let mut weights = vec![
+        T::zero();
+        if layer.is_some() {
+            n_tiles * TILE_PIXELS
+        } else {
+            0
+        }
+    ];
+    let weight_chunks: Vec<&mut [T]> = if layer.is_some() {
+        weights.chunks_mut(TILE_PIXELS).collect()
+    } else {
+        (0..n_tiles).map(|_| &mut [][..]).collect()
+    };
     tile_buf
         .par_chunks_mut(stride)
         .zip(used.par_iter_mut())
+        .zip(weight_chunks)
         .enumerate()
-        .for_each(|(tile, (buf, used))| {
+        .for_each(|(tile, ((buf, used), weights))| {
             if let Some(r) = reused.filter(|r| r.reuse[tile]) {
                 buf.copy_from_slice(&r.tile_buf[tile * stride..(tile + 1) * stride]);
                 *used = r.used[tile];
                 return;
             }
-            let range = b.tile_offsets[tile]..b.tile_offsets[tile + 1];
-            let origin = [(tile % b.gx) * TILE_SIZE, (tile / b.gx) * TILE_SIZE];
-            let size = [
-                TILE_SIZE.min(b.width - origin[0]),
-                TILE_SIZE.min(b.height - origin[1]),
-            ];
-            forward_tile_dispatch(
-                &b.pair_splats,
-                &b.pair_channels,
-                range,
-                b.c,
-                origin,
-                size,
-                buf,
-                used,
-            );
+            let mut alive = [T::zero(); TILE_PIXELS];
+            let entries = layer.map_or(b.list_len(tile), |l| l.head(tile, b.list_len(tile)));
+            b.blend_entries(tile, 0..entries, buf, used, &mut alive);
+            if let Some(l) = layer {
+                l.composite(tile, buf, &alive, weights);
+            }
         });
-    (tile_buf, used)
+    (tile_buf, used, weights)
 }
 
 impl<T: Real> Binned<T> {
@@ -418,20 +504,33 @@ fn forward_tile_dispatch<T: Real>(
     size: [usize; 2],
     buf: &mut [T],
     used: &mut u32,
+    alive: &mut [T],
 ) {
     let channels = &pair_channels[range.start * c..range.end * c];
     #[cfg(target_arch = "x86_64")]
     {
         use std::any::Any;
         let splats32 = (pair_splats as &dyn Any).downcast_ref::<Vec<PairSplat<f32>>>();
-        if let (Some(splats), Some(channels), Some(buf)) =
-            (splats32, T::as_f32(channels), T::as_f32_mut(&mut *buf))
-        {
+        if let (Some(splats), Some(channels), Some(buf), Some(alive)) = (
+            splats32,
+            T::as_f32(channels),
+            T::as_f32_mut(&mut *buf),
+            T::as_f32_mut(&mut *alive),
+        ) {
             let list = &splats[range.clone()];
-            if avx512::try_forward_tile(list, channels, c, origin, size, buf, used) {
+            if avx512::try_forward_tile(list, channels, c, origin, size, buf, used, alive) {
                 return;
             }
         }
     }
-    forward_tile(&pair_splats[range], channels, c, origin, size, buf, used);
+    forward_tile(
+        &pair_splats[range],
+        channels,
+        c,
+        origin,
+        size,
+        buf,
+        used,
+        alive,
+    );
 }

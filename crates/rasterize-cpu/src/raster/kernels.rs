@@ -225,7 +225,8 @@ fn quad_centres<T: Real>() -> [T::V4; QUADS] {
 }
 
 /// Blends one tile front to back into `buf` ([T | depth | channels] × 256); `used` receives the
-/// number of list entries blended before every pixel stopped.
+/// number of list entries blended before every pixel stopped, `alive` (256) 1 for each pixel that
+/// never stopped and 0 for one that did.
 ///
 /// Splat-major: each row of a splat's (margin-padded) pixel box is a few fixed 16-lane passes (one
 /// lane per pixel column; lanes outside the box, already stopped, with power > 0 or α < 1/255 get
@@ -240,16 +241,17 @@ pub(super) fn forward_tile<T: Real>(
     size: [usize; 2],
     buf: &mut [T],
     used: &mut u32,
+    alive: &mut [T],
 ) {
     buf[BUF_T..BUF_T + TILE_PIXELS].fill(T::one());
+    // 1 while a pixel still blends, 0 once it stopped (a T so that every lane is T-wide).
+    alive[..TILE_PIXELS].fill(T::one());
     *used = list.len() as u32;
     if list.is_empty() {
         return;
     }
     let (tbuf, rest) = buf.split_at_mut(BUF_D);
     let (dbuf, cbuf) = rest.split_at_mut(TILE_PIXELS);
-    // 1 while a pixel still blends, 0 once it stopped (a T so that every lane is T-wide).
-    let mut alive = [T::one(); TILE_PIXELS];
     let mut n_done = 0u32;
     let n_pixels = (size[0] * size[1]) as u32;
     let ox: T = lit(origin[0] as f64);

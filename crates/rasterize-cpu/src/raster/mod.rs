@@ -35,6 +35,7 @@ mod camera_pose;
 mod forward;
 mod inputs;
 mod kernels;
+mod layer;
 mod shared;
 
 #[cfg(target_arch = "x86_64")]
@@ -47,6 +48,7 @@ pub use inputs::{
     Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats,
     COVARIANCE_SYMMETRY_TOLERANCE, DEFAULT_NEAR_PLANE,
 };
+pub use layer::StaticLayer;
 pub use shared::{
     render_cov_shared, render_cov_shared_backward, SharedOutputs, SharedRenders, TileSharing,
 };

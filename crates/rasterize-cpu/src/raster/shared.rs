@@ -12,9 +12,10 @@
 
 use rayon::prelude::*;
 
-use super::backward::{backward_inputs, SharedTiles};
+use super::backward::{backward_inputs, LayerReplay, SharedTiles};
 use super::forward::{bin_pass, blend_tiles, project_pass, ReusedProjection, ReusedTiles};
 use super::inputs::Inputs;
+use super::layer::{layer_cuts, StaticLayer};
 use super::{Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings};
 use crate::{Camera, RasterError, Real};
 
@@ -26,21 +27,24 @@ pub struct SharedRenders<T> {
     /// is, and the others are differentiated by [`render_cov_shared_backward`] alone.
     pub outputs: Vec<RenderOutput<T>>,
     /// Which tiles were blended once, and by which render.
-    pub sharing: TileSharing,
+    pub sharing: TileSharing<T>,
 }
 
 /// Which tiles several renders of one camera share, and which render blends and differentiates
 /// them.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct TileSharing {
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileSharing<T = f32> {
     /// Per tile (row-major, 16×16 pixels): no moving Gaussian reaches it in any render, so it
     /// was blended once, by the owner.
     pub shared_tiles: Vec<bool>,
     /// The render that blends and differentiates the shared tiles.
     pub owner: usize,
+    /// With [`SharedOutputs::Layered`]: the static layers blended once behind the moving tiles'
+    /// lists (`None` otherwise).
+    pub layer: Option<StaticLayer<T>>,
 }
 
-impl TileSharing {
+impl<T> TileSharing<T> {
     /// Fraction of the tiles blended once for all renders.
     pub fn shared_fraction(&self) -> f64 {
         let shared = self.shared_tiles.iter().filter(|&&s| s).count();
@@ -57,6 +61,12 @@ pub enum SharedOutputs {
     /// The other renders keep no list for the shared tiles (they are binned once, by the owner):
     /// only [`render_cov_shared_backward`] differentiates them. Same images, same gradients.
     OwnerLists,
+    /// As [`SharedOutputs::OwnerLists`], and in the other tiles the static Gaussians behind every
+    /// moving one are blended once, as a layer each render composites behind its own list
+    /// (`raster::layer`): the images differ from separate renders only where a pixel's
+    /// transmittance would fall below 1e-4 inside the layer. Only [`render_cov_shared_backward`]
+    /// differentiates any of the outputs.
+    Layered,
 }
 
 /// Renders `renders` (each as [`super::render_cov`] would) from one camera, where every Gaussian
@@ -107,42 +117,76 @@ pub fn render_cov_shared<T: Real>(
             }
         }
     }
-    let skip = (outputs == SharedOutputs::OwnerLists).then_some(&shared_tiles[..]);
+    let skip = (outputs != SharedOutputs::Complete).then_some(&shared_tiles[..]);
+    let cuts = (outputs == SharedOutputs::Layered).then(|| {
+        let projections: Vec<_> = projected
+            .iter()
+            .flatten()
+            .map(|p| &p.projection)
+            .chain([owner_binned.projection()])
+            .collect();
+        layer_cuts(&projections, moving, &shared_tiles, gx)
+    });
     let mut binned: Vec<_> = projected
         .into_par_iter()
         .zip(renders)
-        .map(|(p, splats)| p.map(|p| p.bin(camera, &Inputs::from(splats), skip)))
+        .map(|(p, splats)| {
+            p.map(|p| p.bin(camera, &Inputs::from(splats), skip, cuts.as_deref()))
+        })
         .collect();
-    let (owner_buf, owner_used) = blend_tiles(&owner_binned, None);
+    binned[owner] = Some(owner_binned);
+    // Every entry is `Some` now: the owner's was just put back.
+    let mut binned: Vec<_> = binned.into_iter().flatten().collect();
+    let c = renders[owner].num_channels;
+    let mut layer = cuts.map(|cuts| {
+        let all: Vec<_> = binned.iter().collect();
+        StaticLayer::blend(&all, owner, &cuts, c)
+    });
+    let (owner_buf, owner_used, owner_weights) = blend_tiles(
+        &binned[owner],
+        None,
+        layer.as_ref().map(|l| l.view(owner, c)).as_ref(),
+    );
     let mut buffers: Vec<_> = binned
         .par_iter()
-        .map(|b| {
-            b.as_ref().map(|b| {
+        .enumerate()
+        .map(|(r, b)| {
+            (r != owner).then(|| {
                 let reused = ReusedTiles {
                     reuse: &shared_tiles,
                     tile_buf: &owner_buf,
                     used: &owner_used,
                 };
-                blend_tiles(b, Some(&reused))
+                let view = layer.as_ref().map(|l| l.view(r, c));
+                blend_tiles(b, Some(&reused), view.as_ref())
             })
         })
         .collect();
-    buffers[owner] = Some((owner_buf, owner_used));
-    binned[owner] = Some(owner_binned);
-    // Every entry is `Some` now: the owner's was just put back.
+    buffers[owner] = Some((owner_buf, owner_used, owner_weights));
+    let (buffers, weights): (Vec<_>, Vec<_>) = buffers
+        .into_iter()
+        .map(|b| {
+            let (tile_buf, used, weights) = b.unwrap_or_default();
+            ((tile_buf, used), weights)
+        })
+        .unzip();
+    if let Some(l) = layer.as_mut() {
+        l.set_weights(weights);
+        for b in &mut binned {
+            b.mark_partial();
+        }
+    }
     let outputs = binned
         .into_iter()
         .zip(buffers)
-        .filter_map(|(b, buf)| {
-            let (tile_buf, used) = buf.unwrap_or_default();
-            b.map(|b| b.into_output(tile_buf, used))
-        })
+        .map(|(b, (tile_buf, used))| b.into_output(tile_buf, used))
         .collect();
     Ok(SharedRenders {
         outputs,
         sharing: TileSharing {
             shared_tiles,
             owner,
+            layer,
         },
     })
 }
@@ -156,7 +200,7 @@ pub fn render_cov_shared_backward<T: Real>(
     renders: &[CovSplats<'_, T>],
     settings: &RenderSettings,
     outputs: &[&RenderOutput<T>],
-    sharing: &TileSharing,
+    sharing: &TileSharing<T>,
     cots: &[Cotangents<'_, T>],
 ) -> Result<Vec<Gradients<T>>, RasterError> {
     let tiles = outputs.first().map(|o| o.state.tile_offsets.len() - 1);
@@ -176,6 +220,22 @@ pub fn render_cov_shared_backward<T: Real>(
     }
     let summed = SummedCotangents::of(cots)?;
     let summed = summed.as_cotangents();
+    let owner_out = outputs[sharing.owner];
+    let layer_cot = sharing.layer.as_ref().map(|l| {
+        let (w, h) = (owner_out.width as usize, owner_out.height as usize);
+        l.cotangents(cots, &owner_out.state.background, w, h)
+    });
+    let layer_cot_refs = layer_cot.as_ref().map(|l| l.as_cotangents());
+    let layer_replay = sharing
+        .layer
+        .as_ref()
+        .zip(layer_cot.as_ref().zip(layer_cot_refs.as_ref()))
+        .map(|(layer, (lc, cot))| LayerReplay {
+            layer,
+            owner: sharing.owner,
+            cot,
+            background: &lc.background,
+        });
     renders
         .par_iter()
         .zip(outputs)
@@ -185,6 +245,7 @@ pub fn render_cov_shared_backward<T: Real>(
             let tiles = SharedTiles::Some {
                 shared: &sharing.shared_tiles,
                 summed: (r == sharing.owner).then_some(&summed),
+                layer: layer_replay.filter(|_| r == sharing.owner),
             };
             backward_inputs(camera, &Inputs::from(splats), settings, out, cot, tiles)
         })

@@ -272,6 +272,14 @@ training_options! {
     /// gradient, which need each render's own gradients.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     share_static_tiles: bool = true,
+    /// With `share_static_tiles` and the passes differentiated only together: in the tiles a
+    /// moving Gaussian reaches, the static Gaussians behind every moving one are blended once per
+    /// frame, as a layer each render composites behind its own list, and replayed once in the
+    /// backward (`rasterize_cpu::SharedOutputs::Layered`). The renders differ from blending each
+    /// alone only where a pixel's transmittance would fall below 1e-4 inside that layer; `off`:
+    /// the bits of runs before 2026-12-05's layer.
+    #[arg(value_parser = parse_on_off, value_name = "on|off")]
+    static_layer: bool = true,
     /// Event-flow supervision (paper §4.4): on steps whose frame k has a next training frame k+1 with
     /// a flow of `flow_source`, frame k+1 is rendered too and the frozen flow network's prediction
     /// between the two renders is pulled towards that flow (see `train::loss::optical_flow`).

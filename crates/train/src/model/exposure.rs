@@ -83,7 +83,9 @@ impl Model {
         // Gaussian on the image).
         let one_camera = cameras.iter().all(|c| c.raster == camera.raster);
         if plan.share_static_tiles && posed.len() > 1 && one_camera {
-            let outputs = if plan.joint_backward_only {
+            let outputs = if plan.joint_backward_only && plan.static_layer {
+                SharedOutputs::Layered
+            } else if plan.joint_backward_only {
                 SharedOutputs::OwnerLists
             } else {
                 SharedOutputs::Complete

@@ -130,6 +130,9 @@ pub struct PassPlan {
     /// ([`Model::shared_render_backward`]), so the shared tiles are binned by the reference pass
     /// alone (`rasterize_cpu::SharedOutputs::OwnerLists`); a pass's own backward is then refused.
     pub joint_backward_only: bool,
+    /// With `joint_backward_only`: the static Gaussians behind every moving one are blended once,
+    /// as a layer behind each pass (`rasterize_cpu::SharedOutputs::Layered`).
+    pub static_layer: bool,
 }
 
 /// One frame's passes, and the tiles they share when rendered together.

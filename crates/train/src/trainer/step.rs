@@ -557,6 +557,7 @@ fn frame_passes<'a>(
         reposed: poses.len() > 1 && config.exposure_networks == ExposureNetworks::Once,
         share_static_tiles: config.share_static_tiles && !config.camera_correction,
         joint_backward_only: joint_backward_only(config),
+        static_layer: config.static_layer,
     };
     let ExposurePasses { passes, sharing } =
         model.forward_passes(&cameras, &poses, mid, model.latent(slot), plan)?;
