@@ -63,9 +63,8 @@ pub(super) fn bin_and_sort<T: Real>(
     skip: Option<&[bool]>,
     cut: Option<&[T]>,
 ) -> (Vec<usize>, Vec<u32>) {
-    let listed = |t: usize, depth: T| {
-        skip.is_none_or(|s| !s[t]) && cut.is_none_or(|c| depth <= c[t])
-    };
+    let listed =
+        |t: usize, depth: T| skip.is_none_or(|s| !s[t]) && cut.is_none_or(|c| depth <= c[t]);
     let max_jobs = (BIN_COUNTER_BUDGET / (n_tiles + 1)).clamp(1, MAX_BIN_JOBS);
     let chunk = BIN_CHUNK.max(visible.len().div_ceil(max_jobs));
     // 1. Per job: its entries grouped by tile, and where each tile's group starts.

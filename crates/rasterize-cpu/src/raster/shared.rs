@@ -130,9 +130,7 @@ pub fn render_cov_shared<T: Real>(
     let mut binned: Vec<_> = projected
         .into_par_iter()
         .zip(renders)
-        .map(|(p, splats)| {
-            p.map(|p| p.bin(camera, &Inputs::from(splats), skip, cuts.as_deref()))
-        })
+        .map(|(p, splats)| p.map(|p| p.bin(camera, &Inputs::from(splats), skip, cuts.as_deref())))
         .collect();
     binned[owner] = Some(owner_binned);
     // Every entry is `Some` now: the owner's was just put back.

@@ -187,6 +187,14 @@ impl Trainer {
         self.config.share_static_tiles = share;
     }
 
+    /// Turns the static layer behind an exposure's moving Gaussians on or off
+    /// ([`TrainConfig::static_layer`]; a speed option that changes the renders only where a
+    /// pixel's transmittance falls below 1e-4 inside the layer, e.g. for measuring a saved run
+    /// both ways). The model is not changed.
+    pub fn set_static_layer(&mut self, layer: bool) {
+        self.config.static_layer = layer;
+    }
+
     /// Runs steps until `self.step == until`, calling `on_step` after each.
     pub fn run(
         &mut self,

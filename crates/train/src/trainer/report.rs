@@ -64,6 +64,9 @@ pub struct StepReport {
     /// Fraction of the tiles the step's sub-exposure renders shared (blended once;
     /// `share_static_tiles`), 0 when they shared none.
     pub shared_tiles: f64,
+    /// Fraction of the tiles whose static Gaussians behind every moving one were blended once,
+    /// as a layer behind the renders' own lists (`static_layer`), 0 without a layer.
+    pub layered_tiles: f64,
     /// With several people: Gaussians whose most probable person changed in this step's update
     /// (0 with one person).
     pub person_changes: usize,

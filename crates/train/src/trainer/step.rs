@@ -195,6 +195,11 @@ impl Trainer {
             .sharing
             .as_ref()
             .map_or(0.0, TileSharing::shared_fraction);
+        let layered_tiles = frame_k
+            .sharing
+            .as_ref()
+            .and_then(|s| s.layer.as_ref())
+            .map_or(0.0, |l| l.layered_fraction());
         let statistics = StepStatistics {
             means_2d: back.means_2d,
             radii: first.out.radii.clone(),
@@ -237,6 +242,7 @@ impl Trainer {
             gaussians_scene: self.model.set.len() - human,
             active,
             shared_tiles,
+            layered_tiles,
             person_changes,
             times,
         })

@@ -31,6 +31,11 @@ pub struct Args {
     /// static Gaussians reach once), to time the step with and without it.
     #[arg(long, value_parser = train::config::parse_on_off, value_name = "on|off")]
     pub share_static_tiles: Option<bool>,
+    /// Overrides the run's `static_layer` (the static Gaussians behind every moving one are
+    /// blended once per exposure, as a layer behind each render), to time the step with and
+    /// without it.
+    #[arg(long, value_parser = train::config::parse_on_off, value_name = "on|off")]
+    pub static_layer: Option<bool>,
 }
 
 /// Runs the benchmark.
@@ -65,6 +70,9 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(share) = args.share_static_tiles {
         trainer.set_share_static_tiles(share);
     }
+    if let Some(layer) = args.static_layer {
+        trainer.set_static_layer(layer);
+    }
     let config = trainer.config().clone();
     crate::training::prepare_training_data(&mut ctx, &data, &config)?;
     let (from, gaussians) = (trainer.step, trainer.model.set.len());
@@ -83,6 +91,8 @@ pub fn run(args: Args) -> Result<()> {
         "steal_pct": steal.percent(),
         "share_static_tiles": config.share_static_tiles,
         "shared_tiles": reports.iter().map(|r| r.shared_tiles).sum::<f64>() / args.steps.max(1) as f64,
+        "static_layer": config.static_layer,
+        "layered_tiles": reports.iter().map(|r| r.layered_tiles).sum::<f64>() / args.steps.max(1) as f64,
     });
     if let Some(obj) = line.as_object_mut() {
         for (stage, seconds) in crate::training::mean_times(&reports) {
