@@ -113,40 +113,17 @@ proptest! {
                 if !moving[i] && r > 0 {
                     continue;
                 }
-                let x = scenes[r].params(i);
-                let (mut num, mut ana) = (Vec::new(), Vec::new());
-                for k in [0usize, 1, 2, 10].into_iter().chain(11..11 + c) {
-                    probes += 1;
-                    let perturbed = |v: f64| -> Vec<Scene> {
-                        let mut sc = scenes.clone();
-                        for (q, x2) in sc.iter_mut().enumerate() {
-                            if moving[i] && q != r {
-                                continue;
-                            }
-                            let mut p = x2.params(i);
-                            p[k] = v;
-                            x2.set_params(i, &p);
-                        }
-                        sc
-                    };
-                    let flips = |v: f64| {
+                let loss = |sc: &[Scene]| layered_loss(sc, &covs, &moving, &cots);
+                let discard = |perturbed: &dyn Fn(f64) -> Vec<Scene>, x: f64| {
+                    let flips = [x + FD_H, x - FD_H].into_iter().any(|v| {
                         perturbed(v).iter().zip(&base).any(|(sc, b)| &oracle(sc, None).decisions != b)
-                    };
-                    let loss = |t: f64| layered_loss(&perturbed(x[k] + t), &covs, &moving, &cots);
-                    if flips(x[k] + FD_H) || flips(x[k] - FD_H) || kinked(&loss, FD_H) {
-                        continue;
-                    }
-                    valid += 1;
-                    num.push(central_differences(|t| loss(t[0]), &[0.0], FD_H)[0]);
-                    let sum = |f: &dyn Fn(&rasterize_cpu::Gradients<f64>) -> f64| -> f64 {
-                        if moving[i] { f(&g[r]) } else { g.iter().map(f).sum() }
-                    };
-                    ana.push(match k {
-                        0..=2 => sum(&|gr| gr.means[i][k]),
-                        10 => sum(&|gr| gr.opacity_logits[i]),
-                        _ => sum(&|gr| gr.channels[i * c + k - 11]),
                     });
-                }
+                    flips || kinked(&|t| loss(&perturbed(x + t)), FD_H)
+                };
+                let (num, ana, p, v) =
+                    shared_render_probes(&scenes, &moving, i, r, c, &g, &loss, &discard);
+                probes += p;
+                valid += v;
                 checker.check(
                     &format!("gaussian {i} (kind {}, moving {}) render {r}, layered {layered:.2}", kind_of(&kinds, i), moving[i]),
                     &num,
@@ -204,42 +181,11 @@ fn layered_renders_stay_within_the_stop_rule_of_separate_renders() {
     // f32, many opaque Gaussians: the layer exists, and a pixel differs from its separate render
     // only by what the 1e-4 stop leaves out of the layer, at most T·(max |channel| + max |bg|)
     // with T < 1e-4 / (1 − 0.99) at the stop. Every output refuses its own backward.
-    let (cam, m, ls, q, op, ch) = f32_scene(3000, 100, 76, 7);
-    let covs: Vec<Mat3<f32>> = ls
-        .iter()
-        .zip(&q)
-        .map(|(l, r)| covariance_3d(*l, *r))
-        .collect();
-    let moving: Vec<bool> = m.iter().map(|p| p[0] < -0.3).collect();
-    let means: Vec<Vec<[f32; 3]>> = (0..3)
-        .map(|r| {
-            m.iter()
-                .zip(&moving)
-                .map(|(p, &mv)| {
-                    if mv {
-                        [p[0] + 0.01 * r as f32, p[1], p[2]]
-                    } else {
-                        *p
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    let splats: Vec<CovSplats<'_, f32>> = means
-        .iter()
-        .map(|mm| CovSplats {
-            means: mm,
-            covariances: &covs,
-            opacity_logits: &op,
-            channels: &ch,
-            num_channels: 3,
-        })
-        .collect();
-    let settings = RenderSettings {
-        near_plane: NEAR,
-        background: vec![0.1, 0.2, 0.3],
-    };
-    let layered = render_cov_shared(&cam, &splats, &moving, 1, &settings, SharedOutputs::Layered)
+    let scene = F32Renders::new();
+    let (cam, moving) = (&scene.cam, &scene.moving);
+    let splats = scene.splats();
+    let settings = scene.settings();
+    let layered = render_cov_shared(cam, &splats, moving, 1, &settings, SharedOutputs::Layered)
         .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
     let fraction = layered
         .sharing
@@ -247,12 +193,12 @@ fn layered_renders_stay_within_the_stop_rule_of_separate_renders() {
         .as_ref()
         .map_or(0.0, |l| l.layered_fraction());
     assert!(fraction > 0.05, "layered fraction {fraction}");
-    let max_channel = ch.iter().fold(0.0f32, |a, v| a.max(v.abs()));
+    let max_channel = scene.channels.iter().fold(0.0f32, |a, v| a.max(v.abs()));
     let bound = 1e-2 * (max_channel + 0.3) + 1e-5;
     let hw = (cam.width * cam.height) as usize;
     let cot: Vec<f32> = vec![0.1; 3 * hw];
     for r in 0..3 {
-        let alone = render_cov(&cam, &splats[r], &settings).unwrap_or_else(|e| panic!("{e}"));
+        let alone = render_cov(cam, &splats[r], &settings).unwrap_or_else(|e| panic!("{e}"));
         let out = &layered.outputs[r];
         let worst = alone
             .image
@@ -277,7 +223,7 @@ fn layered_renders_stay_within_the_stop_rule_of_separate_renders() {
             alpha: None,
             depth: None,
         };
-        let alone_backward = render_cov_backward(&cam, &splats[r], &settings, out, &own);
+        let alone_backward = render_cov_backward(cam, &splats[r], &settings, out, &own);
         assert!(
             matches!(alone_backward, Err(RasterError::ForwardMismatch(_))),
             "render {r}"

@@ -75,39 +75,15 @@ proptest! {
                 if !moving[i] && r > 0 {
                     continue;
                 }
-                let x = scenes[r].params(i);
-                let (mut num, mut ana) = (Vec::new(), Vec::new());
-                for k in [0usize, 1, 2, 10].into_iter().chain(11..11 + c) {
-                    probes += 1;
-                    let perturbed = |v: f64| -> Vec<Scene> {
-                        let mut sc = scenes.clone();
-                        for (q, x2) in sc.iter_mut().enumerate() {
-                            if moving[i] && q != r {
-                                continue;
-                            }
-                            let mut p = x2.params(i);
-                            p[k] = v;
-                            x2.set_params(i, &p);
-                        }
-                        sc
-                    };
-                    let flips = |v: f64| {
+                let flips = |perturbed: &dyn Fn(f64) -> Vec<Scene>, x: f64| {
+                    [x + FD_H, x - FD_H].into_iter().any(|v| {
                         perturbed(v).iter().zip(&base).any(|(sc, b)| &oracle(sc, None).decisions != b)
-                    };
-                    if flips(x[k] + FD_H) || flips(x[k] - FD_H) {
-                        continue;
-                    }
-                    valid += 1;
-                    num.push(central_differences(|v| total(&perturbed(v[0])), &[x[k]], FD_H)[0]);
-                    let sum = |f: &dyn Fn(&rasterize_cpu::Gradients<f64>) -> f64| -> f64 {
-                        if moving[i] { f(&g[r]) } else { g.iter().map(f).sum() }
-                    };
-                    ana.push(match k {
-                        0..=2 => sum(&|gr| gr.means[i][k]),
-                        10 => sum(&|gr| gr.opacity_logits[i]),
-                        _ => sum(&|gr| gr.channels[i * c + k - 11]),
-                    });
-                }
+                    })
+                };
+                let (num, ana, p, v) =
+                    shared_render_probes(&scenes, &moving, i, r, c, &g, &|sc| total(sc), &flips);
+                probes += p;
+                valid += v;
                 checker.check(
                     &format!("gaussian {i} (kind {}, moving {}) render {r}", kind_of(&kinds, i), moving[i]),
                     &num,
@@ -128,50 +104,12 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
     // f32 scene large enough for static tiles and moving tiles: the outputs are bit-identical to
     // rendering each alone, the moving Gaussians' gradients bit-identical per render, and the
     // static ones' summed gradients equal the separate sum up to rounding.
-    let (cam, m, ls, q, op, ch) = f32_scene(3000, 100, 76, 7);
-    let covs: Vec<Mat3<f32>> = ls
-        .iter()
-        .zip(&q)
-        .map(|(l, r)| covariance_3d(*l, *r))
-        .collect();
-    let moving: Vec<bool> = m.iter().map(|p| p[0] < -0.3).collect();
-    let means: Vec<Vec<[f32; 3]>> = (0..3)
-        .map(|r| {
-            m.iter()
-                .zip(&moving)
-                .map(|(p, &mv)| {
-                    if mv {
-                        [p[0] + 0.01 * r as f32, p[1], p[2]]
-                    } else {
-                        *p
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    let splats: Vec<CovSplats<'_, f32>> = means
-        .iter()
-        .map(|mm| CovSplats {
-            means: mm,
-            covariances: &covs,
-            opacity_logits: &op,
-            channels: &ch,
-            num_channels: 3,
-        })
-        .collect();
-    let settings = RenderSettings {
-        near_plane: NEAR,
-        background: vec![0.1, 0.2, 0.3],
-    };
-    let shared = render_cov_shared(
-        &cam,
-        &splats,
-        &moving,
-        1,
-        &settings,
-        SharedOutputs::Complete,
-    )
-    .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
+    let scene = F32Renders::new();
+    let (cam, moving, means) = (&scene.cam, &scene.moving, &scene.means);
+    let splats = scene.splats();
+    let settings = scene.settings();
+    let shared = render_cov_shared(cam, &splats, moving, 1, &settings, SharedOutputs::Complete)
+        .unwrap_or_else(|e| panic!("render_cov_shared: {e}"));
     let fraction = shared.sharing.shared_fraction();
     assert!(
         fraction > 0.1 && fraction < 0.9,
@@ -194,14 +132,14 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
         })
         .collect();
     let outs: Vec<_> = shared.outputs.iter().collect();
-    let g = render_cov_shared_backward(&cam, &splats, &settings, &outs, &shared.sharing, &cot_refs)
+    let g = render_cov_shared_backward(cam, &splats, &settings, &outs, &shared.sharing, &cot_refs)
         .unwrap_or_else(|e| panic!("render_cov_shared_backward: {e}"));
     // Binning the shared tiles only in the owner gives the same images and gradients, bit for bit,
     // from fewer pairs.
     let lean = render_cov_shared(
-        &cam,
+        cam,
         &splats,
-        &moving,
+        moving,
         1,
         &settings,
         SharedOutputs::OwnerLists,
@@ -210,7 +148,7 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
     assert_eq!(lean.sharing, shared.sharing);
     let lean_outs: Vec<_> = lean.outputs.iter().collect();
     let g_lean = render_cov_shared_backward(
-        &cam,
+        cam,
         &splats,
         &settings,
         &lean_outs,
@@ -241,22 +179,22 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
             );
             // A render without the shared tiles' lists cannot be differentiated alone.
             let alone =
-                render_cov_backward(&cam, &splats[r], &settings, &lean.outputs[r], &cot_refs[r]);
+                render_cov_backward(cam, &splats[r], &settings, &lean.outputs[r], &cot_refs[r]);
             assert!(
                 matches!(alone, Err(RasterError::ForwardMismatch(_))),
                 "render {r}"
             );
         }
     }
-    let mut sum_shared = vec![0.0f64; m.len()];
-    let mut sum_separate = vec![0.0f64; m.len()];
+    let mut sum_shared = vec![0.0f64; moving.len()];
+    let mut sum_separate = vec![0.0f64; moving.len()];
     for r in 0..3 {
-        let alone = render_cov(&cam, &splats[r], &settings).unwrap_or_else(|e| panic!("{e}"));
+        let alone = render_cov(cam, &splats[r], &settings).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(alone.image, shared.outputs[r].image, "render {r} image");
         assert_eq!(alone.alpha, shared.outputs[r].alpha, "render {r} alpha");
-        let ga = render_cov_backward(&cam, &splats[r], &settings, &alone, &cot_refs[r])
+        let ga = render_cov_backward(cam, &splats[r], &settings, &alone, &cot_refs[r])
             .unwrap_or_else(|e| panic!("{e}"));
-        for i in 0..m.len() {
+        for i in 0..moving.len() {
             if moving[i] {
                 assert_eq!(
                     ga.means[i], g[r].means[i],
@@ -268,7 +206,7 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
         }
     }
     let scale = sum_separate.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    for i in 0..m.len() {
+    for i in 0..moving.len() {
         let err = (sum_shared[i] - sum_separate[i]).abs();
         assert!(
             err <= 1e-4 * scale,
@@ -284,9 +222,9 @@ fn shared_renders_equal_separate_renders_and_share_tiles() {
     let mut splats_bad = splats.clone();
     splats_bad[2].means = &bad;
     let err = render_cov_shared(
-        &cam,
+        cam,
         &splats_bad,
-        &moving,
+        moving,
         1,
         &settings,
         SharedOutputs::OwnerLists,

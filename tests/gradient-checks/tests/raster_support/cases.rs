@@ -218,3 +218,130 @@ pub fn moving_renders(s: &Scene, renders: usize) -> (Vec<Scene>, Vec<bool>) {
         .collect();
     (scenes, moving)
 }
+
+/// Three f32 renders of one 100×76 camera over [`f32_scene`]'s 3000 Gaussians (seed 7), the ones
+/// left of x = −0.3 moving 1 cm to the right per render: the shared renders' checks' scene.
+pub struct F32Renders {
+    pub cam: Camera,
+    /// Each render's means.
+    pub means: Vec<Vec<[f32; 3]>>,
+    pub covs: Vec<Mat3<f32>>,
+    pub opacity_logits: Vec<f32>,
+    /// Three channels per Gaussian.
+    pub channels: Vec<f32>,
+    pub moving: Vec<bool>,
+}
+
+impl F32Renders {
+    pub fn new() -> Self {
+        let (cam, m, ls, q, op, ch) = f32_scene(3000, 100, 76, 7);
+        let covs = ls
+            .iter()
+            .zip(&q)
+            .map(|(l, r)| covariance_3d(*l, *r))
+            .collect();
+        let moving: Vec<bool> = m.iter().map(|p| p[0] < -0.3).collect();
+        let means = (0..3)
+            .map(|r| {
+                m.iter()
+                    .zip(&moving)
+                    .map(|(p, &mv)| {
+                        if mv {
+                            [p[0] + 0.01 * r as f32, p[1], p[2]]
+                        } else {
+                            *p
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        Self {
+            cam,
+            means,
+            covs,
+            opacity_logits: op,
+            channels: ch,
+            moving,
+        }
+    }
+
+    /// The three renders' inputs.
+    pub fn splats(&self) -> Vec<CovSplats<'_, f32>> {
+        self.means
+            .iter()
+            .map(|means| CovSplats {
+                means,
+                covariances: &self.covs,
+                opacity_logits: &self.opacity_logits,
+                channels: &self.channels,
+                num_channels: 3,
+            })
+            .collect()
+    }
+
+    /// The near plane of the checks and a background of (0.1, 0.2, 0.3).
+    pub fn settings(&self) -> RenderSettings {
+        RenderSettings {
+            near_plane: NEAR,
+            background: vec![0.1, 0.2, 0.3],
+        }
+    }
+}
+
+/// Whether a probe is discarded, from the perturbed scenes (as a function of the parameter's
+/// value) and the parameter's value.
+pub type ProbeDiscard<'a> = dyn Fn(&dyn Fn(f64) -> Vec<Scene>, f64) -> bool + 'a;
+
+/// One Gaussian's probes in shared renders: the central differences of `loss` and the analytic
+/// gradients `g` (one per render) of Gaussian `i`'s mean, opacity logit and `c` channels in render
+/// `r` — a static Gaussian's parameter moved in every render at once against the renders' summed
+/// gradient, a moving one's in render `r` alone against that render's. A probe is discarded when
+/// `discard(perturbed, x)` says so (`perturbed(v)`: the scenes with the parameter at v; `x` its
+/// value). Returns (numeric, analytic, probes, valid probes).
+#[allow(clippy::too_many_arguments)]
+pub fn shared_render_probes(
+    scenes: &[Scene],
+    moving: &[bool],
+    i: usize,
+    r: usize,
+    c: usize,
+    g: &[rasterize_cpu::Gradients<f64>],
+    loss: &dyn Fn(&[Scene]) -> f64,
+    discard: &ProbeDiscard<'_>,
+) -> (Vec<f64>, Vec<f64>, usize, usize) {
+    let x = scenes[r].params(i);
+    let (mut num, mut ana, mut probes, mut valid) = (Vec::new(), Vec::new(), 0, 0);
+    for k in [0usize, 1, 2, 10].into_iter().chain(11..11 + c) {
+        probes += 1;
+        let perturbed = |v: f64| -> Vec<Scene> {
+            let mut sc = scenes.to_vec();
+            for (q, x2) in sc.iter_mut().enumerate() {
+                if moving[i] && q != r {
+                    continue;
+                }
+                let mut p = x2.params(i);
+                p[k] = v;
+                x2.set_params(i, &p);
+            }
+            sc
+        };
+        if discard(&perturbed, x[k]) {
+            continue;
+        }
+        valid += 1;
+        num.push(central_differences(|v| loss(&perturbed(v[0])), &[x[k]], FD_H)[0]);
+        let sum = |f: &dyn Fn(&rasterize_cpu::Gradients<f64>) -> f64| -> f64 {
+            if moving[i] {
+                f(&g[r])
+            } else {
+                g.iter().map(f).sum()
+            }
+        };
+        ana.push(match k {
+            0..=2 => sum(&|gr| gr.means[i][k]),
+            10 => sum(&|gr| gr.opacity_logits[i]),
+            _ => sum(&|gr| gr.channels[i * c + k - 11]),
+        });
+    }
+    (num, ana, probes, valid)
+}
