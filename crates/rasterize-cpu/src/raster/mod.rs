@@ -27,7 +27,8 @@
 //! 16-lane twins), `forward` (projection, binning and blending into the outputs) and `backward`
 //! (replay of every tile and the fixed-order reduction per Gaussian); `shared` renders several
 //! passes of one camera that share their static Gaussians, blending and replaying the tiles only
-//! those reach once.
+//! those reach once, and `layer` blends once the static Gaussians behind every moving one in the
+//! other tiles.
 
 mod backward;
 mod binning;
