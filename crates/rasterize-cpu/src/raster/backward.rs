@@ -86,7 +86,6 @@ pub(super) enum SharedTiles<'a, T> {
 /// What the owner's backward needs to replay the static layers once (`super::layer`).
 pub(super) struct LayerReplay<'a, T> {
     pub(super) layer: &'a StaticLayer<T>,
-    pub(super) owner: usize,
     pub(super) cot: &'a Cotangents<'a, T>,
     pub(super) background: &'a [T],
 }
@@ -222,7 +221,7 @@ pub(super) fn backward_inputs<'a, T: Real>(
             let Some(lr) = tiles.layer() else {
                 return;
             };
-            if let Some((head, buf, used)) = lr.layer.tile(tile, lr.owner, c) {
+            if let Some((head, buf, used)) = lr.layer.tile(tile, c) {
                 let replay = TileReplay {
                     range: range.start + head..range.end,
                     buf,

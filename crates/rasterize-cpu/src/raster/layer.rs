@@ -32,9 +32,9 @@ use crate::{Real, TILE_PIXELS, TILE_SIZE};
 pub struct StaticLayer<T> {
     /// Per tile: its index among the layered tiles, or `u32::MAX` (no layer).
     index: Vec<u32>,
-    /// Per render, per tile: the list entries the render blends itself (its whole list where the
-    /// tile has no layer).
-    heads: Vec<Vec<u32>>,
+    /// Per layered tile: the owner's list entries before the layer (the other renders' lists
+    /// stop at the cut, so they blend the whole of theirs).
+    owner_heads: Vec<u32>,
     /// Per layered tile: the layer blended alone, [T | depth | channel sums] × 256 pixels.
     tile_buf: Vec<T>,
     /// Per layered tile: the layer's entries blended before every pixel stopped.
@@ -52,9 +52,10 @@ impl<T> StaticLayer<T> {
     }
 }
 
-/// What one render's blend needs of the layer: its heads and the layer's buffers.
+/// What one render's blend needs of the layer: the owner's heads (`None` for another render)
+/// and the layer's buffers.
 pub(super) struct LayerView<'a, T> {
-    heads: &'a [u32],
+    owner_heads: Option<&'a [u32]>,
     index: &'a [u32],
     tile_buf: &'a [T],
     c: usize,
@@ -63,7 +64,10 @@ pub(super) struct LayerView<'a, T> {
 impl<T: Real> LayerView<'_, T> {
     /// The entries of tile `tile` the render blends itself (`len`: its list's length).
     pub(super) fn head(&self, tile: usize, len: usize) -> usize {
-        (self.heads[tile] as usize).min(len)
+        match (self.owner_heads, self.layer_of(tile)) {
+            (Some(heads), Some(k)) => heads[k] as usize,
+            _ => len,
+        }
     }
 
     /// Composites tile `tile`'s layer behind the head just blended into `buf` (`alive` from that
@@ -122,60 +126,51 @@ pub(super) fn layer_cuts<T: Real>(
 }
 
 impl<T: Real> StaticLayer<T> {
-    /// Splits every tile's lists at `cuts` ([`layer_cuts`]; `binned[owner]` holds every entry,
-    /// the other renders only those up to the cut) and blends the layers once, from the owner's
-    /// lists. A tile whose owner list has nothing behind the cut has no layer.
-    pub(super) fn blend(binned: &[&Binned<T>], owner: usize, cuts: &[T], c: usize) -> Self {
-        let own = binned[owner];
-        let n_tiles = cuts.len();
-        let mut index = vec![u32::MAX; n_tiles];
-        let mut layered = Vec::new();
+    /// Splits the owner's lists `own` (every entry; the other renders' lists stop at the cut) at
+    /// `cuts` ([`layer_cuts`]) and blends the layers once, from those lists. A tile whose owner
+    /// list has nothing behind the cut has no layer.
+    pub(super) fn blend(own: &Binned<T>, cuts: &[T], c: usize) -> Self {
+        let mut index = vec![u32::MAX; cuts.len()];
+        let (mut layered, mut owner_heads) = (Vec::new(), Vec::new());
         for (tile, &cut) in cuts.iter().enumerate() {
-            if own.entries_within(tile, cut) < own.list_len(tile) {
+            let head = own.entries_within(tile, cut);
+            if head < own.list_len(tile) {
                 index[tile] = layered.len() as u32;
                 layered.push(tile);
+                owner_heads.push(head as u32);
             }
         }
-        let heads: Vec<Vec<u32>> = binned
-            .iter()
-            .map(|b| {
-                (0..n_tiles)
-                    .map(|tile| {
-                        let head = if index[tile] == u32::MAX {
-                            b.list_len(tile)
-                        } else {
-                            b.entries_within(tile, cuts[tile])
-                        };
-                        head as u32
-                    })
-                    .collect()
-            })
-            .collect();
         let stride = (2 + c) * TILE_PIXELS;
         let mut tile_buf = vec![T::zero(); layered.len() * stride];
         let mut used = vec![0u32; layered.len()];
         tile_buf
             .par_chunks_mut(stride)
             .zip(used.par_iter_mut())
-            .zip(&layered)
-            .for_each(|((buf, used), &tile)| {
+            .zip(layered.par_iter().zip(&owner_heads))
+            .for_each(|((buf, used), (&tile, &head))| {
                 let mut alive = [T::zero(); TILE_PIXELS];
-                let from = heads[owner][tile] as usize;
-                own.blend_entries(tile, from..own.list_len(tile), buf, used, &mut alive);
+                own.blend_entries(
+                    tile,
+                    head as usize..own.list_len(tile),
+                    buf,
+                    used,
+                    &mut alive,
+                );
             });
         Self {
             index,
-            heads,
+            owner_heads,
             tile_buf,
             used,
             weights: Vec::new(),
         }
     }
 
-    /// Render `r`'s view of the layer, for its blend.
-    pub(super) fn view(&self, r: usize, c: usize) -> LayerView<'_, T> {
+    /// A render's view of the layer, for its blend (`owner`: the render whose lists hold the
+    /// layers' entries).
+    pub(super) fn view(&self, owner: bool, c: usize) -> LayerView<'_, T> {
         LayerView {
-            heads: &self.heads[r],
+            owner_heads: owner.then_some(&self.owner_heads[..]),
             index: &self.index,
             tile_buf: &self.tile_buf,
             c,
@@ -189,14 +184,14 @@ impl<T: Real> StaticLayer<T> {
 
     /// Tile `tile`'s layer, if it has one: the owner's entries before it, the layer's tile buffer
     /// and its used count.
-    pub(super) fn tile(&self, tile: usize, owner: usize, c: usize) -> Option<(usize, &[T], usize)> {
+    pub(super) fn tile(&self, tile: usize, c: usize) -> Option<(usize, &[T], usize)> {
         let k = self.index[tile];
         if k == u32::MAX {
             return None;
         }
         let (k, stride) = (k as usize, (2 + c) * TILE_PIXELS);
         Some((
-            self.heads[owner][tile] as usize,
+            self.owner_heads[k] as usize,
             &self.tile_buf[k * stride..(k + 1) * stride],
             self.used[k] as usize,
         ))

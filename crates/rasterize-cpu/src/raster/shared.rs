@@ -50,6 +50,14 @@ impl<T> TileSharing<T> {
         let shared = self.shared_tiles.iter().filter(|&&s| s).count();
         shared as f64 / self.shared_tiles.len().max(1) as f64
     }
+
+    /// Fraction of the tiles whose static Gaussians behind every moving one were blended once as
+    /// a layer (0 without [`SharedOutputs::Layered`]).
+    pub fn layered_fraction(&self) -> f64 {
+        self.layer
+            .as_ref()
+            .map_or(0.0, StaticLayer::layered_fraction)
+    }
 }
 
 /// What the renders other than the owner keep of the shared tiles.
@@ -136,14 +144,11 @@ pub fn render_cov_shared<T: Real>(
     // Every entry is `Some` now: the owner's was just put back.
     let mut binned: Vec<_> = binned.into_iter().flatten().collect();
     let c = renders[owner].num_channels;
-    let mut layer = cuts.map(|cuts| {
-        let all: Vec<_> = binned.iter().collect();
-        StaticLayer::blend(&all, owner, &cuts, c)
-    });
+    let mut layer = cuts.map(|cuts| StaticLayer::blend(&binned[owner], &cuts, c));
     let (owner_buf, owner_used, owner_weights) = blend_tiles(
         &binned[owner],
         None,
-        layer.as_ref().map(|l| l.view(owner, c)).as_ref(),
+        layer.as_ref().map(|l| l.view(true, c)).as_ref(),
     );
     let mut buffers: Vec<_> = binned
         .par_iter()
@@ -155,7 +160,7 @@ pub fn render_cov_shared<T: Real>(
                     tile_buf: &owner_buf,
                     used: &owner_used,
                 };
-                let view = layer.as_ref().map(|l| l.view(r, c));
+                let view = layer.as_ref().map(|l| l.view(false, c));
                 blend_tiles(b, Some(&reused), view.as_ref())
             })
         })
@@ -230,7 +235,6 @@ pub fn render_cov_shared_backward<T: Real>(
         .zip(layer_cot.as_ref().zip(layer_cot_refs.as_ref()))
         .map(|(layer, (lc, cot))| LayerReplay {
             layer,
-            owner: sharing.owner,
             cot,
             background: &lc.background,
         });

@@ -191,15 +191,10 @@ impl Trainer {
         }
         let first = &frame_k.passes[frame_k.mid];
         let active = first.active().len();
-        let shared_tiles = frame_k
+        let (shared_tiles, layered_tiles) = frame_k
             .sharing
             .as_ref()
-            .map_or(0.0, TileSharing::shared_fraction);
-        let layered_tiles = frame_k
-            .sharing
-            .as_ref()
-            .and_then(|s| s.layer.as_ref())
-            .map_or(0.0, |l| l.layered_fraction());
+            .map_or((0.0, 0.0), |s| (s.shared_fraction(), s.layered_fraction()));
         let statistics = StepStatistics {
             means_2d: back.means_2d,
             radii: first.out.radii.clone(),
