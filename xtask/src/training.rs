@@ -151,8 +151,9 @@ fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path
             _ => "",
         };
         println!(
-            "event loss: {pairs} pairs of {between}{compared}, weight {}, C {}",
-            config.event_weight, config.event_threshold
+            "event loss: {pairs} pairs of {between}{compared}, weight {}, C {} per event",
+            config.event_weight,
+            config.event_thresholds().0
         );
     }
     if let Some(slices) = done.modulated_slices {

@@ -1,7 +1,7 @@
 //! `cargo xtask reconstruct`'s defaults that depend on the scene, on edited copies of the tiny
 //! fixture: a scene without events trains the exposure model alone, and a sensor recorded without
 //! a refractory period holds mixed-polarity pixels to their counts and bounds a count of n by n − 1
-//! thresholds, and a moving camera is corrected from the images and its scene Gaussians start on
+//! thresholds (one with a refractory period reads each event as 1.25 thresholds), and a moving camera is corrected from the images and its scene Gaussians start on
 //! swept surfaces, unless the user says otherwise.
 #![allow(clippy::unwrap_used)]
 
@@ -58,6 +58,8 @@ fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
     assert!(used.contains("\"event_ignore_mixed\": false"), "{used}");
     assert!(stdout.contains("n - 1"), "{stdout}");
     assert!(used.contains("\"event_bound_margin\": 1.0"), "{used}");
+    assert!(used.contains("\"event_threshold_scale\": 1.0"), "{used}");
+    assert!(!stdout.contains("read as 1.25 thresholds"), "{stdout}");
     // The user's choices win over the scene's defaults, each on its own.
     let (stdout, used) = run("chosen", &["--event-ignore-mixed", "on"]);
     assert!(!stdout.contains("no refractory period"), "{stdout}");
@@ -66,6 +68,24 @@ fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
     let (stdout, used) = run("margin", &["--event-bound-margin", "0.5"]);
     assert!(!stdout.contains("n - 1"), "{stdout}");
     assert!(used.contains("\"event_bound_margin\": 0.5"), "{used}");
+}
+
+#[test]
+fn a_sensor_with_a_refractory_period_reads_each_event_as_more_than_a_threshold() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = tiny_config(dir.path());
+    let scene_dir = fixture_with_scene(dir.path(), "refractory-sensor", |scene| {
+        scene["generator"]["config"]["refractory_us"] = serde_json::json!(1000);
+    });
+    let run = |name: &str, extra: &[&str]| {
+        run_three_renders(&scene_dir, &dir.path().join(name), &config, extra)
+    };
+    let (stdout, used) = run("default", &[]);
+    assert!(stdout.contains("read as 1.25 thresholds"), "{stdout}");
+    assert!(used.contains("\"event_threshold_scale\": 1.25"), "{used}");
+    let (stdout, used) = run("chosen", &["--event-threshold-scale", "1"]);
+    assert!(!stdout.contains("read as 1.25 thresholds"), "{stdout}");
+    assert!(used.contains("\"event_threshold_scale\": 1.0"), "{used}");
 }
 
 /// A copy of the tiny fixture whose camera moves: scene format 2, each frame's camera the scene's

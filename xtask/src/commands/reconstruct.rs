@@ -139,8 +139,14 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
     Ok((kept, seconds))
 }
 
+/// How many of the sensor's thresholds one event is read as (`--event-threshold-scale`) when the
+/// sensor has a refractory period: the best of 1 / 1.25 / 1.375 on the default benchmark
+/// (`docs/notes/2026-12-05-event-threshold-scale.md`).
+const REFRACTORY_THRESHOLD_SCALE: f32 = 1.25;
+
 /// The defaults that depend on the scene, for the settings the user left alone: the contrast
-/// thresholds its generator recorded, mixed-polarity pixels held to their counts and a bound margin
+/// thresholds its generator recorded, each event read as 1.25 of them unless the sensor was
+/// recorded without a refractory period, mixed-polarity pixels held to their counts and a bound margin
 /// of one threshold when it recorded a sensor without a refractory period, and the event loss between sub-exposure renders and the
 /// events' modulation of each render's slice when the blur model is `exposure` and every frame
 /// has events (a scene without events trains with the exposure
@@ -179,6 +185,22 @@ fn scene_defaults(
             "events: every crossing is reported, so n events bound a pixel's change by n - 1 \
              thresholds (--event-bound-margin 1; give it to choose)"
         );
+    }
+    // A sensor with a refractory period (every real one) drops crossings, so each event stands
+    // for more than one threshold of change; one recorded without reports them all.
+    if !training.sets("event_threshold_scale")? {
+        config.event_threshold_scale = if data.recorded("refractory_us") == Some(0.0) {
+            1.0
+        } else {
+            REFRACTORY_THRESHOLD_SCALE
+        };
+        if config.event_threshold_scale != 1.0 {
+            println!(
+                "events: a sensor's refractory period drops crossings, so each event is read as \
+                 {} thresholds (--event-threshold-scale 1 to read the sensor's own)",
+                config.event_threshold_scale
+            );
+        }
     }
     let with_events = data.scene.frames.iter().all(|f| f.events.is_some());
     if config.blur_model == BlurModel::Exposure && !training.sets("event_modulation")? {
@@ -228,12 +250,12 @@ fn scene_defaults(
         config.event_loss = with_events;
         if with_events {
             println!(
-                "events: the event loss compares {} (weight {}, C+ {}, C- {}, {:?} penalty; \
-                 --event-loss off to train without)",
+                "events: the event loss compares {} (weight {}, C+ {}, C- {} per event, {:?} \
+                 penalty; --event-loss off to train without)",
                 crate::training::compared_renders(config.exposure_pairs),
                 config.event_weight,
-                config.event_threshold,
-                config.event_threshold_neg.unwrap_or(config.event_threshold),
+                config.event_thresholds().0,
+                config.event_thresholds().1,
                 config.event_penalty
             );
         } else {
@@ -437,6 +459,7 @@ pub fn run(args: Args) -> Result<()> {
             "event_weight": config.event_weight,
             "event_threshold": config.event_threshold,
             "event_threshold_neg": config.event_threshold_neg,
+            "event_threshold_scale": config.event_threshold_scale,
             "event_penalty": config.event_penalty,
             "event_modulation": config.event_modulation,
             "exposure_motion": config.exposure_motion,

@@ -90,6 +90,12 @@ impl TrainConfig {
                 return bad("event_threshold_neg", "must be a finite number > 0");
             }
         }
+        within(
+            "event_threshold_scale",
+            self.event_threshold_scale,
+            0.25,
+            4.0,
+        )?;
         within("event_bound_margin", self.event_bound_margin, 0.0, 1.0)?;
         within("event_dead_zone", self.event_dead_zone, 0.0, 4.0)?;
         within(

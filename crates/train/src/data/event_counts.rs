@@ -7,7 +7,7 @@ use crate::config::TrainConfig;
 use crate::TrainError;
 
 /// C+·n⁺ − C−·n⁻ per pixel (row-major H × W) of `events`: the log-intensity change they report,
-/// with C± from `config` (C·(n⁺ − n⁻) when C− is not set).
+/// with C± from `config` ([`TrainConfig::event_thresholds`]; C·(n⁺ − n⁻) when C− is not set).
 /// The pixels `hot` marks (empty: none) report no change, as if their events were removed.
 pub(super) fn expected_change(
     events: &events::EventSlice<'_>,
@@ -40,9 +40,10 @@ pub(super) fn slice_modulation(
         end_us: us(to_s).max(us(from_s) + 1),
         reference_us: us(anchor_s),
     };
+    let (c_pos, c_neg) = config.event_thresholds();
     let edi = events::EdiConfig {
-        c_pos: f64::from(config.event_threshold),
-        c_neg: f64::from(config.event_threshold_neg.unwrap_or(config.event_threshold)),
+        c_pos: f64::from(c_pos),
+        c_neg: f64::from(c_neg),
     };
     let gain = events::edi_gain(events, sensor, exposure, edi)
         .map_err(|e| TrainError::Config(format!("the events' modulation of an exposure: {e}")))?;
@@ -66,14 +67,13 @@ fn counted_change(
     sensor: events::SensorSize,
     config: &TrainConfig,
 ) -> Vec<f32> {
-    let c_pos = config.event_threshold;
+    let (c_pos, c_neg) = config.event_thresholds();
     match (config.event_threshold_neg, config.event_ignore_mixed) {
         (None, false) => events::count_frame(events, sensor, events::CountMode::Signed)
             .iter()
             .map(|c| c * c_pos)
             .collect(),
-        (c_neg, ignore_mixed) => {
-            let c_neg = c_neg.unwrap_or(c_pos);
+        (_, ignore_mixed) => {
             let two = events::count_frame(events, sensor, events::CountMode::TwoChannel);
             let (pos, neg) = two.split_at(two.len() / 2);
             pos.iter()
@@ -149,6 +149,33 @@ mod tests {
         let hot = expected_change(&stream.as_slice(), sensor, &config, &[true, false, false]);
         assert_eq!(hot[0], 0.0);
         assert_eq!(hot[1..], two[1..]);
+    }
+
+    #[test]
+    fn the_threshold_scale_multiplies_every_events_change_and_the_modulation() {
+        let (sensor, stream, mut config) = three_pixels();
+        config.event_threshold_neg = Some(0.3);
+        config.event_threshold_scale = 1.25;
+        assert_eq!(config.event_thresholds(), (0.25, 0.375));
+        let scaled = expected_change(&stream.as_slice(), sensor, &config, &[]);
+        assert!((scaled[0] - 0.5).abs() < 1e-7, "{scaled:?}");
+        assert!((scaled[1] + 0.125).abs() < 1e-7, "{scaled:?}");
+        assert!((scaled[2] + 0.375).abs() < 1e-7, "{scaled:?}");
+        // One ON event at 750 µs of a slice [0, 1000) anchored at 500 µs: M = 0.75 + 0.25·e^{1.25 C}.
+        let mut one = events::EventStream::new();
+        one.push(events::Event {
+            t: 750,
+            x: 0,
+            y: 0,
+            p: 1,
+        });
+        let m = slice_modulation(&one.as_slice(), sensor, (0.0, 1e-3, 5e-4), &config, &[])
+            .expect("a valid slice");
+        let want = 0.75 + 0.25 * 0.25f64.exp();
+        assert!((f64::from(m[0]) - want).abs() < 1e-6, "{m:?}");
+        // Scale 1 reads the thresholds themselves, bit for bit.
+        config.event_threshold_scale = 1.0;
+        assert_eq!(config.event_thresholds(), (0.2, 0.3));
     }
 
     #[test]
