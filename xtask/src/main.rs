@@ -36,16 +36,17 @@ enum Command {
     /// Every training option below overrides the preset and the --config file. The default is the
     /// best method measured within the `quick` preset's time budget: the physical model of the blur (each training frame the mean of 9 renders
     /// over its exposure) with the events between those renders when the scene has events, their
-    /// counts read as lower bounds on the change as a sensor with a refractory period gives them,
+    /// counts read as lower bounds on the change as a sensor with a refractory period gives them
+    /// (each event read as 1.25 of the sensor's thresholds, for the crossings it drops),
     /// each pixel's cost capped at one threshold, a pixel that fired both polarities left
     /// unconstrained and the event term at weight 2 (`--event-loss off`: the exposure model
     /// alone), and with one person the body's change over each exposure learned per frame around
     /// the band-limited interpolation of the given poses; when the camera moves, each training
     /// frame's camera corrected from the images (`--camera-correction off` keeps the given
-    /// cameras). The previous default is `--exposure-motion
+    /// cameras). The previous default is `--event-threshold-scale 1`; before it `--exposure-motion
     /// given --body-interpolation local --lr-means 1.6e-4`; before it `--event-weight 1`, then also `--subframes 5
     /// --event-ignore-mixed off`, then also `--event-residual-cap 0`; the squared event loss is `--event-penalty squared
-    /// --event-weight 0.3 --event-modulation off`. The 2-D cascade baseline (every
+    /// --event-weight 0.3 --event-modulation off --event-threshold-scale 1`. The 2-D cascade baseline (every
     /// frame deblurred by EDI first) is `--train-on edi --blur-model none --event-loss off`. The
     /// paper's own configuration (one render per frame, the event-flow loss) is
     /// `--blur-model none --event-loss off --flow-loss on --flow-source events`.

@@ -116,6 +116,7 @@ const RUNS: [Run; 14] = [
             event_weight: Some(3.0),
             event_penalty: Some(EventPenaltyKind::Squared),
             flow_loss: Some(false),
+            event_threshold_scale: Some(1.0),
             ..TrainOptions::default()
         },
     },
@@ -180,6 +181,7 @@ const RUNS: [Run; 14] = [
             event_penalty: Some(EventPenaltyKind::Squared),
             event_weight: Some(0.3),
             flow_loss: Some(false),
+            event_threshold_scale: Some(1.0),
             ..TrainOptions::default()
         },
     },
@@ -195,6 +197,7 @@ const RUNS: [Run; 14] = [
             event_penalty: Some(EventPenaltyKind::Bound),
             event_modulation: Some(false),
             flow_loss: Some(false),
+            event_threshold_scale: Some(1.0),
             ..TrainOptions::default()
         },
     },
@@ -215,6 +218,7 @@ const RUNS: [Run; 14] = [
             body_interpolation: Some(TrackTangents::Local),
             lr_means: Some(1.6e-4),
             flow_loss: Some(false),
+            event_threshold_scale: Some(1.0),
             ..TrainOptions::default()
         },
     },
