@@ -37,7 +37,8 @@ enum Command {
     /// best method measured within the `quick` preset's time budget: the physical model of the blur (each training frame the mean of 9 renders
     /// over its exposure) with the events between those renders when the scene has events, their
     /// counts read as lower bounds on the change as a sensor with a refractory period gives them
-    /// (each event read as 1.25 of the sensor's thresholds, for the crossings it drops),
+    /// (with a fixed camera each event read as 1.25 of the sensor's thresholds, for the crossings
+    /// it drops),
     /// each pixel's cost capped at one threshold, a pixel that fired both polarities left
     /// unconstrained and the event term at weight 2 (`--event-loss off`: the exposure model
     /// alone), and with one person the body's change over each exposure learned per frame around

@@ -1,7 +1,8 @@
 //! `cargo xtask reconstruct`'s defaults that depend on the scene, on edited copies of the tiny
 //! fixture: a scene without events trains the exposure model alone, and a sensor recorded without
 //! a refractory period holds mixed-polarity pixels to their counts and bounds a count of n by n − 1
-//! thresholds (one with a refractory period reads each event as 1.25 thresholds), and a moving camera is corrected from the images and its scene Gaussians start on
+//! thresholds (one with a refractory period reads each event as 1.25 thresholds, unless the camera
+//! moves), and a moving camera is corrected from the images and its scene Gaussians start on
 //! swept surfaces, unless the user says otherwise.
 #![allow(clippy::unwrap_used)]
 
@@ -121,6 +122,9 @@ fn a_moving_camera_is_corrected_and_its_scene_swept_unless_the_user_chooses() {
     assert!(used.contains("\"camera_correction\": true"), "{used}");
     assert!(stdout.contains("plane sweep"), "{stdout}");
     assert!(used.contains("\"scene_init\": \"stereo\""), "{used}");
+    // Its events are mostly the room's, read as the sensor's thresholds.
+    assert!(!stdout.contains("read as 1.25 thresholds"), "{stdout}");
+    assert!(used.contains("\"event_threshold_scale\": 1.0"), "{used}");
     let (stdout, used) = run("given", &["--camera-correction", "off"]);
     assert!(!stdout.contains("camera is corrected"), "{stdout}");
     assert!(used.contains("\"camera_correction\": false"), "{used}");

@@ -376,7 +376,8 @@ training_options! {
     /// soon after a pixel's last event while its reference level moves on (on the benchmark's
     /// 1 ms sensor a moving edge's count recovers 22–54 % of its change), so `cargo xtask
     /// reconstruct` reads each event as 1.25 thresholds unless the scene's generator recorded a
-    /// sensor without a refractory period (then 1) or this option is given. Default benchmark,
+    /// sensor without a refractory period, the camera moves (its events are mostly the room's
+    /// slower edges, where 1.25 cost the room 0.5 dB on `handheld`) or this option is given. Default benchmark,
     /// `quick`, seeds 0–3: 1.25 gives the human box a mean of 31.99 dB and LPIPS 0.0283 against
     /// 31.89 and 0.0337 with 1 (the box's LPIPS lower on every seed; 1.375 and 1.5 lose on seed
     /// 0; `docs/notes/2026-12-05-event-threshold-scale.md`).
