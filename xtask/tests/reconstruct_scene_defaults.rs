@@ -73,13 +73,11 @@ fn a_sensor_without_a_refractory_period_holds_mixed_pixels_to_their_counts() {
 
 #[test]
 fn a_sensor_with_a_refractory_period_reads_each_event_as_more_than_a_threshold() {
+    // The tiny fixture's generator recorded a 1 ms refractory period.
     let dir = tempfile::tempdir().unwrap();
     let config = tiny_config(dir.path());
-    let scene_dir = fixture_with_scene(dir.path(), "refractory-sensor", |scene| {
-        scene["generator"]["config"]["refractory_us"] = serde_json::json!(1000);
-    });
     let run = |name: &str, extra: &[&str]| {
-        run_three_renders(&scene_dir, &dir.path().join(name), &config, extra)
+        run_three_renders(&common::fixture(), &dir.path().join(name), &config, extra)
     };
     let (stdout, used) = run("default", &[]);
     assert!(stdout.contains("read as 1.25 thresholds"), "{stdout}");

@@ -140,14 +140,14 @@ fn kept_log_lines(text: &str, step: usize) -> Result<(String, f64)> {
 }
 
 /// How many of the sensor's thresholds one event is read as (`--event-threshold-scale`) when the
-/// sensor has a refractory period: the best of 1 / 1.25 / 1.375 on the default benchmark
-/// (`docs/notes/2026-12-05-event-threshold-scale.md`).
+/// sensor has a refractory period: the best of 1 / 1.125 / 1.25 / 1.375 / 1.5 on the default
+/// benchmark (`docs/notes/2026-12-05-event-threshold-scale.md`).
 const REFRACTORY_THRESHOLD_SCALE: f32 = 1.25;
 
 /// The defaults that depend on the scene, for the settings the user left alone: the contrast
 /// thresholds its generator recorded, each event read as 1.25 of them unless the sensor was
-/// recorded without a refractory period or the camera moves, mixed-polarity pixels held to their counts and a bound margin
-/// of one threshold when it recorded a sensor without a refractory period, and the event loss between sub-exposure renders and the
+/// recorded without a refractory period or the camera moves, mixed-polarity pixels held to their
+/// counts and a bound margin of one threshold when it recorded a sensor without a refractory period, and the event loss between sub-exposure renders and the
 /// events' modulation of each render's slice when the blur model is `exposure` and every frame
 /// has events (a scene without events trains with the exposure
 /// model alone, and says so), the learned in-exposure motion with the exposure model when the
@@ -252,13 +252,12 @@ fn scene_defaults(
     if config.blur_model == BlurModel::Exposure && !training.sets("event_loss")? {
         config.event_loss = with_events;
         if with_events {
+            let (c_pos, c_neg) = config.event_thresholds();
             println!(
-                "events: the event loss compares {} (weight {}, C+ {}, C- {} per event, {:?} \
-                 penalty; --event-loss off to train without)",
+                "events: the event loss compares {} (weight {}, C+ {c_pos}, C- {c_neg} per event, \
+                 {:?} penalty; --event-loss off to train without)",
                 crate::training::compared_renders(config.exposure_pairs),
                 config.event_weight,
-                config.event_thresholds().0,
-                config.event_thresholds().1,
                 config.event_penalty
             );
         } else {

@@ -6,16 +6,16 @@ use super::{EventPenaltyKind, TrainConfig};
 impl TrainConfig {
     /// The log-intensity changes (C+, C−) one positive and one negative event stand for: the
     /// sensor's thresholds (`event_threshold`, `event_threshold_neg`, C− = C+ when unset) times
-    /// `event_threshold_scale`, rounded to f32 (with scale 1, exactly the thresholds).
+    /// `event_threshold_scale`, the product in f64 rounded to f32 (exact, so with scale 1 the
+    /// thresholds themselves).
     pub fn event_thresholds(&self) -> (f32, f32) {
-        let c_pos = self.event_threshold;
-        let c_neg = self.event_threshold_neg.unwrap_or(c_pos);
-        if self.event_threshold_scale == 1.0 {
-            return (c_pos, c_neg);
-        }
         let scale = f64::from(self.event_threshold_scale);
         let scaled = |c: f32| (scale * f64::from(c)) as f32;
-        (scaled(c_pos), scaled(c_neg))
+        let c_pos = self.event_threshold;
+        (
+            scaled(c_pos),
+            scaled(self.event_threshold_neg.unwrap_or(c_pos)),
+        )
     }
 
     /// The event loss's penalty as `train::loss::event` takes it (thresholds C± from

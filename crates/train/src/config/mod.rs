@@ -335,16 +335,16 @@ training_options! {
     /// The log-intensity change one event stands for, in the sensor's thresholds (C±): every use
     /// of the events (the event loss's counts, margin, dead zone and cap, and the events'
     /// modulation; not the EDI cascade's frames, a baseline at the sensor's thresholds) reads an
-    /// event as this many times C± (`TrainConfig::event_thresholds`). 1 in
-    /// a bare configuration. A sensor with a refractory period drops the crossings that come too
-    /// soon after a pixel's last event while its reference level moves on (on the benchmark's
-    /// 1 ms sensor a moving edge's count recovers 22–54 % of its change), so `cargo xtask
-    /// reconstruct` reads each event as 1.25 thresholds unless the scene's generator recorded a
-    /// sensor without a refractory period, the camera moves (its events are mostly the room's
-    /// slower edges, where 1.25 cost the room 0.5 dB on `handheld`) or this option is given. Default benchmark,
-    /// `quick`, seeds 0–3: 1.25 gives the human box a mean of 31.99 dB and LPIPS 0.0283 against
-    /// 31.89 and 0.0337 with 1 (the box's LPIPS lower on every seed; 1.375 and 1.5 lose on seed
-    /// 0; `docs/notes/2026-12-05-event-threshold-scale.md`).
+    /// event as this many times C± (`TrainConfig::event_thresholds`). 1 in a bare configuration.
+    /// A sensor with a refractory period drops the crossings that come too soon after a pixel's
+    /// last event while its reference level moves on (on the benchmark's 1 ms sensor a moving
+    /// edge's count recovers 22–54 % of its change), so `cargo xtask reconstruct` reads each event
+    /// as 1.25 thresholds unless the scene's generator recorded a sensor without a refractory
+    /// period, the camera moves (its events are mostly the room's slower edges, where 1.25 cost
+    /// the room 0.5 dB on `handheld`) or this option is given. Default benchmark, `quick`, seeds
+    /// 0–3: 1.25 gives the human box a mean of 31.99 dB and LPIPS 0.0283 against 31.89 and 0.0337
+    /// with 1 (the box's LPIPS lower on every seed; 1.125, 1.375 and 1.5 lose on seed 0;
+    /// `docs/notes/2026-12-05-event-threshold-scale.md`).
     event_threshold_scale: f32 = 1.0,
     /// ε of log(Y + ε) (the benchmark's simulator: 1e-3).
     event_log_eps: f32 = 1e-3,

@@ -333,8 +333,8 @@ impl TrainingData {
 
     /// Prepares the event-generation loss: for every pair of consecutive training frames, reads frame
     /// k's `events` file (the events of [t_k, t_{k+1})) and turns it into C·E per pixel
-    /// (`config.event_thresholds()`). A pair whose frame has no events file, or whose events file cannot
-    /// be read, is an error naming the frame and the file — refused here, not mid-training.
+    /// (`config.event_thresholds()`). A pair whose frame has no events file, or whose events file
+    /// cannot be read, is an error naming the frame and the file — refused here, not mid-training.
     pub fn enable_events(
         &mut self,
         data: &Dataset,
@@ -371,7 +371,8 @@ impl TrainingData {
 
     /// Prepares the event-generation loss inside exposures: for every training frame k and every
     /// pair of consecutive sub-exposure times (s, s+1) of `subframes` midpoint-rule times, C·E per
-    /// pixel (C = `config.event_thresholds()`, E the signed count of the events with t_s ≤ t < t_{s+1}).
+    /// pixel (C± = `config.event_thresholds()`, E the signed count of the events with
+    /// t_s ≤ t < t_{s+1}).
     /// An exposure spans the event files of frames k−1 ([t_{k−1}, t_k)) and k ([t_k, t_{k+1})),
     /// which are joined; a frame whose exposure needs a file that `scene.json` does not name is an
     /// error naming the frame and the field. Intervals outside the files' evidence
