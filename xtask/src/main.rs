@@ -40,8 +40,9 @@ enum Command {
     /// (with a fixed camera each event read as 1.25 of the sensor's thresholds, for the crossings
     /// it drops),
     /// each pixel's cost capped at one threshold, a pixel that fired both polarities left
-    /// unconstrained and the event term at weight 2 (`--event-loss off`: the exposure model
-    /// alone), and with one person the body's change over each exposure learned per frame around
+    /// unconstrained and the event term at weight 2, falling to a tenth after densification at
+    /// `--preset full` (`--event-weight-final-fraction 1` keeps it; `--event-loss off`: the
+    /// exposure model alone), and with one person the body's change over each exposure learned per frame around
     /// the band-limited interpolation of the given poses; when the camera moves, each training
     /// frame's camera corrected from the images (`--camera-correction off` keeps the given
     /// cameras). The previous default is `--event-threshold-scale 1`; before it `--exposure-motion
