@@ -40,12 +40,12 @@ enum Command {
     /// (with a fixed camera each event read as 1.25 of the sensor's thresholds, for the crossings
     /// it drops),
     /// each pixel's cost capped at one threshold, a pixel that fired both polarities left
-    /// unconstrained and the event term at weight 2, falling to a tenth after densification at
-    /// `--preset full` (`--event-weight-final-fraction 1` keeps it; `--event-loss off`: the
+    /// unconstrained and the event term at weight 2, falling to a tenth after densification
+    /// (`--event-weight-final-fraction 1` keeps it; `--event-loss off`: the
     /// exposure model alone), and with one person the body's change over each exposure learned per frame around
     /// the band-limited interpolation of the given poses; when the camera moves, each training
     /// frame's camera corrected from the images (`--camera-correction off` keeps the given
-    /// cameras). The previous default is `--event-threshold-scale 1`; before it `--exposure-motion
+    /// cameras). The previous default is `--event-weight-final-fraction 1`; before it `--event-threshold-scale 1`; before it `--exposure-motion
     /// given --body-interpolation local --lr-means 1.6e-4`; before it `--event-weight 1`, then also `--subframes 5
     /// --event-ignore-mixed off`, then also `--event-residual-cap 0`; the squared event loss is `--event-penalty squared
     /// --event-weight 0.3 --event-modulation off --event-threshold-scale 1`. The 2-D cascade baseline (every

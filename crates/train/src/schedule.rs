@@ -39,6 +39,7 @@ mod tests {
     #[test]
     fn the_event_weight_decays_from_its_step_to_its_final_fraction() {
         let mut config = TrainConfig::preset(Preset::Quick);
+        config.event_weight_final_fraction = 1.0;
         let w = config.event_weight;
         assert_eq!(event_weight_at(&config, config.steps), w);
         config.event_weight_final_fraction = 0.1;

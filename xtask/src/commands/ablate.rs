@@ -117,6 +117,7 @@ const RUNS: [Run; 14] = [
             event_penalty: Some(EventPenaltyKind::Squared),
             flow_loss: Some(false),
             event_threshold_scale: Some(1.0),
+            event_weight_final_fraction: Some(1.0),
             ..TrainOptions::default()
         },
     },
@@ -182,6 +183,7 @@ const RUNS: [Run; 14] = [
             event_weight: Some(0.3),
             flow_loss: Some(false),
             event_threshold_scale: Some(1.0),
+            event_weight_final_fraction: Some(1.0),
             ..TrainOptions::default()
         },
     },
@@ -198,6 +200,7 @@ const RUNS: [Run; 14] = [
             event_modulation: Some(false),
             flow_loss: Some(false),
             event_threshold_scale: Some(1.0),
+            event_weight_final_fraction: Some(1.0),
             ..TrainOptions::default()
         },
     },
@@ -219,6 +222,7 @@ const RUNS: [Run; 14] = [
             lr_means: Some(1.6e-4),
             flow_loss: Some(false),
             event_threshold_scale: Some(1.0),
+            event_weight_final_fraction: Some(1.0),
             ..TrainOptions::default()
         },
     },

@@ -319,12 +319,14 @@ training_options! {
     /// log-linearly to this fraction of `event_weight` (1, the default: a constant weight). Early
     /// on the events lead the renders towards sharpness and drive the person's densification;
     /// their optimum at the end is blurrier than the photometric term's (the loss audit of
-    /// `docs/notes/2026-12-02-event-weight-decay.md`). The `full` preset takes 0.1 from step
-    /// 4000, the end of its densification: +0.57 dB in the human box (34.03 → 34.60, LPIPS
-    /// 0.0162 → 0.0164; `docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
-    event_weight_final_fraction: f32 = 1.0,
+    /// `docs/notes/2026-12-02-event-weight-decay.md`). Both presets take 0.1 from the end of
+    /// their densification (`quick` step 900, `full` step 4000): +0.57 dB in the human box at
+    /// `full` (34.03 → 34.60), +0.18 / +0.48 / +0.29 dB on seeds 0 / 1 / 2 at `quick` (LPIPS
+    /// 3–4 % higher; 1 before 2026-12-05;
+    /// `docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
+    event_weight_final_fraction: f32 = 0.1,
     /// The step where the event weight starts to decay (see `event_weight_final_fraction`).
-    event_weight_decay_from: usize = 0,
+    event_weight_decay_from: usize = 900,
     /// Contrast threshold C of the camera (log-intensity units): 0.2, the benchmark simulator's;
     /// `cargo xtask reconstruct` takes the one the scene's generator recorded
     /// (`generator.config.event_threshold` in scene.json) unless this option or the config file

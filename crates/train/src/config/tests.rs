@@ -134,19 +134,13 @@ fn presets_are_valid_and_round_trip_through_json() {
 }
 
 #[test]
-fn the_full_preset_lets_the_event_weight_fall_after_densification_and_quick_keeps_it() {
-    let full = TrainConfig::preset(Preset::Full);
-    assert_eq!(full.event_weight_decay_from, full.densify_until);
-    let w = full.event_weight;
-    assert_eq!(
-        crate::schedule::event_weight_at(&full, full.densify_until),
-        w
-    );
-    let last = crate::schedule::event_weight_at(&full, full.steps);
-    assert!((last - 0.1 * w).abs() < 1e-6 * w, "{last}");
-    let quick = TrainConfig::preset(Preset::Quick);
-    assert_eq!(
-        crate::schedule::event_weight_at(&quick, quick.steps),
-        quick.event_weight
-    );
+fn both_presets_let_the_event_weight_fall_to_a_tenth_after_densification() {
+    for preset in [Preset::Quick, Preset::Full] {
+        let c = TrainConfig::preset(preset);
+        assert_eq!(c.event_weight_decay_from, c.densify_until, "{preset:?}");
+        let w = c.event_weight;
+        assert_eq!(crate::schedule::event_weight_at(&c, c.densify_until), w);
+        let last = crate::schedule::event_weight_at(&c, c.steps);
+        assert!((last - 0.1 * w).abs() < 1e-6 * w, "{preset:?}: {last}");
+    }
 }
