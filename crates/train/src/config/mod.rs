@@ -322,7 +322,7 @@ training_options! {
     /// `docs/notes/2026-12-02-event-weight-decay.md`). Both presets take 0.1 from the end of
     /// their densification (`quick` step 900, `full` step 4000): +0.57 dB in the human box at
     /// `full` (34.03 → 34.60), +0.18 / +0.48 / +0.29 dB on seeds 0 / 1 / 2 at `quick` (LPIPS
-    /// 3–4 % higher; 1 before 2026-12-05;
+    /// 3–5 % higher; 1 before 2026-12-05;
     /// `docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
     event_weight_final_fraction: f32 = 0.1,
     /// The step where the event weight starts to decay (see `event_weight_final_fraction`).
