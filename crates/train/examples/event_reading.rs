@@ -83,14 +83,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Last event time per pixel, seeded from the previous file.
         let mut last = vec![i64::MIN; plane];
         if let Some(prev) = &previous {
-            for e in prev.iter() {
+            for e in prev
+                .iter()
+                .filter(|e| (e.x as usize) < w && (e.y as usize) < h)
+            {
                 last[e.y as usize * w + e.x as usize] = e.t;
             }
         }
         let mut pos = vec![0usize; plane];
         let mut neg = vec![0usize; plane];
         let mut read = vec![vec![0.0f64; plane]; readings.len()];
-        for e in stream.iter() {
+        for e in stream
+            .iter()
+            .filter(|e| (e.x as usize) < w && (e.y as usize) < h)
+        {
             let i = e.y as usize * w + e.x as usize;
             let burst = last[i] != i64::MIN && e.t - last[i] < 2 * refractory;
             last[i] = e.t;

@@ -622,9 +622,7 @@ impl TrainConfig {
                 nonrigid_from: 1000,
                 densify_from: 500,
                 densify_until: 4000,
-                // At `full` the event term's optimum is blurrier than the ceiling (the loss audit
-                // of 2026-12-05): it leads until densification ends, then falls to a tenth.
-                event_weight_final_fraction: 0.1,
+                // The event weight falls to a tenth from the end of densification, as at `quick`.
                 event_weight_decay_from: 4000,
                 opacity_reset_every: 3000,
                 checkpoint_every: 1000,
