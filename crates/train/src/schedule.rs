@@ -31,6 +31,19 @@ pub fn event_weight_at(config: &crate::config::TrainConfig, step: usize) -> f32 
         )
 }
 
+/// The D-SSIM weight λ at `step`: `ssim_weight`, decaying log-linearly over the event weight's
+/// window (from `event_weight_decay_from`) to `ssim_weight_final_fraction` of it at the last step
+/// (exactly `ssim_weight` at every step when the fraction is 1).
+pub fn ssim_weight_at(config: &crate::config::TrainConfig, step: usize) -> f32 {
+    config.ssim_weight
+        * correction_rate_scale(
+            config.ssim_weight_final_fraction,
+            config.event_weight_decay_from,
+            step,
+            config.steps,
+        )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -47,6 +60,19 @@ mod tests {
         assert_eq!(event_weight_at(&config, 300), w);
         let last = event_weight_at(&config, config.steps);
         assert!((last - 0.1 * w).abs() < 1e-5 * w, "{last}");
+    }
+
+    #[test]
+    fn the_ssim_weight_is_constant_by_default_and_decays_over_the_event_window() {
+        let mut config = TrainConfig::preset(Preset::Full);
+        let l = config.ssim_weight;
+        for step in [0, 3999, 4000, 5000, config.steps] {
+            assert_eq!(ssim_weight_at(&config, step), l);
+        }
+        config.ssim_weight_final_fraction = 0.1;
+        assert_eq!(ssim_weight_at(&config, config.event_weight_decay_from), l);
+        let last = ssim_weight_at(&config, config.steps);
+        assert!((last - 0.1 * l).abs() < 1e-6 * l, "{last}");
     }
 
     #[test]

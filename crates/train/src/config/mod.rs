@@ -146,6 +146,12 @@ training_options! {
     near_plane: f64 = rasterize_cpu::DEFAULT_NEAR_PLANE,
     /// Weight λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
     ssim_weight: f32 = 0.2,
+    /// The D-SSIM weight's decay over the event weight's window: from `event_weight_decay_from`
+    /// to the last step λ falls log-linearly to this fraction of `ssim_weight` (1, the default: a
+    /// constant λ). The loss audit at `full` found SSIM preferring the blurry model to the
+    /// sharp-trained one where L1 prefers the sharp one
+    /// (`docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
+    ssim_weight_final_fraction: f32 = 1.0,
     /// Weight of the perceptual loss: LPIPS (AlexNet, v0.1, on sRGB-encoded images) of the frame's
     /// prediction (the mean of its sub-exposure renders) against the observed frame
     /// (`train::loss::perceptual`; 3DGS-Avatar's third term). 0 = off (no LPIPS work at all).
@@ -316,7 +322,7 @@ training_options! {
     /// preset").
     event_weight: f32 = 2.0,
     /// The event weight's decay: from `event_weight_decay_from` to the last step it falls
-    /// log-linearly to this fraction of `event_weight` (1, the default: a constant weight). Early
+    /// log-linearly to this fraction of `event_weight` (1: a constant weight). Early
     /// on the events lead the renders towards sharpness and drive the person's densification;
     /// their optimum at the end is blurrier than the photometric term's (the loss audit of
     /// `docs/notes/2026-12-02-event-weight-decay.md`). Both presets take 0.1 from the end of

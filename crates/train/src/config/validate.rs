@@ -67,6 +67,9 @@ impl TrainConfig {
         if !(0.0..=1.0).contains(&self.ssim_weight) {
             return bad("ssim_weight", "must be in [0, 1]");
         }
+        if !(self.ssim_weight_final_fraction > 0.0 && self.ssim_weight_final_fraction <= 1.0) {
+            return bad("ssim_weight_final_fraction", "must be in (0, 1]");
+        }
         non_negative("lpips_weight", self.lpips_weight)?;
         non_negative("flow_weight", self.flow_weight)?;
         non_negative("flow_tau", self.flow_tau)?;

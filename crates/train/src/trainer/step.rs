@@ -23,7 +23,7 @@ use crate::model::{
     ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
 };
 use crate::pose::posing::ModelGradients;
-use crate::schedule::event_weight_at;
+use crate::schedule::{event_weight_at, ssim_weight_at};
 use crate::TrainError;
 use rasterize_cpu::TileSharing;
 use smpl_deform::math::Affine;
@@ -32,10 +32,12 @@ use std::time::Instant;
 /// The configuration step `step` trains with: `config` itself, except during the EDI warm-up
 /// (`step < edi_warmup`), which renders once at mid exposure with no event term (its target is
 /// the frame's EDI deblurring, [`TrainingData::target_image`]), and the event weight, which
-/// decays from `event_weight_decay_from` on when `event_weight_final_fraction` is below 1.
+/// decays from `event_weight_decay_from` on when `event_weight_final_fraction` is below 1, as
+/// the D-SSIM weight does when `ssim_weight_final_fraction` is.
 fn step_config(config: &TrainConfig, step: usize) -> TrainConfig {
     let mut config = config.clone();
     config.event_weight = event_weight_at(&config, step);
+    config.ssim_weight = ssim_weight_at(&config, step);
     if step < config.edi_warmup {
         config.blur_model = BlurModel::None;
         config.event_loss = false;
