@@ -53,6 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let c = data.recorded("event_threshold").unwrap_or(0.2);
     let (w, h) = (data.camera.width as usize, data.camera.height as usize);
     let plane = w * h;
+    let in_sensor = |e: &events::Event| (e.x as usize) < w && (e.y as usize) < h;
     let eps = 1e-3;
     // Readings: (label, g for an isolated event, b for an event within 2r of its predecessor).
     let readings: Vec<(String, f64, f64)> = vec![
@@ -83,20 +84,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Last event time per pixel, seeded from the previous file.
         let mut last = vec![i64::MIN; plane];
         if let Some(prev) = &previous {
-            for e in prev
-                .iter()
-                .filter(|e| (e.x as usize) < w && (e.y as usize) < h)
-            {
+            for e in prev.iter().filter(in_sensor) {
                 last[e.y as usize * w + e.x as usize] = e.t;
             }
         }
         let mut pos = vec![0usize; plane];
         let mut neg = vec![0usize; plane];
         let mut read = vec![vec![0.0f64; plane]; readings.len()];
-        for e in stream
-            .iter()
-            .filter(|e| (e.x as usize) < w && (e.y as usize) < h)
-        {
+        for e in stream.iter().filter(in_sensor) {
             let i = e.y as usize * w + e.x as usize;
             let burst = last[i] != i64::MIN && e.t - last[i] < 2 * refractory;
             last[i] = e.t;

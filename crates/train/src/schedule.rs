@@ -22,26 +22,26 @@ pub fn correction_rate_scale(final_fraction: f32, from: usize, step: usize, step
 /// `event_weight_decay_from` to `event_weight_final_fraction` of it at the last step (exactly
 /// `event_weight` at every step when the fraction is 1).
 pub fn event_weight_at(config: &crate::config::TrainConfig, step: usize) -> f32 {
-    config.event_weight
-        * correction_rate_scale(
-            config.event_weight_final_fraction,
-            config.event_weight_decay_from,
-            step,
-            config.steps,
-        )
+    config.event_weight * late_decay(config, config.event_weight_final_fraction, step)
 }
 
 /// The D-SSIM weight λ at `step`: `ssim_weight`, decaying log-linearly over the event weight's
 /// window (from `event_weight_decay_from`) to `ssim_weight_final_fraction` of it at the last step
 /// (exactly `ssim_weight` at every step when the fraction is 1).
 pub fn ssim_weight_at(config: &crate::config::TrainConfig, step: usize) -> f32 {
-    config.ssim_weight
-        * correction_rate_scale(
-            config.ssim_weight_final_fraction,
-            config.event_weight_decay_from,
-            step,
-            config.steps,
-        )
+    config.ssim_weight * late_decay(config, config.ssim_weight_final_fraction, step)
+}
+
+/// The factor of a loss weight at `step` in the window after densification: 1 until
+/// `event_weight_decay_from`, then log-linear to `final_fraction` at the last step (exactly 1 at
+/// every step when `final_fraction` is 1).
+fn late_decay(config: &crate::config::TrainConfig, final_fraction: f32, step: usize) -> f32 {
+    correction_rate_scale(
+        final_fraction,
+        config.event_weight_decay_from,
+        step,
+        config.steps,
+    )
 }
 
 #[cfg(test)]

@@ -146,11 +146,9 @@ training_options! {
     near_plane: f64 = rasterize_cpu::DEFAULT_NEAR_PLANE,
     /// Weight λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
     ssim_weight: f32 = 0.2,
-    /// The D-SSIM weight's decay over the event weight's window: from `event_weight_decay_from`
-    /// to the last step λ falls log-linearly to this fraction of `ssim_weight` (1, the default: a
-    /// constant λ). The loss audit at `full` found SSIM preferring the blurry model to the
-    /// sharp-trained one where L1 prefers the sharp one
-    /// (`docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
+    /// λ's decay over the event weight's window: log-linear to this fraction of `ssim_weight` at
+    /// the last step (1, the default: constant). 0.1 at `full`: +0.05 dB, not kept
+    /// (`docs/notes/2026-12-05-full-gap-and-new-default-reruns.md`).
     ssim_weight_final_fraction: f32 = 1.0,
     /// Weight of the perceptual loss: LPIPS (AlexNet, v0.1, on sRGB-encoded images) of the frame's
     /// prediction (the mean of its sub-exposure renders) against the observed frame
@@ -328,8 +326,7 @@ training_options! {
     /// `docs/notes/2026-12-02-event-weight-decay.md`). Both presets take 0.1 from the end of
     /// their densification (`quick` step 900, `full` step 4000): +0.57 dB in the human box at
     /// `full` (34.03 → 34.60), +0.18 / +0.48 / +0.29 dB on seeds 0 / 1 / 2 at `quick` (LPIPS
-    /// 3–5 % higher; 1 before 2026-12-05;
-    /// `docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
+    /// 3–5 % higher; 1 before; `docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
     event_weight_final_fraction: f32 = 0.1,
     /// The step where the event weight starts to decay (see `event_weight_final_fraction`).
     event_weight_decay_from: usize = 900,
