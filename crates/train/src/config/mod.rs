@@ -376,11 +376,9 @@ training_options! {
     /// crossings, so a count is never too high, but a count at a slowly changing pixel is exact).
     event_overshoot_weight: f32 = 0.0,
     /// The cap of the `bound` penalty, in thresholds (the mean of C±): a pixel's event cost is
-    /// capped at τ² with τ this many thresholds (0: no cap, the default before 2026-11-28's
-    /// thirtieth session), so a pixel whose count the sensor's refractory period turned into the
-    /// wrong sign or size stops pulling once its change is τ away from what the count allows (a
-    /// truncated quadratic; `train::loss::event`). The default, one threshold, gains 0.40 dB in
-    /// the human box at `quick` (1.27 dB with `--subframes 9`; `docs/BENCHMARKS.md`).
+    /// capped at τ² with τ this many thresholds (0: no cap), so a pixel whose count the sensor's
+    /// refractory period turned into the wrong sign or size stops pulling (a truncated
+    /// quadratic; `train::loss::event`; +1.27 dB in the box at `quick`, `docs/BENCHMARKS.md`).
     event_residual_cap: f32 = 1.0,
     /// The cap's Huber form: beyond the cap a pixel's event cost grows linearly (a constant pull)
     /// instead of staying flat; off, the default: on costs 0.52 / 0.66 dB in the box at `quick` on
@@ -394,9 +392,7 @@ training_options! {
     /// for a positive count, the smallest for a negative one), so an edge the model places a
     /// fraction of a pixel off is not charged at the pixel that fired (`train::loss::event::
     /// pair_event_loss_reach`); pixels without events stay per pixel. 0 (the default): per pixel.
-    /// Reach 1 with ideal events (`refr0`, `quick`): 35.21 / 30.83 dB full frame / human box
-    /// against 36.01 / 31.70, LPIPS 0.0134 / 0.0305 against 0.0158 / 0.0354 — sharper edges, placed
-    /// less exactly (`docs/notes/2026-12-03-oracle-motion-reach-tracker-prior.md`).
+    /// Reach 1 loses 0.87 dB in the box with ideal events at `quick` (`docs/notes/2026-12-03-…`).
     event_reach: u32 = 0,
     /// A pixel that fired events of both polarities within an interval says nothing about its net
     /// change there: on a sensor with a refractory period, texture crossing the pixel both ways
@@ -409,6 +405,10 @@ training_options! {
     /// are exact: +0.46 dB in the box there (31.40 against 30.94 dB at weight 1).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     event_ignore_mixed: bool = true,
+    /// Between sub-exposure renders, the sensor's refractory period (µs): a pixel silent in an
+    /// interval but that fired less than this long before it is unconstrained there (its silence
+    /// may be the refractory period's). 0: every silent pixel is held to the dead zone.
+    event_refractory_us: f32 = 0.0,
     /// With `blur_model = exposure` and a scene with events: each sub-exposure render stands for
     /// its 1/S slice of the exposure modulated per pixel by the events inside that slice — the
     /// event double integral (EDI) over the slice, anchored at the render's time — instead of

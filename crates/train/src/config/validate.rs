@@ -121,6 +121,11 @@ impl TrainConfig {
                  `event_penalty = squared` and `event_pairs = exposure`",
             );
         }
+        if !(self.event_refractory_us.is_finite()
+            && (0.0..=1e5).contains(&self.event_refractory_us))
+        {
+            return bad("event_refractory_us", "must be 0 to 100000 µs");
+        }
         if self.event_reach > 3 {
             return bad("event_reach", "must be 0 to 3 pixels");
         }

@@ -22,6 +22,59 @@ pub(super) fn expected_change(
     change
 }
 
+/// [`expected_change`] of the events of `slice` in `[from_us, to_us)`, then, with
+/// `config.event_refractory_us`, [`unconstrain_refractory_silence`] for the events that long
+/// before `from_us`: what the event loss holds one interval between sub-exposure renders to.
+pub(super) fn interval_change(
+    slice: &events::EventSlice<'_>,
+    (from_us, to_us): (i64, i64),
+    sensor: events::SensorSize,
+    config: &TrainConfig,
+    hot: &[bool],
+) -> Vec<f32> {
+    let during = slice.window(from_us, to_us);
+    let mut expected = expected_change(&during, sensor, config, hot);
+    let refractory_us = f64::from(config.event_refractory_us).round() as i64;
+    if refractory_us > 0 {
+        let before = slice.window(from_us - refractory_us, from_us);
+        unconstrain_refractory_silence(&mut expected, &before, &during, sensor, hot);
+    }
+    expected
+}
+
+/// Leaves unconstrained ([`crate::loss::event::UNCONSTRAINED`]) every pixel of `expected` (the
+/// change [`expected_change`] read from the events `during` an interval) that fired no event
+/// during the interval but one `before` it — the events of the sensor's refractory period before
+/// the interval's start: such a pixel's silence may be the refractory period's (crossings
+/// dropped while its reference level still moved), not a steady intensity. Hot pixels (`hot`;
+/// empty: none) keep what [`expected_change`] gave them. Returns how many pixels it freed.
+fn unconstrain_refractory_silence(
+    expected: &mut [f32],
+    before: &events::EventSlice<'_>,
+    during: &events::EventSlice<'_>,
+    sensor: events::SensorSize,
+    hot: &[bool],
+) -> usize {
+    let width = sensor.width as usize;
+    let pixel = |e: events::Event| usize::from(e.y) * width + usize::from(e.x);
+    let mut fired = vec![false; expected.len()];
+    for e in during.iter() {
+        if let Some(f) = fired.get_mut(pixel(e)) {
+            *f = true;
+        }
+    }
+    let mut freed = 0;
+    for e in before.iter() {
+        let p = pixel(e);
+        let is_hot = hot.get(p).copied().unwrap_or(false);
+        if p < expected.len() && !fired[p] && !is_hot && expected[p] == 0.0 {
+            expected[p] = crate::loss::event::UNCONSTRAINED;
+            freed += 1;
+        }
+    }
+    freed
+}
+
 /// The events' modulation of one sub-exposure render's slice `(from_s, to_s, anchor_s)` of an
 /// exposure: per pixel (row-major H × W), the mean over the slice of exp(E(anchor → t)), E the
 /// threshold-weighted signed sum of the pixel's events between the anchor (the render's time) and
@@ -191,6 +244,43 @@ mod tests {
         // A hot pixel still reports no change.
         let hot = expected_change(&stream.as_slice(), sensor, &config, &[false, true, false]);
         assert_eq!(hot[1], 0.0);
+    }
+
+    #[test]
+    fn a_silent_pixel_is_freed_only_after_an_event_just_before_the_interval() {
+        // The interval is [10, 20) µs, the refractory window before it [9, 10). Pixel 0 fired at
+        // 9 and stays silent: freed. Pixel 1 fired at 9 and again at 12: held to its count. Pixel
+        // 2 fired only long before (not in `before`): held to no change. Pixel 3 is hot and fired
+        // at 9: it keeps the no change a hot pixel reports.
+        let sensor = events::SensorSize::new(4, 1);
+        let mut stream = events::EventStream::new();
+        for (t, x, p) in [(2, 2, 1), (9, 0, 1), (9, 1, -1), (9, 3, 1), (12, 1, 1)] {
+            stream.push(events::Event { t, x, y: 0, p });
+        }
+        let config = TrainConfig {
+            event_threshold: 0.2,
+            ..TrainConfig::default()
+        };
+        let slice = stream.as_slice();
+        let during = slice.window(10, 20);
+        let hot = [false, false, false, true];
+        let mut expected = expected_change(&during, sensor, &config, &hot);
+        assert_eq!(expected, vec![0.0, 0.2, 0.0, 0.0]);
+        assert_eq!(
+            interval_change(&slice, (10, 20), sensor, &config, &hot),
+            expected
+        );
+        let before = slice.window(9, 10);
+        let freed = unconstrain_refractory_silence(&mut expected, &before, &during, sensor, &hot);
+        assert_eq!(freed, 1);
+        assert!(expected[0].is_nan(), "{expected:?}");
+        assert_eq!(expected[1..], [0.2, 0.0, 0.0]);
+        let config = TrainConfig {
+            event_refractory_us: 1.0,
+            ..config
+        };
+        let read = interval_change(&slice, (10, 20), sensor, &config, &hot);
+        assert!(read[0].is_nan() && read[1..] == expected[1..], "{read:?}");
     }
 
     #[test]

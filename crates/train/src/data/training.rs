@@ -3,7 +3,7 @@
 //! targets and event counts) — prepared once, refused at load time when a file is missing or wrong.
 
 use super::dataset::Dataset;
-use super::event_counts::{expected_change, hot_pixels, slice_modulation};
+use super::event_counts::{expected_change, hot_pixels, interval_change, slice_modulation};
 use super::event_files::read_frame_events;
 use crate::config::TrainConfig;
 use crate::loss::optical_flow::{network_target, prepare_target, FlowTarget};
@@ -372,7 +372,8 @@ impl TrainingData {
     /// Prepares the event-generation loss inside exposures: for every training frame k and every
     /// pair of consecutive sub-exposure times (s, s+1) of `subframes` midpoint-rule times, C·E per
     /// pixel (C± = `config.event_thresholds()`, E the signed count of the events with
-    /// t_s ≤ t < t_{s+1}).
+    /// t_s ≤ t < t_{s+1}); with `config.event_refractory_us`, a pixel silent in such an interval
+    /// that fired within that long before t_s unconstrained.
     /// An exposure spans the event files of frames k−1 ([t_{k−1}, t_k)) and k ([t_k, t_{k+1})),
     /// which are joined; a frame whose exposure needs a file that `scene.json` does not name is an
     /// error naming the frame and the field. Intervals outside the files' evidence
@@ -452,7 +453,7 @@ impl TrainingData {
                 .windows(2)
                 .map(|w| {
                     (w[0] >= covered_from && w[1] <= covered_to).then(|| {
-                        expected_change(&slice.window(us(w[0]), us(w[1])), sensor, config, &hot)
+                        interval_change(&slice, (us(w[0]), us(w[1])), sensor, config, &hot)
                     })
                 })
                 .collect();
