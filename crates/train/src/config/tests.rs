@@ -144,3 +144,28 @@ fn both_presets_let_the_event_weight_fall_to_a_tenth_after_densification() {
         assert!((last - 0.1 * w).abs() < 1e-6 * w, "{preset:?}: {last}");
     }
 }
+
+#[test]
+fn the_refractory_reading_of_silence_is_refused_outside_its_range_and_between_frames() {
+    for v in [-1.0, f32::NAN, 2e5] {
+        let c = TrainConfig {
+            event_refractory_us: v,
+            ..TrainConfig::default()
+        };
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("event_refractory_us"), "{v}: {e}");
+    }
+    let between_frames = TrainConfig {
+        event_refractory_us: 1000.0,
+        event_pairs: super::EventPairs::Frames,
+        ..TrainConfig::default()
+    };
+    let e = between_frames.validate().unwrap_err().to_string();
+    assert!(e.contains("event_pairs = exposure"), "{e}");
+    TrainConfig {
+        event_refractory_us: 1000.0,
+        ..TrainConfig::default()
+    }
+    .validate()
+    .unwrap();
+}

@@ -126,6 +126,12 @@ impl TrainConfig {
         {
             return bad("event_refractory_us", "must be 0 to 100000 µs");
         }
+        if self.event_refractory_us > 0.0 && self.event_pairs != super::EventPairs::Exposure {
+            return bad(
+                "event_refractory_us",
+                "reads the intervals between sub-exposure renders: needs `event_pairs = exposure`",
+            );
+        }
         if self.event_reach > 3 {
             return bad("event_reach", "must be 0 to 3 pixels");
         }

@@ -55,19 +55,21 @@ fn unconstrain_refractory_silence(
     sensor: events::SensorSize,
     hot: &[bool],
 ) -> usize {
-    let width = sensor.width as usize;
-    let pixel = |e: events::Event| usize::from(e.y) * width + usize::from(e.x);
+    // Events outside the sensor are skipped, as `events::count_frame` skips them.
+    let (w, h) = (sensor.width as usize, sensor.height as usize);
+    let pixel = |e: events::Event| {
+        let (x, y) = (usize::from(e.x), usize::from(e.y));
+        (x < w && y < h).then_some(y * w + x)
+    };
     let mut fired = vec![false; expected.len()];
-    for e in during.iter() {
-        if let Some(f) = fired.get_mut(pixel(e)) {
-            *f = true;
-        }
+    for p in during.iter().filter_map(pixel) {
+        fired[p] = true;
     }
     let mut freed = 0;
-    for e in before.iter() {
-        let p = pixel(e);
+    for p in before.iter().filter_map(pixel) {
         let is_hot = hot.get(p).copied().unwrap_or(false);
-        if p < expected.len() && !fired[p] && !is_hot && expected[p] == 0.0 {
+        // `expected[p]` is 0 for a silent pixel not yet freed (NaN once freed).
+        if !fired[p] && !is_hot && expected[p] == 0.0 {
             expected[p] = crate::loss::event::UNCONSTRAINED;
             freed += 1;
         }
@@ -251,10 +253,18 @@ mod tests {
         // The interval is [10, 20) µs, the refractory window before it [9, 10). Pixel 0 fired at
         // 9 and stays silent: freed. Pixel 1 fired at 9 and again at 12: held to its count. Pixel
         // 2 fired only long before (not in `before`): held to no change. Pixel 3 is hot and fired
-        // at 9: it keeps the no change a hot pixel reports.
+        // at 9: it keeps the no change a hot pixel reports. The event at x = 6 is outside the
+        // 4-pixel sensor: skipped (not read as pixel 2 of a next row).
         let sensor = events::SensorSize::new(4, 1);
         let mut stream = events::EventStream::new();
-        for (t, x, p) in [(2, 2, 1), (9, 0, 1), (9, 1, -1), (9, 3, 1), (12, 1, 1)] {
+        for (t, x, p) in [
+            (2, 2, 1),
+            (9, 0, 1),
+            (9, 1, -1),
+            (9, 3, 1),
+            (9, 6, 1),
+            (12, 1, 1),
+        ] {
             stream.push(events::Event { t, x, y: 0, p });
         }
         let config = TrainConfig {
