@@ -148,6 +148,9 @@ fn report_preparation(done: &Preparation, config: &TrainConfig, flow_path: &Path
             (EventPairs::Exposure, ExposurePairs::All) => {
                 " (every pair of an exposure's renders compared, the counts between them summed)"
             }
+            (EventPairs::Exposure, ExposurePairs::SilentSpans) => {
+                " (and every longer pair of an exposure's renders on the pixels silent between them)"
+            }
             _ => "",
         };
         println!(
@@ -169,6 +172,9 @@ pub fn compared_renders(pairs: ExposurePairs) -> &'static str {
     match pairs {
         ExposurePairs::Consecutive => "consecutive sub-exposure renders",
         ExposurePairs::All => "every pair of sub-exposure renders",
+        ExposurePairs::SilentSpans => {
+            "consecutive sub-exposure renders (and longer pairs on silent pixels)"
+        }
     }
 }
 

@@ -7,7 +7,8 @@
 //! blurry (`docs/notes/2026-11-28-what-holds-the-blur.md`).
 //!
 //! ```text
-//! cargo run --release -p train --example loss_audit -- DATA S [dead_zone margin] CHECKPOINT...
+//! cargo run --release -p train --example loss_audit -- [--true-poses] [--refractory-us R] DATA S \
+//!     [dead_zone margin] CHECKPOINT...
 //! ```
 //!
 //! `DATA` a synthetic scene (it needs sharp references and events), `S` renders per exposure,
@@ -21,7 +22,7 @@ use train::data::edi::span_events;
 use train::data::{load_dataset, Dataset, TrainingData};
 use train::loss::event::{event_residual, LUMA};
 use train::loss::image::ImageShape;
-use train::loss::photometric::{exposure_loss, ExposureEvents};
+use train::loss::photometric::{exposure_loss, ExposureEvents, RenderPairs};
 use train::model::{PassCamera, PassPlan, RENDER_CHANNELS};
 use train::pose::exposure::{subframe_times, TrackRules};
 use train::trainer::Trainer;
@@ -89,11 +90,20 @@ fn bound_interval(expected: f64, c_pos: f64, c_neg: f64, margin: f64, zone: f64)
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: loss_audit [--true-poses] DATA S [dead_zone margin] CHECKPOINT...";
+    let usage =
+        "usage: loss_audit [--true-poses] [--refractory-us R] DATA S [dead_zone margin] CHECKPOINT...";
     // The generator's own sub-frame poses instead of the ones interpolated from the frames' (a
     // synthetic benchmark only): how much of the event term is the in-exposure motion's error.
     let true_poses = args.iter().any(|a| a == "--true-poses");
     args.retain(|a| a != "--true-poses");
+    // `--refractory-us R`: a pixel silent between two renders that fired less than R µs before
+    // the interval is free there (`reconstruct --event-refractory-us R`).
+    let mut refractory_us = 0.0f32;
+    if let Some(at) = args.iter().position(|a| a == "--refractory-us") {
+        let value = args.get(at + 1).ok_or("--refractory-us needs a value")?;
+        refractory_us = value.parse()?;
+        args.drain(at..at + 2);
+    }
     let (Some(dir), Some(s)) = (args.first(), args.get(1)) else {
         return Err(usage.into());
     };
@@ -101,6 +111,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut config = TrainConfig::preset(Preset::Quick);
     config.subframes = subframes;
     config.event_modulation = true;
+    config.event_refractory_us = refractory_us;
     let mut rest = &args[2..];
     if let (Some(z), Some(m)) = (rest.first(), rest.get(1)) {
         if let (Ok(z), Ok(m)) = (z.parse(), m.parse()) {
@@ -136,7 +147,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     );
     println!(
-        "S = {subframes}, dead zone {}, margin {}, C+ {}, mixed pixels {}",
+        "S = {subframes}, dead zone {}, margin {}, C+ {}, mixed pixels {}, silence after an event \
+         within {refractory_us} µs free",
         config.event_dead_zone,
         config.event_bound_margin,
         config.event_threshold,
@@ -271,7 +283,7 @@ fn audit(
             weight: 1.0,
             penalty,
             log_eps: config.event_log_eps,
-            all_pairs: false,
+            pairs: RenderPairs::Consecutive,
             pool: 1,
             reach: 0,
             modulation: blurred.exposure_modulation(slot)?,

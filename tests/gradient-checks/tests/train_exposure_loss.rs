@@ -1,7 +1,7 @@
 //! Finite-difference check of the exposure model's image terms (`train::loss::photometric`): the
 //! photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) — of the mean of S sub-exposure renders against the
-//! observed frame, plus the weighted event-generation loss between consecutive renders, or between
-//! every pair of renders (some intervals without events), w.r.t. every render, for S = 1, 2, 3 and 5. Each render carries a fourth plane
+//! observed frame, plus the weighted event-generation loss between consecutive renders, between
+//! every pair of renders (some intervals without events), or consecutive and silent spans, w.r.t. every render, for S = 1, 2, 3 and 5. Each render carries a fourth plane
 //! (the trainer's human probability) that the terms ignore: its cotangent must be exactly zero.
 //! With a grey frame (three equal planes) the photometric terms compare the mean render's Rec. 601
 //! luminance; the colour cotangent (without the luminance's adjoint) fails that case.
@@ -21,7 +21,7 @@ use proptest::prelude::*;
 use rand::Rng;
 use train::loss::event::EventPenalty;
 use train::loss::image::ImageShape;
-use train::loss::photometric::{exposure_loss, ExposureEvents};
+use train::loss::photometric::{exposure_loss, ExposureEvents, RenderPairs};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;
@@ -45,7 +45,7 @@ fn value(
     observed: &[f64],
     expected: &[Option<Vec<f64>>],
     event_weight: f64,
-    all_pairs: bool,
+    pairs: RenderPairs,
     grey: bool,
     penalty: EventPenalty,
     modulation: &[Option<Vec<f64>>],
@@ -66,7 +66,7 @@ fn value(
             weight: event_weight,
             penalty,
             log_eps: 1e-3,
-            all_pairs,
+            pairs,
             pool: 1,
             reach: 0,
             modulation,
@@ -84,7 +84,7 @@ fn clear_of_l1_kinks(
     x: &[f64],
     observed: &[f64],
     expected: &[Option<Vec<f64>>],
-    all_pairs: bool,
+    pairs: RenderPairs,
     grey: bool,
     penalty: EventPenalty,
     modulation: &[Option<Vec<f64>>],
@@ -100,7 +100,7 @@ fn clear_of_l1_kinks(
         weight: 0.7,
         penalty,
         log_eps: 1e-3,
-        all_pairs,
+        pairs,
         pool: 1,
         reach: 0,
         modulation,
@@ -131,24 +131,25 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(8))]
 
     #[test]
-    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4, all_pairs in any::<bool>(), grey in any::<bool>(), bound in any::<bool>()) {
+    fn exposure_terms_gradient_matches(seed in any::<u64>(), which in 0usize..4, which_pairs in 0usize..3, grey in any::<bool>(), bound in any::<bool>()) {
         let penalty = if bound { BOUND } else { EventPenalty::Squared };
         let subframes = [1, 2, 3, 5][which];
+        let pairs = [RenderPairs::Consecutive, RenderPairs::All, RenderPairs::SilentSpans][which_pairs];
         let mut rng = rng(seed);
         let (x, observed) = renders_and_frame(&mut rng, subframes, grey);
         // Every other pair has events (C·E with C = 0.2); the first pair has none.
         let expected: Vec<Option<Vec<f64>>> = (0..subframes.saturating_sub(1))
             .map(|s| (s % 2 == 1 || subframes == 2).then(|| (0..HW).map(|_| 0.2 * f64::from(rng.gen_range(-3i32..4))).collect()))
             .collect();
-        prop_assume!(clear_of_l1_kinks(&x, &observed, &expected, all_pairs, grey, penalty, &[]));
-        let (_, d) = value(&x, &observed, &expected, 0.7, all_pairs, grey, penalty, &[]);
+        prop_assume!(clear_of_l1_kinks(&x, &observed, &expected, pairs, grey, penalty, &[]));
+        let (_, d) = value(&x, &observed, &expected, 0.7, pairs, grey, penalty, &[]);
         let analytic: Vec<f64> = d.concat();
-        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, all_pairs, grey, penalty, &[]).0, &x, H);
+        let numeric = central_differences(|p| value(p, &observed, &expected, 0.7, pairs, grey, penalty, &[]).0, &x, H);
         let mut checker = GradientChecker::new();
-        checker.check(&format!("exposure terms, S = {subframes}, all pairs {all_pairs}, grey {grey}"), &numeric, &analytic, TOL);
+        checker.check(&format!("exposure terms, S = {subframes}, {pairs:?}, grey {grey}"), &numeric, &analytic, TOL);
         if grey {
             // The luminance's adjoint is needed: the colour cotangent fails a grey frame.
-            let (_, colour) = value(&x, &observed, &expected, 0.7, all_pairs, false, penalty, &[]);
+            let (_, colour) = value(&x, &observed, &expected, 0.7, pairs, false, penalty, &[]);
             prop_assert!(!compare("colour cotangent on a grey frame", &numeric, &colour.concat(), TOL).passed());
         }
         // The probability plane is not part of the terms.
@@ -157,7 +158,7 @@ proptest! {
         }
         if subframes > 1 {
             // The mean's 1/S is needed: the unscaled photometric cotangent fails.
-            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, all_pairs, grey, penalty, &[]);
+            let (_, d_no_events) = value(&x, &observed, &expected, 0.0, pairs, grey, penalty, &[]);
             let unscaled: Vec<f64> = d.iter().zip(&d_no_events).flat_map(|(with, without)| {
                 with.iter().zip(without).map(move |(&a, &b)| a + (subframes as f64 - 1.0) * b)
             }).collect();
@@ -170,6 +171,28 @@ proptest! {
                 prop_assert!(!compare("unweighted events", &numeric, &unweighted, TOL).passed());
             }
         }
+        checker.finish();
+    }
+
+    /// Every interval covered, most pixels silent in each (counts of −1, 0, 0, 0 or +1
+    /// thresholds): the silent spans' longer pairs add terms on the pixels silent across them, with
+    /// the exact gradient; the consecutive pairs' gradient alone fails (the longer pairs count).
+    #[test]
+    fn silent_span_terms_gradient_matches(seed in any::<u64>(), which in 0usize..2) {
+        let subframes = [3, 5][which];
+        let mut rng = rng(seed);
+        let (x, observed) = renders_and_frame(&mut rng, subframes, false);
+        let expected: Vec<Option<Vec<f64>>> = (0..subframes - 1)
+            .map(|_| Some((0..HW).map(|_| 0.2 * f64::from([-1, 0, 0, 0, 1][rng.gen_range(0..5)])).collect()))
+            .collect();
+        prop_assume!(clear_of_l1_kinks(&x, &observed, &expected, RenderPairs::SilentSpans, false, BOUND, &[]));
+        let f = |p: &[f64], pairs| value(p, &observed, &expected, 0.7, pairs, false, BOUND, &[]);
+        let (_, d) = f(&x, RenderPairs::SilentSpans);
+        let numeric = central_differences(|p| f(p, RenderPairs::SilentSpans).0, &x, H);
+        let mut checker = GradientChecker::new();
+        checker.check(&format!("silent spans, S = {subframes}"), &numeric, &d.concat(), TOL);
+        let (_, consecutive) = f(&x, RenderPairs::Consecutive);
+        prop_assert!(!compare("consecutive pairs only", &numeric, &consecutive.concat(), TOL).passed());
         checker.finish();
     }
 
@@ -188,14 +211,14 @@ proptest! {
         let modulation: Vec<Option<Vec<f64>>> = (0..subframes)
             .map(|s| (s > 0).then(|| (0..HW).map(|_| rng.gen_range(0.5..2.0)).collect()))
             .collect();
-        prop_assume!(clear_of_l1_kinks(&x, &observed, &expected, false, grey, BOUND, &modulation));
-        let f = |p: &[f64]| value(p, &observed, &expected, 0.7, false, grey, BOUND, &modulation);
+        prop_assume!(clear_of_l1_kinks(&x, &observed, &expected, RenderPairs::Consecutive, grey, BOUND, &modulation));
+        let f = |p: &[f64]| value(p, &observed, &expected, 0.7, RenderPairs::Consecutive, grey, BOUND, &modulation);
         let (_, d) = f(&x);
         let numeric = central_differences(|p| f(p).0, &x, H);
         let mut checker = GradientChecker::new();
         checker.check(&format!("modulated exposure terms, S = {subframes}, grey {grey}"), &numeric, &d.concat(), TOL);
         // The factor M is needed in the cotangent: without it the check fails.
-        let (_, d_events_only) = value(&x, &observed, &expected, 0.7, false, grey, BOUND, &[]);
+        let (_, d_events_only) = value(&x, &observed, &expected, 0.7, RenderPairs::Consecutive, grey, BOUND, &[]);
         let unfactored: Vec<f64> = d.iter().zip(&modulation).flat_map(|(render, m)| {
             render.iter().enumerate().map(move |(i, &v)| match m {
                 Some(m) if i < 3 * HW => v / m[i % HW],

@@ -37,6 +37,8 @@ pub enum ExposurePairs {
     Consecutive,
     /// Every pair of renders.
     All,
+    /// Consecutive renders, and every longer pair on the pixels silent across it.
+    SilentSpans,
 }
 
 /// Network evaluations per exposure (see [`TrainConfig::exposure_networks`]).

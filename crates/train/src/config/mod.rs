@@ -306,8 +306,8 @@ training_options! {
     event_pairs: EventPairs = EventPairs::Exposure,
     /// With `event_pairs = exposure`: which pairs of sub-exposure renders (s, s′), s < s′, the
     /// event loss compares against the events of [t_s, t_s′): `consecutive` (s′ = s + 1, S − 1
-    /// pairs) or `all` (every pair, S(S − 1)/2; the counts of a longer interval are the sums of its
-    /// consecutive ones).
+    /// pairs), `all` (every pair, S(S − 1)/2; a longer interval's counts sum its consecutive ones)
+    /// or `silent-spans` (consecutive, and every longer pair on the pixels silent across it).
     exposure_pairs: ExposurePairs = ExposurePairs::Consecutive,
     /// Weight of the event-generation loss: 2. With the cap, mixed pixels free and 9 renders, 2
     /// gives 35.99 / 31.66 dB (full frame / human box) against 35.81 / 31.47 with 1 (`quick`,

@@ -12,7 +12,8 @@
 //!
 //! Backward: the photometric cotangent of the mean reaches every render scaled by 1/S (unscaled for
 //! one render, so the single-render model is the S = 1 case bit for bit); each event pair —
-//! consecutive renders, or every pair — adds its weighted cotangents to its two renders.
+//! consecutive renders, every pair, or every pair on its silent pixels ([`RenderPairs`]) — adds its
+//! weighted cotangents to its two renders.
 
 use crate::loss::event::{pair_event_loss_pooled, pair_event_loss_reach, EventPenalty};
 use crate::loss::image::{l1, ssim, ImageShape};
@@ -31,9 +32,8 @@ pub struct ExposureEvents<'a, T> {
     pub penalty: EventPenalty,
     /// ε of log(Y + ε).
     pub log_eps: T,
-    /// Every pair of renders (s < s′, against the summed counts of the consecutive intervals
-    /// between them, when all of them are covered) instead of consecutive ones.
-    pub all_pairs: bool,
+    /// Which pairs of renders the event term compares.
+    pub pairs: RenderPairs,
     /// Side of the pixel blocks the squared penalty pools (`train::loss::event::
     /// pair_event_loss_pooled`); 1: per pixel, with any penalty.
     pub pool: usize,
@@ -45,6 +45,21 @@ pub struct ExposureEvents<'a, T> {
     /// empty: no modulation. The prediction is then the mean of (r_s + ε)·M_s − ε, every channel
     /// modulated by the luma's events (EDI's assumption: the colour's ratios hold over the slice).
     pub modulation: &'a [Option<Vec<T>>],
+}
+
+/// Which pairs (s, s′ > s) of an exposure's renders the event term compares, each against the
+/// events of [t_s, t_s′) when every consecutive interval between them is covered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RenderPairs {
+    /// Consecutive renders (s′ = s + 1).
+    Consecutive,
+    /// Every pair, against the summed counts of the consecutive intervals between them.
+    All,
+    /// Consecutive renders, and every longer pair on the pixels that fired no event between them
+    /// (the others free there): a pixel that stays silent keeps its log intensity within one
+    /// threshold of a reference level it does not move, so its change over the whole silent span
+    /// is bounded as over one interval, not by the sum of the intervals' bounds.
+    SilentSpans,
 }
 
 /// The value of the terms and the cotangent of every render.
@@ -132,12 +147,9 @@ pub fn exposure_loss<T: Real>(
     });
     let mut event_value = T::zero();
     if let Some(events) = events {
-        let last = |s: usize| {
-            if events.all_pairs {
-                renders.len() - 1
-            } else {
-                s + 1
-            }
+        let last = |s: usize| match events.pairs {
+            RenderPairs::Consecutive => s + 1,
+            RenderPairs::All | RenderPairs::SilentSpans => renders.len() - 1,
         };
         let pairs: Vec<(usize, usize)> = (0..renders.len().saturating_sub(1))
             .flat_map(|s| (s + 1..=last(s)).map(move |s2| (s, s2)))
@@ -146,7 +158,11 @@ pub fn exposure_loss<T: Real>(
         let terms: Vec<_> = pairs
             .par_iter()
             .map(|&(s, s2)| {
-                let expected = interval_counts(events.expected, s, s2)?;
+                let expected = if events.pairs == RenderPairs::SilentSpans {
+                    silent_span(events.expected, s, s2)?
+                } else {
+                    interval_counts(events.expected, s, s2)?
+                };
                 let el = if events.pool > 1 {
                     pair_event_loss_pooled(
                         renders[s],
@@ -219,6 +235,29 @@ fn interval_counts<T: Real>(
     Some(std::borrow::Cow::Owned(sum))
 }
 
+/// The counts of a [`RenderPairs::SilentSpans`] pair (s, s2): the consecutive interval's own for
+/// s2 = s + 1; for a longer span 0 where every interval between is 0 (the pixel fired nothing) and
+/// NaN (free) elsewhere, or `None` if one of them is uncovered.
+fn silent_span<T: Real>(
+    consecutive: &[Option<Vec<T>>],
+    s: usize,
+    s2: usize,
+) -> Option<std::borrow::Cow<'_, [T]>> {
+    let parts = consecutive.get(s..s2)?;
+    if let [Some(only)] = parts {
+        return Some(std::borrow::Cow::Borrowed(only));
+    }
+    let mut span = vec![T::zero(); parts.first()?.as_ref()?.len()];
+    for part in parts {
+        for (x, &y) in span.iter_mut().zip(part.as_ref()?) {
+            if y != T::zero() {
+                *x = T::of(f64::NAN);
+            }
+        }
+    }
+    Some(std::borrow::Cow::Owned(span))
+}
+
 /// The mean of the first `len` values of `images` (the image itself for one), summed in order.
 pub fn mean_image<T: Real>(images: &[&[T]], len: usize) -> Vec<T> {
     if let [image] = images {
@@ -237,4 +276,34 @@ pub fn add_scaled<T: Real>(dst: &mut [T], src: &[T], weight: T) {
     dst.par_iter_mut()
         .zip(src)
         .for_each(|(o, &g)| *o = *o + weight * g);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::silent_span;
+
+    /// A longer span holds a pixel to no change only where every interval of it is silent; a
+    /// pixel that fired anywhere in it, or was free (NaN) in one interval, is free; one uncovered
+    /// interval leaves the whole span out; a consecutive pair keeps its own counts.
+    #[test]
+    fn a_silent_span_holds_only_the_pixels_silent_throughout() {
+        let nan = f64::NAN;
+        let covered = vec![
+            Some(vec![0.0, 0.2, 0.0, nan]),
+            Some(vec![0.0, 0.0, -0.2, 0.0]),
+            Some(vec![0.0, 0.0, 0.0, 0.0]),
+        ];
+        let span = silent_span(&covered, 0, 3).expect("covered");
+        assert_eq!(span[0], 0.0);
+        assert!(span[1..].iter().all(|v| v.is_nan()), "{span:?}");
+        let later = silent_span(&covered, 1, 3).expect("covered");
+        assert_eq!((later[0], later[1], later[3]), (0.0, 0.0, 0.0));
+        assert!(later[2].is_nan());
+        let own = silent_span(&covered, 0, 1).expect("covered");
+        assert_eq!(own[1], 0.2);
+        let mut gap = covered.clone();
+        gap[1] = None;
+        assert!(silent_span(&gap, 0, 3).is_none());
+        assert!(silent_span(&gap, 2, 3).is_some());
+    }
 }

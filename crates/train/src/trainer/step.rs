@@ -18,7 +18,7 @@ use crate::density::{add_ndc_norms, StepStatistics};
 use crate::eval::psnr;
 use crate::loss::image::ImageShape;
 use crate::loss::perceptual::perceptual_term;
-use crate::loss::photometric::{exposure_loss, ExposureEvents};
+use crate::loss::photometric::{exposure_loss, ExposureEvents, RenderPairs};
 use crate::model::{
     ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
 };
@@ -616,7 +616,11 @@ fn frame_losses(
             weight: config.event_weight,
             penalty: config.event_penalty(),
             log_eps: config.event_log_eps,
-            all_pairs: config.exposure_pairs == ExposurePairs::All,
+            pairs: match config.exposure_pairs {
+                ExposurePairs::Consecutive => RenderPairs::Consecutive,
+                ExposurePairs::All => RenderPairs::All,
+                ExposurePairs::SilentSpans => RenderPairs::SilentSpans,
+            },
             pool: config.event_pool as usize,
             reach: config.event_reach as usize,
             modulation: if modulated {
