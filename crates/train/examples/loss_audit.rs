@@ -7,7 +7,8 @@
 //! blurry (`docs/notes/2026-11-28-what-holds-the-blur.md`).
 //!
 //! ```text
-//! cargo run --release -p train --example loss_audit -- [--true-poses] [--refractory-us R] DATA S \
+//! cargo run --release -p train --example loss_audit -- [--true-poses] [--pairs P]
+//!     [--refractory-us R] DATA S \
 //!     [dead_zone margin] CHECKPOINT...
 //! ```
 //!
@@ -91,13 +92,26 @@ fn bound_interval(expected: f64, c_pos: f64, c_neg: f64, margin: f64, zone: f64)
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let usage =
-        "usage: loss_audit [--true-poses] [--refractory-us R] DATA S [dead_zone margin] CHECKPOINT...";
+        "usage: loss_audit [--true-poses] [--pairs P] [--refractory-us R] DATA S [dead_zone margin] \
+         CHECKPOINT...";
     // The generator's own sub-frame poses instead of the ones interpolated from the frames' (a
     // synthetic benchmark only): how much of the event term is the in-exposure motion's error.
     let true_poses = args.iter().any(|a| a == "--true-poses");
     args.retain(|a| a != "--true-poses");
     // `--refractory-us R`: a pixel silent between two renders that fired less than R µs before
     // the interval is free there (`reconstruct --event-refractory-us R`).
+    // `--pairs all|silent-spans`: which pairs of renders the event term compares
+    // (`reconstruct --exposure-pairs`; default consecutive).
+    let mut pairs = RenderPairs::Consecutive;
+    if let Some(at) = args.iter().position(|a| a == "--pairs") {
+        pairs = match args.get(at + 1).map(String::as_str) {
+            Some("consecutive") => RenderPairs::Consecutive,
+            Some("all") => RenderPairs::All,
+            Some("silent-spans") => RenderPairs::SilentSpans,
+            _ => return Err("--pairs takes consecutive, all or silent-spans".into()),
+        };
+        args.drain(at..at + 2);
+    }
     let mut refractory_us = 0.0f32;
     if let Some(at) = args.iter().position(|a| a == "--refractory-us") {
         let value = args.get(at + 1).ok_or("--refractory-us needs a value")?;
@@ -148,7 +162,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!(
         "S = {subframes}, dead zone {}, margin {}, C+ {}, mixed pixels {}, silence after an event \
-         within {refractory_us} µs free",
+         within {refractory_us} µs free, pairs {pairs:?}",
         config.event_dead_zone,
         config.event_bound_margin,
         config.event_threshold,
@@ -159,7 +173,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     );
     for checkpoint in rest {
-        let audit = audit(checkpoint, &data, &blurred, &sharp, &config)?;
+        let audit = audit(checkpoint, &data, &blurred, &sharp, &config, pairs)?;
         let k = blurred.frames.len() as f64;
         let p = audit.by_pixel.map(|v| v / k);
         let q = audit.pixel_share.map(|v| 100.0 * v / k);
@@ -243,6 +257,7 @@ fn audit(
     blurred: &TrainingData,
     sharp: &TrainingData,
     config: &TrainConfig,
+    pairs: RenderPairs,
 ) -> Result<Audit, Box<dyn std::error::Error>> {
     let (h, w) = (data.camera.height as usize, data.camera.width as usize);
     let sensor = events::SensorSize::new(data.camera.width, data.camera.height);
@@ -283,7 +298,7 @@ fn audit(
             weight: 1.0,
             penalty,
             log_eps: config.event_log_eps,
-            pairs: RenderPairs::Consecutive,
+            pairs,
             pool: 1,
             reach: 0,
             modulation: blurred.exposure_modulation(slot)?,
