@@ -104,12 +104,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // (`reconstruct --exposure-pairs`; default consecutive).
     let mut pairs = RenderPairs::Consecutive;
     if let Some(at) = args.iter().position(|a| a == "--pairs") {
-        pairs = match args.get(at + 1).map(String::as_str) {
-            Some("consecutive") => RenderPairs::Consecutive,
-            Some("all") => RenderPairs::All,
-            Some("silent-spans") => RenderPairs::SilentSpans,
-            _ => return Err("--pairs takes consecutive, all or silent-spans".into()),
-        };
+        let name = args.get(at + 1).map_or("", String::as_str);
+        pairs = <train::config::ExposurePairs as clap::ValueEnum>::from_str(name, false)
+            .map_err(|_| "--pairs takes consecutive, all or silent-spans")?
+            .render_pairs();
         args.drain(at..at + 2);
     }
     let mut refractory_us = 0.0f32;

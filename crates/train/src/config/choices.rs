@@ -41,6 +41,18 @@ pub enum ExposurePairs {
     SilentSpans,
 }
 
+impl ExposurePairs {
+    /// The event term's pairing of renders this choice names.
+    pub fn render_pairs(self) -> crate::loss::photometric::RenderPairs {
+        use crate::loss::photometric::RenderPairs;
+        match self {
+            Self::Consecutive => RenderPairs::Consecutive,
+            Self::All => RenderPairs::All,
+            Self::SilentSpans => RenderPairs::SilentSpans,
+        }
+    }
+}
+
 /// Network evaluations per exposure (see [`TrainConfig::exposure_networks`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]

@@ -158,11 +158,8 @@ pub fn exposure_loss<T: Real>(
         let terms: Vec<_> = pairs
             .par_iter()
             .map(|&(s, s2)| {
-                let expected = if events.pairs == RenderPairs::SilentSpans {
-                    silent_span(events.expected, s, s2)?
-                } else {
-                    interval_counts(events.expected, s, s2)?
-                };
+                let silent = events.pairs == RenderPairs::SilentSpans;
+                let expected = span_counts(events.expected, s, s2, silent)?;
                 let el = if events.pool > 1 {
                     pair_event_loss_pooled(
                         renders[s],
@@ -215,44 +212,36 @@ fn modulate<T: Real>(r: &[T], m: &[T], log_eps: T, hw: usize) -> Vec<T> {
     out
 }
 
-/// C·E of the interval between sub-exposure times `s` and `s2` > `s`: the consecutive intervals'
-/// counts summed in order (borrowed for one interval), or `None` if one of them is uncovered.
-fn interval_counts<T: Real>(
+/// The counts of the pair of sub-exposure times (`s`, `s2` > `s`), borrowed for one interval, or
+/// `None` if one of the consecutive intervals between them is uncovered: their C·E summed in order,
+/// or for `silent` ([`RenderPairs::SilentSpans`]) 0 where every interval is 0 (the pixel fired
+/// nothing) and NaN (free) elsewhere.
+fn span_counts<T: Real>(
     consecutive: &[Option<Vec<T>>],
     s: usize,
     s2: usize,
+    silent: bool,
 ) -> Option<std::borrow::Cow<'_, [T]>> {
     let parts = consecutive.get(s..s2)?;
     if let [Some(only)] = parts {
         return Some(std::borrow::Cow::Borrowed(only));
     }
-    let mut sum = parts.first()?.clone()?;
-    for part in &parts[1..] {
-        for (x, &y) in sum.iter_mut().zip(part.as_ref()?) {
-            *x = *x + y;
+    let fired = |y: T| {
+        if y != T::zero() {
+            T::of(f64::NAN)
+        } else {
+            T::zero()
         }
-    }
-    Some(std::borrow::Cow::Owned(sum))
-}
-
-/// The counts of a [`RenderPairs::SilentSpans`] pair (s, s2): the consecutive interval's own for
-/// s2 = s + 1; for a longer span 0 where every interval between is 0 (the pixel fired nothing) and
-/// NaN (free) elsewhere, or `None` if one of them is uncovered.
-fn silent_span<T: Real>(
-    consecutive: &[Option<Vec<T>>],
-    s: usize,
-    s2: usize,
-) -> Option<std::borrow::Cow<'_, [T]>> {
-    let parts = consecutive.get(s..s2)?;
-    if let [Some(only)] = parts {
-        return Some(std::borrow::Cow::Borrowed(only));
-    }
-    let mut span = vec![T::zero(); parts.first()?.as_ref()?.len()];
-    for part in parts {
+    };
+    let first = parts.first()?.as_ref()?;
+    let mut span: Vec<T> = if silent {
+        first.iter().map(|&y| fired(y)).collect()
+    } else {
+        first.clone()
+    };
+    for part in &parts[1..] {
         for (x, &y) in span.iter_mut().zip(part.as_ref()?) {
-            if y != T::zero() {
-                *x = T::of(f64::NAN);
-            }
+            *x = if silent { *x + fired(y) } else { *x + y };
         }
     }
     Some(std::borrow::Cow::Owned(span))
@@ -280,7 +269,15 @@ pub fn add_scaled<T: Real>(dst: &mut [T], src: &[T], weight: T) {
 
 #[cfg(test)]
 mod tests {
-    use super::silent_span;
+    use super::span_counts;
+
+    fn silent_span(
+        c: &[Option<Vec<f64>>],
+        s: usize,
+        s2: usize,
+    ) -> Option<std::borrow::Cow<'_, [f64]>> {
+        span_counts(c, s, s2, true)
+    }
 
     /// A longer span holds a pixel to no change only where every interval of it is silent; a
     /// pixel that fired anywhere in it, or was free (NaN) in one interval, is free; one uncovered

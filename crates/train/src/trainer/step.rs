@@ -10,15 +10,14 @@ use super::terms::{
 };
 use super::{add_to, all_finite, StageTimes, StepReport, Trainer};
 use crate::config::{
-    BlurModel, DensityGradient, EventPairs, ExposureNetworks, ExposurePairs, FlowGradient,
-    TrainConfig,
+    BlurModel, DensityGradient, EventPairs, ExposureNetworks, FlowGradient, TrainConfig,
 };
 use crate::data::TrainingData;
 use crate::density::{add_ndc_norms, StepStatistics};
 use crate::eval::psnr;
 use crate::loss::image::ImageShape;
 use crate::loss::perceptual::perceptual_term;
-use crate::loss::photometric::{exposure_loss, ExposureEvents, RenderPairs};
+use crate::loss::photometric::{exposure_loss, ExposureEvents};
 use crate::model::{
     ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
 };
@@ -616,11 +615,7 @@ fn frame_losses(
             weight: config.event_weight,
             penalty: config.event_penalty(),
             log_eps: config.event_log_eps,
-            pairs: match config.exposure_pairs {
-                ExposurePairs::Consecutive => RenderPairs::Consecutive,
-                ExposurePairs::All => RenderPairs::All,
-                ExposurePairs::SilentSpans => RenderPairs::SilentSpans,
-            },
+            pairs: config.exposure_pairs.render_pairs(),
             pool: config.event_pool as usize,
             reach: config.event_reach as usize,
             modulation: if modulated {
