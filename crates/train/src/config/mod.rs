@@ -366,8 +366,8 @@ training_options! {
     /// C·E)², EventNeRF / E-NeRF and the paper's event loss: every crossing fired; the default
     /// before 2026-11-27, with `--event-weight 0.3`; `docs/BENCHMARKS.md`).
     event_penalty: EventPenaltyKind = EventPenaltyKind::Bound,
-    /// m of the `bound` penalty: a count of n events bounds the change by (n − m) thresholds;
-    /// `reconstruct` takes 1 for a scene recorded without refractory period (`refractory_us = 0`).
+    /// m of the `bound` penalty (0–2): n events bound the change by (n − m) thresholds; 2 is what a
+    /// sensor with a refractory period guarantees, 1 what `reconstruct` takes without one.
     event_bound_margin: f32 = 0.5,
     /// z of the `bound` penalty: a pixel without events changes freely within ±z thresholds.
     event_dead_zone: f32 = 1.0,

@@ -169,3 +169,28 @@ fn the_refractory_reading_of_silence_is_refused_outside_its_range_and_between_fr
     .validate()
     .unwrap();
 }
+
+#[test]
+fn the_bound_margin_reaches_what_a_refractory_sensor_guarantees_and_no_further() {
+    // n events of one polarity on a sensor with a refractory period guarantee a change beyond
+    // (n − 2) thresholds, so m = 2 is the widest reading with a meaning.
+    for (m, ok) in [
+        (0.0, true),
+        (2.0, true),
+        (2.01, false),
+        (-0.1, false),
+        (f32::NAN, false),
+    ] {
+        let c = TrainConfig {
+            event_bound_margin: m,
+            ..TrainConfig::default()
+        };
+        match c.validate() {
+            Ok(()) => assert!(ok, "{m} accepted"),
+            Err(e) => {
+                assert!(!ok, "{m}: {e}");
+                assert!(e.to_string().contains("event_bound_margin"), "{e}");
+            }
+        }
+    }
+}

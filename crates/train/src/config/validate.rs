@@ -99,7 +99,7 @@ impl TrainConfig {
             0.25,
             4.0,
         )?;
-        within("event_bound_margin", self.event_bound_margin, 0.0, 1.0)?;
+        within("event_bound_margin", self.event_bound_margin, 0.0, 2.0)?;
         within("event_dead_zone", self.event_dead_zone, 0.0, 4.0)?;
         within(
             "event_overshoot_weight",
