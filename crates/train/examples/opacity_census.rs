@@ -1,7 +1,8 @@
 //! How opaque are a model's Gaussians, and where do the faint ones sit? For each saved model, the
 //! person's and the scene's Gaussians (the class a Gaussian's semantic logits favour) are counted
 //! by opacity band, with the median and 90th-percentile distance of each band to the nearest
-//! *opaque* Gaussian (opacity ≥ 0.5) of the same class, in canonical space. A blur-trained model
+//! *opaque* Gaussian (opacity ≥ 0.5) of the same class, in canonical space, and how many lie
+//! beyond 2 cm of every opaque one. A blur-trained model
 //! that keeps a haze of faint Gaussians around the body, which a sharp-trained one does not, shows
 //! as a large faint band far from the opaque ones.
 //!
@@ -11,41 +12,16 @@
 //!
 //! Each `MODEL_DIR` a run's `model/` (its `canonical.ply` is read).
 
-use std::collections::HashMap;
+use kiddo::immutable::float::kdtree::ImmutableKdTree;
+use kiddo::SquaredEuclidean;
 use std::path::PathBuf;
 
 /// Opacity bands: [lower, upper).
 const BANDS: [(f32, f32); 4] = [(0.0, 0.05), (0.05, 0.2), (0.2, 0.5), (0.5, 1.01)];
 /// Opacity from which a Gaussian counts as opaque.
 const OPAQUE: f32 = 0.5;
-/// Cell of the grid the opaque Gaussians are hashed into (metres); the search looks one cell
-/// around, so distances up to this are exact and larger ones are reported as "≥ CELL".
-const CELL: f32 = 0.02;
-
-/// The grid cell of a point.
-fn cell_of(p: [f32; 3]) -> [i32; 3] {
-    p.map(|v| (v / CELL).floor() as i32)
-}
-
-/// Distance from `p` to the nearest point in `grid` within one cell, or `None` when none is.
-fn nearest(grid: &HashMap<[i32; 3], Vec<[f32; 3]>>, p: [f32; 3]) -> Option<f32> {
-    let c = cell_of(p);
-    let mut best: Option<f32> = None;
-    for dx in -1..=1 {
-        for dy in -1..=1 {
-            for dz in -1..=1 {
-                let Some(points) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) else {
-                    continue;
-                };
-                for q in points {
-                    let d = (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f32>().sqrt();
-                    best = Some(best.map_or(d, |b| b.min(d)));
-                }
-            }
-        }
-    }
-    best.filter(|&d| d <= CELL)
-}
+/// Distance (metres) beyond which a Gaussian counts as away from every opaque one.
+const FAR: f32 = 0.02;
 
 /// The `q`-quantile (0..1) of sorted `values`, `None` for none.
 fn quantile(values: &[f32], q: f64) -> Option<f32> {
@@ -55,12 +31,13 @@ fn quantile(values: &[f32], q: f64) -> Option<f32> {
 
 /// Prints one class's census: `members` are indices into `set`.
 fn census(label: &str, set: &gaussians::GaussianSet, members: &[usize]) {
-    let mut grid: HashMap<[i32; 3], Vec<[f32; 3]>> = HashMap::new();
-    for &i in members.iter().filter(|&&i| set.opacity(i) >= OPAQUE) {
-        grid.entry(cell_of(set.means[i]))
-            .or_default()
-            .push(set.means[i]);
-    }
+    let opaque: Vec<[f32; 3]> = members
+        .iter()
+        .filter(|&&i| set.opacity(i) >= OPAQUE)
+        .map(|&i| set.means[i])
+        .collect();
+    // The same k-d tree the initial scales' neighbours come from (`gaussians::init`).
+    let tree: ImmutableKdTree<f32, u64, 3, 32> = ImmutableKdTree::new_from_slice(&opaque);
     println!("  {label}: {} Gaussians", members.len());
     for (lo, hi) in BANDS {
         let band: Vec<usize> = members
@@ -68,24 +45,26 @@ fn census(label: &str, set: &gaussians::GaussianSet, members: &[usize]) {
             .copied()
             .filter(|&i| (lo..hi).contains(&set.opacity(i)))
             .collect();
-        let mut near: Vec<f32> = Vec::new();
-        let mut far = 0usize;
-        for &i in &band {
-            match nearest(&grid, set.means[i]) {
-                Some(d) => near.push(d),
-                None => far += 1,
-            }
-        }
+        let mut near: Vec<f32> = band
+            .iter()
+            .filter(|_| !opaque.is_empty())
+            .map(|&i| {
+                tree.nearest_one::<SquaredEuclidean>(&set.means[i])
+                    .distance
+                    .sqrt()
+            })
+            .collect();
+        let far = near.iter().filter(|&&d| d > FAR).count();
         near.sort_by(f32::total_cmp);
         let mm = |q| quantile(&near, q).map_or("-".into(), |d| format!("{:.1}", d * 1e3));
         println!(
-            "    opacity [{lo:.2}, {hi:.2}): {:6} ({:4.1} %); nearest opaque within {} mm: \
-             median {} mm, p90 {} mm; farther: {far} ({:.1} %)",
+            "    opacity [{lo:.2}, {hi:.2}): {:6} ({:4.1} %); nearest opaque one: median {} mm, \
+             p90 {} mm; beyond {} mm: {far} ({:.1} %)",
             band.len(),
             100.0 * band.len() as f64 / members.len().max(1) as f64,
-            CELL * 1e3,
             mm(0.5),
             mm(0.9),
+            FAR * 1e3,
             100.0 * far as f64 / band.len().max(1) as f64,
         );
     }
