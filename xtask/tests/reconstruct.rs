@@ -318,10 +318,26 @@ fn an_interrupted_run_resumed_writes_the_same_model_bytes() {
     let straight = dir.path().join("straight");
     reconstruct(&straight, &config, &[]);
     let resumed = dir.path().join("resumed");
-    let o = reconstruct(&resumed, &config, &["--stop-after", "7"]);
+    // Scoring the held-out frames while training reads the model only: same bytes as without.
+    let every = ["--eval-every", "4"];
+    let o = reconstruct(
+        &resumed,
+        &config,
+        &[&every[..], &["--stop-after", "7"]].concat(),
+    );
     assert!(String::from_utf8_lossy(&o.stdout).contains("--resume"));
     assert!(!resumed.join("model").exists());
-    reconstruct(&resumed, &config, &["--resume"]);
+    reconstruct(&resumed, &config, &[&every[..], &["--resume"]].concat());
+    let curve = std::fs::read_to_string(resumed.join("eval_curve.jsonl")).unwrap();
+    let points: Vec<serde_json::Value> = curve
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let steps: Vec<u64> = points.iter().map(|p| p["step"].as_u64().unwrap()).collect();
+    assert_eq!(steps, [4, 8, 12], "{curve}");
+    assert!(points
+        .iter()
+        .all(|p| p["test_psnr_full"].as_f64().unwrap().is_finite()));
     for f in ["model/canonical.ply", "model/networks.safetensors"] {
         assert_eq!(
             std::fs::read(straight.join(f)).unwrap(),

@@ -4,6 +4,7 @@
 //!
 //! Output directory layout: `config.json` (the resolved hyper-parameters), `log.jsonl` (one JSON object
 //! per step), `checkpoint.safetensors` (atomic, every `checkpoint_every` steps and at the end),
+//! `eval_curve.jsonl` (with `--eval-every N`: the held-out frames' mean figures every N steps),
 //! `model/` (see `train::export`), `model/posed_frame_NNNNNN.ply` (a standard 3DGS PLY of the first
 //! training frame in INRIA's degree-3 layout), `eval/strip_NNNNNN.png`, `metrics.json`, `curve.png`.
 
@@ -82,6 +83,11 @@ pub struct Args {
     /// Continue from OUT/checkpoint.safetensors (same bits as an uninterrupted run).
     #[arg(long)]
     pub resume: bool,
+    /// Score the held-out frames every N steps (and at the end) while training: mean PSNR and
+    /// SSIM, full frame and human box, and mask IoU, one JSON line per point in
+    /// OUT/eval_curve.jsonl (no LPIPS). 0 = off. The model is only read: same bits either way.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub eval_every: usize,
     /// Stop after this many steps of this invocation (the run can be resumed later).
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
@@ -90,6 +96,16 @@ pub struct Args {
     /// motion; the test frames keep their given poses).
     #[arg(long, hide = true)]
     pub oracle_sub_frame_poses: bool,
+}
+
+/// Appends `value` as one JSON line to the file at `path` (created if missing).
+fn append_line(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    writeln!(file, "{value}").with_context(|| format!("writing {}", path.display()))
 }
 
 /// Keeps the log lines of steps before `step` and returns their summed wall time.
@@ -295,6 +311,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut ctx = TrainingData::new(&data, body.clone(), config.seed)?;
     let checkpoint = out.join("checkpoint.safetensors");
     let log_path = out.join("log.jsonl");
+    let curve_path = out.join("eval_curve.jsonl");
     let (mut trainer, mut train_seconds) = if args.resume {
         let t = Trainer::load_checkpoint(&checkpoint, &ctx)
             .with_context(|| format!("resuming from {}", checkpoint.display()))?;
@@ -302,9 +319,11 @@ pub fn run(args: Args) -> Result<()> {
             eprintln!("note: --resume continues with the configuration stored in the checkpoint");
         }
         let secs = truncate_log(&log_path, t.step)?;
+        truncate_log(&curve_path, t.step)?;
         (t, secs)
     } else {
         let _ = std::fs::remove_file(&log_path);
+        let _ = std::fs::remove_file(&curve_path);
         (Trainer::new(&ctx, config)?, 0.0)
     };
     let config = trainer.config().clone();
@@ -360,6 +379,18 @@ pub fn run(args: Args) -> Result<()> {
         recent.push(r.clone());
         if recent.len() > 50 {
             recent.remove(0);
+        }
+        if args.eval_every > 0 && (t.step.is_multiple_of(args.eval_every) || t.step == config.steps)
+        {
+            let point =
+                crate::outputs::evaluation::held_out_point(&t.model, &ctx.cast(), &data, t.step)?;
+            bar.println(format!(
+                "step {}: held-out PSNR {:.2} / {:.2} dB (full / box)",
+                t.step,
+                point["test_psnr_full"].as_f64().unwrap_or(f64::NAN),
+                point["test_psnr_human_box"].as_f64().unwrap_or(f64::NAN)
+            ));
+            append_line(&curve_path, &point).map_err(|e| TrainError::Config(format!("{e:#}")))?;
         }
         if config.checkpoint_every > 0
             && t.step.is_multiple_of(config.checkpoint_every)

@@ -29,6 +29,30 @@ pub struct EvalSummary {
     pub split: scene::Split,
 }
 
+/// One point of the held-out curve (`reconstruct --eval-every N`): the test split's mean PSNR
+/// (dB) and SSIM, full frame and human box, and the mask IoU of the model after `step` steps, as
+/// one JSON object. No LPIPS (it would cost more than the renders) and nothing written: the
+/// model is only read, so the training's bits do not change.
+pub fn held_out_point(
+    model: &Model,
+    cast: &Cast<'_>,
+    data: &train::data::Dataset,
+    step: usize,
+) -> Result<serde_json::Value, train::TrainError> {
+    let frames = evaluate_split(model, cast, data, scene::Split::Test, None)?;
+    let per_frame: Vec<_> = frames.iter().map(|f| f.metrics.clone()).collect();
+    let m = mean_metrics(&per_frame);
+    Ok(json!({
+        "step": step,
+        "test_frames": frames.len(),
+        "test_psnr_full": m.psnr_full,
+        "test_psnr_human_box": m.psnr_human_box,
+        "test_ssim_full": m.ssim_full,
+        "test_ssim_human_box": m.ssim_human_box,
+        "test_mask_iou": m.mask_iou,
+    }))
+}
+
 /// Prints the test split's image metrics against the sharp references (`sharp`), else against the
 /// observed frames (real data); a figure that cannot be measured (no mask for a human box) is a
 /// dash.
