@@ -40,7 +40,7 @@ pub fn held_out_point(
     step: usize,
 ) -> Result<serde_json::Value, train::TrainError> {
     let frames = evaluate_split(model, cast, data, scene::Split::Test, None)?;
-    let per_frame: Vec<_> = frames.iter().map(|f| f.metrics.clone()).collect();
+    let per_frame: Vec<_> = frames.iter().map(|f| f.metrics).collect();
     let m = mean_metrics(&per_frame);
     Ok(json!({
         "step": step,
