@@ -194,28 +194,46 @@ const LOSS_TERMS: [(&str, &str); 5] = [
     ("lpips", "LPIPS"),
 ];
 
-/// Training curves from `log.jsonl` as an SVG string (loss terms on a log scale; training PSNR).
-fn curves_svg(log: &Path) -> Result<String> {
+/// The JSON lines of the file at `path` that parse (a torn last line is skipped).
+fn json_lines(path: &Path) -> Result<Vec<serde_json::Value>> {
     let text =
-        std::fs::read_to_string(log).with_context(|| format!("reading {}", log.display()))?;
-    let rows: Vec<serde_json::Value> = text
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(text
         .lines()
         .filter(|l| !l.trim().is_empty())
         .filter_map(|l| serde_json::from_str(l).ok())
-        .collect();
+        .collect())
+}
+
+/// Training curves from `log.jsonl` as an SVG string (loss terms on a log scale; training PSNR,
+/// and the held-out frames' PSNR when `eval_curve.jsonl` lies beside the log).
+fn curves_svg(log: &Path) -> Result<String> {
+    let rows = json_lines(log)?;
     let losses: Vec<(&str, Vec<(f64, f64)>)> = LOSS_TERMS
         .iter()
         .map(|&(key, name)| (name, bucketed(&rows, key, 300)))
         .filter(|(_, p)| p.iter().any(|&(_, y)| y > 0.0))
         .collect();
-    let psnr = vec![("training frame", bucketed(&rows, "psnr", 300))];
+    let mut psnr = vec![("training frame", bucketed(&rows, "psnr", 300))];
+    let curve = log.with_file_name("eval_curve.jsonl");
+    if curve.exists() {
+        let points = json_lines(&curve)?;
+        psnr.push((
+            "held-out, full frame",
+            bucketed(&points, "test_psnr_full", usize::MAX),
+        ));
+        psnr.push((
+            "held-out, human box",
+            bucketed(&points, "test_psnr_human_box", usize::MAX),
+        ));
+    }
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1000, 340)).into_drawing_area();
         root.fill(&WHITE).map_err(plot_err)?;
         let (left, right) = root.split_horizontally(500);
         line_chart(&left, "loss (log scale)", "step", &losses, true)?;
-        line_chart(&right, "training PSNR (dB)", "step", &psnr, false)?;
+        line_chart(&right, "PSNR (dB)", "step", &psnr, false)?;
         root.present().map_err(plot_err)?;
     }
     Ok(svg)
@@ -548,6 +566,12 @@ mod tests {
     fn the_run_report_has_its_sections_and_every_reference_exists() {
         let dir = tempfile::tempdir().unwrap();
         fake_run(dir.path());
+        std::fs::write(
+            dir.path().join("eval_curve.jsonl"),
+            "{\"step\":2,\"test_psnr_full\":30.0,\"test_psnr_human_box\":25.0}\n\
+             {\"step\":4,\"test_psnr_full\":31.0,\"test_psnr_human_box\":26.0}\n",
+        )
+        .unwrap();
         let path = write_run_report(dir.path(), "run <1>").unwrap();
         let html = std::fs::read_to_string(&path).unwrap();
         for needle in [
@@ -582,6 +606,10 @@ mod tests {
         assert!(
             svg.contains("total") && svg.contains("L1") && !svg.contains(">event<"),
             "zero terms are left out"
+        );
+        assert!(
+            svg.contains("held-out, human box"),
+            "the held-out curve is drawn"
         );
     }
 
