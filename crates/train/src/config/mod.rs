@@ -168,6 +168,11 @@ training_options! {
     aiap_position_weight: f32 = 1.0,
     /// Weight of the AIAP loss on human Gaussians' covariances.
     aiap_covariance_weight: f32 = 100.0,
+    /// Weight of the prior on the human Gaussians' size: mean sum of axis scales, in cm
+    /// (`train::loss::sharpness`). 0 = off.
+    size_prior_weight: f32 = 0.0,
+    /// Weight of the prior on the human Gaussians' opacity: mean binary entropy (nats). 0 = off.
+    opacity_entropy_weight: f32 = 0.0,
     /// Position learning rate at step 0 (× scene extent), metres per step: 4.8e-4, three times
     /// 3DGS's 1.6e-4 (both presets since 2026-12-05; `full` had 1.6e-4): at `quick`, +0.04 /
     /// +0.28 / +0.31 dB in the human box on seeds 0 / 1 / 2 of the default benchmark, +0.26 on

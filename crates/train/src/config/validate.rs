@@ -211,6 +211,8 @@ impl TrainConfig {
             ("skinning_weight", self.skinning_weight),
             ("aiap_position_weight", self.aiap_position_weight),
             ("aiap_covariance_weight", self.aiap_covariance_weight),
+            ("size_prior_weight", self.size_prior_weight),
+            ("opacity_entropy_weight", self.opacity_entropy_weight),
         ];
         for (name, v) in rates {
             if !(v.is_finite() && v >= 0.0) {

@@ -1,7 +1,8 @@
 //! The method's losses, each with its backward: the photometric loss of a frame (the mean of its
 //! sub-exposure renders against the observation; one render with `blur_model = none`), the image
 //! terms it is made of (L1, SSIM), the event-generation loss, the flow loss, the perceptual (LPIPS)
-//! loss and the as-isometric-as-possible regulariser of the human Gaussians. The trainer weights
+//! loss, the as-isometric-as-possible regulariser of the human Gaussians and the priors on their
+//! size and opacity (`sharpness`). The trainer weights
 //! and sums them (`trainer::terms`).
 
 pub mod aiap;
@@ -10,3 +11,4 @@ pub mod image;
 pub mod optical_flow;
 pub mod perceptual;
 pub mod photometric;
+pub mod sharpness;

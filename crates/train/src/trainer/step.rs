@@ -6,7 +6,8 @@
 use super::camera::{CameraGradient, CorrectedCameras};
 use super::correction::{self, CorrectedPoses};
 use super::terms::{
-    add_aiap_canonical, aiap_terms, pair_terms, skinning_term, PairSupervision, PairTerms,
+    add_aiap_canonical, add_sharpness_priors, aiap_terms, pair_terms, skinning_term,
+    PairSupervision, PairTerms,
 };
 use super::{add_to, all_finite, StageTimes, StepReport, Trainer};
 use crate::config::{
@@ -165,7 +166,7 @@ impl Trainer {
         };
         times.flow = t_pair.elapsed().as_secs_f64();
 
-        let back = self.backward(
+        let mut back = self.backward(
             data,
             &config,
             &frame_k,
@@ -179,7 +180,11 @@ impl Trainer {
             .as_ref()
             .map_or((0.0, 0.0), |n| (n.terms.flow, n.terms.event));
         let event = event + losses.exposure_events;
+        let (aiap, model) = (&self.aiap, &self.model);
+        let sharpness =
+            add_sharpness_priors(aiap, model, &config, &mut back.grads, &mut back.opacity);
         let loss = losses.photometric
+            + sharpness
             + losses.lpips
             + back.aiap
             + back.skinning

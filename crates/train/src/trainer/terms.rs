@@ -8,6 +8,7 @@ use crate::loss::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP
 use crate::loss::event::pair_event_loss_with;
 use crate::loss::optical_flow::{pair_flow_loss, pair_warp_loss};
 use crate::loss::photometric::add_scaled;
+use crate::loss::sharpness::{opacity_entropy, size_prior};
 use crate::model::{Model, PosedGradients};
 use crate::pose::posing::{ModelGradients, PosedFrame};
 use crate::TrainError;
@@ -273,6 +274,30 @@ pub(super) fn add_aiap_canonical(
             grads.quats[i][ax] += dq[ax];
         }
     }
+}
+
+/// The priors on the human Gaussians' size and opacity (`train::loss::sharpness`, over the
+/// Gaussians AIAP holds together): adds their gradients to the stored parameters' and returns
+/// their weighted value.
+pub(super) fn add_sharpness_priors(
+    aiap: &AiapNeighbours,
+    model: &Model,
+    config: &TrainConfig,
+    grads: &mut ModelGradients<f32>,
+    d_opacity_logits: &mut [f32],
+) -> f32 {
+    let set = &model.set;
+    let (size_weight, entropy_weight) = (config.size_prior_weight, config.opacity_entropy_weight);
+    let mut value = 0.0;
+    if size_weight > 0.0 {
+        let d = Some(&mut grads.log_scales[..]);
+        value += size_prior(&set.log_scales, &aiap.index, size_weight, d);
+    }
+    if entropy_weight > 0.0 {
+        let d = Some(d_opacity_logits);
+        value += opacity_entropy(&set.opacity_logits, &aiap.index, entropy_weight, d);
+    }
+    value
 }
 
 /// The canonical surface samples of step `step`'s skinning-loss window: `m` consecutive samples of
