@@ -47,6 +47,8 @@ pub struct StepReport {
     pub skinning: f32,
     /// The weighted AIAP loss (positions + covariances).
     pub aiap: f32,
+    /// The weighted priors on the person's size and opacity (0 with both weights 0).
+    pub sharpness: f32,
     /// The weighted flow loss λ_flow·L_flow (0 on steps without a flow pair).
     pub flow: f32,
     /// The weighted event-generation loss (0 on steps without an event pair).

@@ -235,6 +235,7 @@ impl Trainer {
             lpips: losses.lpips,
             skinning: back.skinning,
             aiap: back.aiap,
+            sharpness,
             flow,
             event,
             pose_prior: back.pose_prior,

@@ -186,12 +186,13 @@ fn line_chart<DB: DrawingBackend>(
 }
 
 /// The loss terms plotted, in order (those that are zero throughout are left out).
-const LOSS_TERMS: [(&str, &str); 5] = [
+const LOSS_TERMS: [(&str, &str); 6] = [
     ("loss", "total"),
     ("l1", "L1"),
     ("event", "event"),
     ("flow", "flow"),
     ("lpips", "LPIPS"),
+    ("sharpness", "size / opacity priors"),
 ];
 
 /// The JSON lines of the file at `path` that parse (a torn last line is skipped).
