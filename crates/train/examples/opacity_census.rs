@@ -4,7 +4,8 @@
 //! *opaque* Gaussian (opacity ≥ 0.5) of the same class, in canonical space, and how many lie
 //! beyond 2 cm of every opaque one. A blur-trained model
 //! that keeps a haze of faint Gaussians around the body, which a sharp-trained one does not, shows
-//! as a large faint band far from the opaque ones.
+//! as a large faint band far from the opaque ones. Each class's largest axis scale (canonical
+//! space, mm) is given by its quartiles: the blur-trained person's Gaussians are larger.
 //!
 //! ```text
 //! cargo run --release -p train --example opacity_census -- MODEL_DIR...
@@ -39,6 +40,19 @@ fn census(label: &str, set: &gaussians::GaussianSet, members: &[usize]) {
     // The same k-d tree the initial scales' neighbours come from (`gaussians::init`).
     let tree: ImmutableKdTree<f32, u64, 3, 32> = ImmutableKdTree::new_from_slice(&opaque);
     println!("  {label}: {} Gaussians", members.len());
+    let mut largest: Vec<f32> = members
+        .iter()
+        .map(|&i| set.log_scales[i].into_iter().fold(f32::MIN, f32::max).exp())
+        .collect();
+    largest.sort_by(f32::total_cmp);
+    let mm = |q| quantile(&largest, q).map_or("-".into(), |s| format!("{:.2}", s * 1e3));
+    println!(
+        "    largest axis scale (mm): quartiles {} / {} / {}, p90 {}",
+        mm(0.25),
+        mm(0.5),
+        mm(0.75),
+        mm(0.9)
+    );
     for (lo, hi) in BANDS {
         let band: Vec<usize> = members
             .iter()
