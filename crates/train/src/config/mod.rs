@@ -168,8 +168,7 @@ training_options! {
     aiap_position_weight: f32 = 1.0,
     /// Weight of the AIAP loss on human Gaussians' covariances.
     aiap_covariance_weight: f32 = 100.0,
-    /// Weight of the prior on the human Gaussians' size: mean sum of axis scales, in cm
-    /// (`train::loss::sharpness`). 0 = off.
+    /// Weight of the prior on the human Gaussians' size (mean sum of axis scales, cm). 0 = off.
     size_prior_weight: f32 = 0.0,
     /// Weight of the prior on the human Gaussians' opacity: mean binary entropy (nats). 0 = off.
     opacity_entropy_weight: f32 = 0.0,

@@ -6,8 +6,7 @@
 use super::camera::{CameraGradient, CorrectedCameras};
 use super::correction::{self, CorrectedPoses};
 use super::terms::{
-    add_aiap_canonical, add_sharpness_priors, aiap_terms, pair_terms, skinning_term,
-    PairSupervision, PairTerms,
+    add_aiap_canonical, aiap_terms, pair_terms, skinning_term, PairSupervision, PairTerms,
 };
 use super::{add_to, all_finite, StageTimes, StepReport, Trainer};
 use crate::config::{
@@ -180,9 +179,7 @@ impl Trainer {
             .as_ref()
             .map_or((0.0, 0.0), |n| (n.terms.flow, n.terms.event));
         let event = event + losses.exposure_events;
-        let (aiap, model) = (&self.aiap, &self.model);
-        let sharpness =
-            add_sharpness_priors(aiap, model, &config, &mut back.grads, &mut back.opacity);
+        let sharpness = self.sharpness_priors(&config, &mut back.grads, &mut back.opacity);
         let loss = losses.photometric
             + sharpness
             + losses.lpips

@@ -276,28 +276,28 @@ pub(super) fn add_aiap_canonical(
     }
 }
 
-/// The priors on the human Gaussians' size and opacity (`train::loss::sharpness`, over the
-/// Gaussians AIAP holds together): adds their gradients to the stored parameters' and returns
-/// their weighted value.
-pub(super) fn add_sharpness_priors(
-    aiap: &AiapNeighbours,
-    model: &Model,
-    config: &TrainConfig,
-    grads: &mut ModelGradients<f32>,
-    d_opacity_logits: &mut [f32],
-) -> f32 {
-    let set = &model.set;
-    let (size_weight, entropy_weight) = (config.size_prior_weight, config.opacity_entropy_weight);
-    let mut value = 0.0;
-    if size_weight > 0.0 {
-        let d = Some(&mut grads.log_scales[..]);
-        value += size_prior(&set.log_scales, &aiap.index, size_weight, d);
+impl super::Trainer {
+    /// The priors on the human Gaussians' size and opacity (`train::loss::sharpness`, over the
+    /// Gaussians AIAP holds together): adds their gradients to the stored parameters' and
+    /// returns their weighted value.
+    pub(super) fn sharpness_priors(
+        &self,
+        config: &TrainConfig,
+        grads: &mut ModelGradients<f32>,
+        d_opacity_logits: &mut [f32],
+    ) -> f32 {
+        let (set, index) = (&self.model.set, &self.aiap.index);
+        let mut value = 0.0;
+        if config.size_prior_weight > 0.0 {
+            let d = Some(&mut grads.log_scales[..]);
+            value += size_prior(&set.log_scales, index, config.size_prior_weight, d);
+        }
+        if config.opacity_entropy_weight > 0.0 {
+            let (logits, weight) = (&set.opacity_logits, config.opacity_entropy_weight);
+            value += opacity_entropy(logits, index, weight, Some(d_opacity_logits));
+        }
+        value
     }
-    if entropy_weight > 0.0 {
-        let d = Some(d_opacity_logits);
-        value += opacity_entropy(&set.opacity_logits, &aiap.index, entropy_weight, d);
-    }
-    value
 }
 
 /// The canonical surface samples of step `step`'s skinning-loss window: `m` consecutive samples of
