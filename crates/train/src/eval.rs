@@ -10,6 +10,7 @@
 //! that size for LPIPS only — so a small box's LPIPS also sees a little of the scene around it — and
 //! a frame smaller than that gets NaN.
 
+use crate::camera_alignment::{align_camera, AlignedCamera, AlignmentSettings};
 use crate::loss::image::{crop, ssim, ImageShape};
 use crate::loss::perceptual::{lpips_distance, reference_features};
 use crate::TrainError;
@@ -438,6 +439,8 @@ pub fn comparison_strip_of_people(
 pub struct EvaluatedFrame {
     /// Frame number.
     pub index: u32,
+    /// Its camera's test-time alignment, when asked for ([`crate::camera_alignment`]).
+    pub alignment: Option<AlignedCamera>,
     /// Its figures.
     pub metrics: FrameMetrics,
     /// With several people, each person's own figures (the model's person order; empty with one).
@@ -451,25 +454,38 @@ pub struct EvaluatedFrame {
 /// LPIPS with `lpips` (NaN without).
 /// Unseen frames use the latent of the nearest training frame and, with pose correction, the
 /// correction interpolated from their neighbouring training frames ([`crate::model::Model::corrected_params`]),
-/// and with camera correction the camera's ([`crate::model::Model::render_frame`]).
+/// and with camera correction the camera's ([`crate::model::Model::render_frame`]); with
+/// `alignment`, each frame's camera is then aligned to its observed frame
+/// ([`crate::camera_alignment`]).
 pub fn evaluate_split(
     model: &crate::model::Model,
     cast: &crate::pose::body::Cast<'_>,
     data: &crate::data::Dataset,
-    split: scene::Split,
+    (split, alignment): (scene::Split, Option<&AlignmentSettings>),
     lpips: Option<&Lpips<f32>>,
 ) -> Result<Vec<EvaluatedFrame>, crate::TrainError> {
     let (w, h) = (data.camera.width as usize, data.camera.height as usize);
+    let grey = data.scene.images.is_grey();
     let mut out = Vec::new();
     for f in data.frames.iter().filter(|f| f.split == split) {
         let pose = cast.prepare(&model.corrected_params(f.index, &f.smpl), &f.others)?;
-        let r = model.render_frame(f.index, &f.camera, &pose, model.latent_for(f.index))?;
+        let latent = model.latent_for(f.index);
+        let corrected = model.corrected_camera(f.index, &f.camera);
+        let alignment = match alignment {
+            Some(settings) if settings.steps > 0 => Some(align_camera(
+                model,
+                (&corrected, &f.camera),
+                &pose,
+                latent,
+                (&f.image, grey),
+                settings,
+            )?),
+            _ => None,
+        };
+        let raster = alignment.as_ref().map_or(&corrected, |a| &a.camera);
+        let r = model.render_frame_from(raster, &f.camera, &pose, latent)?;
         // Grey frames are compared with the render's luminance, as in training.
-        let grey_render = data
-            .scene
-            .images
-            .is_grey()
-            .then(|| crate::loss::image::luminance3(&r.rgb, w * h));
+        let grey_render = grey.then(|| crate::loss::image::luminance3(&r.rgb, w * h));
         let frame = EvalFrame {
             width: w,
             height: h,
@@ -494,6 +510,7 @@ pub fn evaluate_split(
         }
         out.push(EvaluatedFrame {
             index: f.index,
+            alignment,
             metrics: evaluate_frame(&frame, lpips)?,
             people,
             strip: comparison_strip_of_people(&frame, &r.people),

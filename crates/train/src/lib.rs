@@ -3,6 +3,7 @@
 //! knows the method; everything it builds on is generic.
 
 pub mod blend;
+pub mod camera_alignment;
 pub mod checkpoint;
 pub mod colour;
 pub mod config;

@@ -378,6 +378,7 @@ pub fn run(args: Args) -> Result<()> {
                 ..args.training.clone()
             },
             resume: false,
+            align_test_cameras: 0,
             eval_every: 0,
             stop_after: None,
             oracle_sub_frame_poses: false,

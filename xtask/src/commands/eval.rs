@@ -27,6 +27,11 @@ pub struct Args {
     /// held-out error is what the blur hid, not unseen poses).
     #[arg(long, value_enum, default_value_t = SplitArg::Test)]
     pub split: SplitArg,
+    /// Before scoring, align each frame's camera to its observed (blurred) frame in this many
+    /// Adam steps, the model frozen: for estimated cameras, whose held-out frames carry errors
+    /// that the training frames' corrections cannot know (0: off)
+    #[arg(long, default_value_t = 0)]
+    pub align_test_cameras: usize,
 }
 
 /// The frames `eval` scores.
@@ -72,6 +77,7 @@ pub fn run(args: Args) -> Result<()> {
         &out,
         &EvalSummary {
             split,
+            camera_alignment_steps: args.align_test_cameras,
             train_seconds: f64::NAN,
             steps: loaded.manifest.steps,
             gaussians_human: human,

@@ -88,6 +88,11 @@ pub struct Args {
     /// OUT/eval_curve.jsonl (no LPIPS). 0 = off. The model is only read: same bits either way.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub eval_every: usize,
+    /// In the final evaluation, align each held-out frame's camera to its observed (blurred)
+    /// frame in N Adam steps, the model frozen, before scoring it (`cargo xtask eval
+    /// --align-test-cameras`): for estimated cameras. 0 = off. Training is unchanged.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub align_test_cameras: usize,
     /// Stop after this many steps of this invocation (the run can be resumed later).
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
@@ -468,6 +473,7 @@ pub fn run(args: Args) -> Result<()> {
     let camera_error = crate::outputs::camera_report::camera_report(&data, model)?;
     let summary = EvalSummary {
         split: scene::Split::Test,
+        camera_alignment_steps: args.align_test_cameras,
         train_seconds,
         steps: trainer.step,
         gaussians_human: model.human_count(),

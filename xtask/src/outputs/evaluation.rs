@@ -5,6 +5,7 @@
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::Path;
+use train::camera_alignment::AlignmentSettings;
 use train::eval::{evaluate_split, mean_metrics, mean_person_metrics, PersonMetrics};
 use train::model::Model;
 use train::pose::body::Cast;
@@ -27,6 +28,9 @@ pub struct EvalSummary {
     /// training frames, against their sharp references (how much of the held-out gap is
     /// generalisation to unseen poses rather than what the blur hides).
     pub split: scene::Split,
+    /// Each scored frame's camera aligned to its observed frame first, in this many Adam steps
+    /// (`train::camera_alignment`; 0: the cameras as the model has them).
+    pub camera_alignment_steps: usize,
 }
 
 /// One point of the held-out curve (`reconstruct --eval-every N`): the test split's mean PSNR
@@ -39,7 +43,7 @@ pub fn held_out_point(
     data: &train::data::Dataset,
     step: usize,
 ) -> Result<serde_json::Value, train::TrainError> {
-    let frames = evaluate_split(model, cast, data, scene::Split::Test, None)?;
+    let frames = evaluate_split(model, cast, data, (scene::Split::Test, None), None)?;
     let per_frame: Vec<_> = frames.iter().map(|f| f.metrics).collect();
     let m = mean_metrics(&per_frame);
     Ok(json!({
@@ -129,7 +133,14 @@ pub fn write_evaluation(
     let weights = crate::common::shipped_lpips_weights();
     let lpips = lpips::load_safetensors(&weights)
         .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
-    let frames = evaluate_split(model, cast, data, summary.split, Some(&lpips))?;
+    let alignment = AlignmentSettings::with_steps(summary.camera_alignment_steps);
+    let frames = evaluate_split(
+        model,
+        cast,
+        data,
+        (summary.split, Some(&alignment)),
+        Some(&lpips),
+    )?;
     let strips = out.join("eval");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
     for f in &frames {
@@ -183,6 +194,7 @@ pub fn write_evaluation(
         "steps": summary.steps,
         "gaussians_human": summary.gaussians_human,
         "gaussians_scene": summary.gaussians_scene,
+        "camera_alignment_steps": summary.camera_alignment_steps,
         "lpips": "AlexNet v0.1 on sRGB-encoded images (lower is closer); a human box below 31 px per side is grown to 31 for LPIPS",
         "per_frame": frames.iter().map(|f| per_frame_json(f, &ids)).collect::<Vec<_>>(),
     });
@@ -226,6 +238,16 @@ pub fn write_evaluation(
             p.psnr_box, p.mask_iou
         );
     }
+    let aligned: Vec<_> = frames.iter().filter_map(|f| f.alignment.as_ref()).collect();
+    if !aligned.is_empty() {
+        let n = aligned.len() as f64;
+        let before = aligned.iter().map(|a| a.loss_before).sum::<f64>() / n;
+        let after = aligned.iter().map(|a| a.loss_after).sum::<f64>() / n;
+        println!(
+            "| cameras aligned ({} steps)   | MSE vs observed {before:.3e} → {after:.3e} |",
+            summary.camera_alignment_steps
+        );
+    }
     if summary.train_seconds.is_finite() {
         println!(
             "| training                     | {:>8.0} s | {} steps |",
@@ -259,6 +281,15 @@ pub fn write_evaluation(
 /// One evaluated frame in `metrics.json`: its figures and, with several people, each person's.
 fn per_frame_json(f: &train::eval::EvaluatedFrame, ids: &[u32]) -> serde_json::Value {
     let mut entry = json!({"index": f.index, "metrics": f.metrics});
+    if let Some(a) = &f.alignment {
+        let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        entry["camera_alignment"] = json!({
+            "loss_before": a.loss_before,
+            "loss_after": a.loss_after,
+            "rotation_deg": norm(&a.twist[..3]).to_degrees(),
+            "translation_cm": norm(&a.twist[3..]) * 100.0,
+        });
+    }
     if !f.people.is_empty() {
         entry["people"] = f
             .people

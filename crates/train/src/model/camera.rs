@@ -128,10 +128,21 @@ impl Model {
         pose: &PreparedPose,
         latent: &[f32],
     ) -> Result<Rendered, TrainError> {
-        let raster = self.corrected_camera(index, camera);
+        self.render_frame_from(&self.corrected_camera(index, camera), camera, pose, latent)
+    }
+
+    /// [`Model::render_frame`] rasterized from `raster` (e.g. a camera aligned at test time,
+    /// `crate::camera_alignment`), colours viewed from the given `camera`.
+    pub fn render_frame_from(
+        &self,
+        raster: &Camera,
+        camera: &Camera,
+        pose: &PreparedPose,
+        latent: &[f32],
+    ) -> Result<Rendered, TrainError> {
         let pass = self.forward_from(
             PassCamera {
-                raster: &raster,
+                raster,
                 view_centre: super::view_centre(camera),
             },
             pose,

@@ -32,8 +32,9 @@ pub use config::ModelConfig;
 use gaussians::GaussianSet;
 pub use networks::{CAMERA_CORRECTIONS_TENSOR, CAMERA_GAUGE_TENSOR, NETWORK_GROUPS};
 use rasterize_cpu::{
-    render_cov, render_cov_backward, render_cov_shared, render_cov_shared_backward, Camera,
-    Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, SharedOutputs, TileSharing,
+    camera_pose_gradient, render_cov, render_cov_backward, render_cov_shared,
+    render_cov_shared_backward, Camera, Cotangents, CovSplats, Gradients, RenderOutput,
+    RenderSettings, SharedOutputs, TileSharing,
 };
 use rayon::prelude::*;
 use smpl_deform::math::Affine;

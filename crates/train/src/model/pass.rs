@@ -33,6 +33,44 @@ impl FramePass<'_> {
             .collect()
     }
 
+    /// This pass's posed Gaussians rasterized from `camera` instead of its own (colours as posed,
+    /// i.e. viewed from this pass's view centre; [`PassCamera`]): the render output, (C, H, W).
+    pub fn render_from(&self, camera: &Camera) -> Result<RenderOutput<f32>, TrainError> {
+        let splats = splats(self.model, &self.posed, &self.channels);
+        Ok(render_cov(camera, &splats, &self.model.render_settings())?)
+    }
+
+    /// dL/dξ of `camera` for a further left twist ξ = (ω, v) (radians, metres;
+    /// `rasterize_cpu::camera_pose_gradient`), for the image cotangent `d_image` ((C, H, W)) of
+    /// `out`, [`FramePass::render_from`]'s render from that camera.
+    pub fn camera_twist_gradient(
+        &self,
+        camera: &Camera,
+        out: &RenderOutput<f32>,
+        d_image: &[f32],
+    ) -> Result<[f64; 6], TrainError> {
+        let splats = splats(self.model, &self.posed, &self.channels);
+        let cotangents = Cotangents {
+            image: d_image,
+            alpha: None,
+            depth: None,
+        };
+        let g = render_cov_backward(
+            camera,
+            &splats,
+            &self.model.render_settings(),
+            out,
+            &cotangents,
+        )?;
+        Ok(camera_pose_gradient(
+            camera,
+            &self.posed.means,
+            &self.posed.covariances,
+            &g.means,
+            &g.covariances,
+        )?)
+    }
+
     /// Rasterizer backward of the image cotangent `d_image` ((C, H, W), C =
     /// [`Model::render_channels`]) plus,
     /// when given, a cotangent `d_geometric` of the RGB planes of which only the geometric share is
