@@ -76,6 +76,41 @@ pub fn camera_report(data: &Dataset, model: &Model) -> Result<Option<CameraRepor
     }))
 }
 
+/// The RMS error of the cameras `aligned` (frame index, world-to-camera; the held-out frames'
+/// cameras after test-time alignment) against the truth, or `None` without `cameras_true.json`.
+pub fn aligned_error(
+    data: &Dataset,
+    aligned: &[(u32, [[f64; 4]; 4])],
+) -> Result<Option<CameraError>> {
+    let path = TrueCameras::path(&data.dir);
+    if !path.exists() || aligned.is_empty() {
+        return Ok(None);
+    }
+    let truth =
+        TrueCameras::read(&data.dir).with_context(|| format!("reading {}", path.display()))?;
+    let mut frames = Vec::with_capacity(aligned.len());
+    for (index, _) in aligned {
+        let t = truth
+            .frames
+            .iter()
+            .find(|t| t.index == *index)
+            .with_context(|| format!("{}: no frame {index}", path.display()))?;
+        frames.push(t.clone());
+    }
+    let estimates: Vec<_> = aligned.iter().map(|(_, m)| *m).collect();
+    let (rotation_rms_deg, centre_rms_cm) = rms_error(
+        &estimates,
+        &TrueCameras {
+            format_version: truth.format_version,
+            frames,
+        },
+    );
+    Ok(Some(CameraError {
+        rotation_rms_deg,
+        centre_rms_cm,
+    }))
+}
+
 /// One line for the terminal: the RMS camera errors, given → corrected.
 pub fn summary_line(r: &CameraReport) -> String {
     let pair = |e: &CameraError| format!("{:.3}° / {:.2} cm", e.rotation_rms_deg, e.centre_rms_cm);
