@@ -7,18 +7,23 @@
 //! reference the frame is scored against).
 //!
 //! The refinement is Adam on a left twist ξ = (ω, v) (radians, metres) of the frame's corrected
-//! camera, minimising the mean squared difference between the model's mid-exposure render from
-//! the twisted camera and the observed frame. A blurred frame is the mean of the exposure's sharp
-//! images, whose centroid is the mid-exposure image, so the difference is smallest near the right
-//! camera. The gradient is the rasterizer's camera gradient (`rasterize_cpu::camera_pose_gradient`)
+//! camera, minimising the mean squared difference between the observed frame and the model's
+//! prediction of it: the mean of the exposure's renders (the trained model's own exposure model,
+//! every render's camera moved by the same twist), or the mid-exposure render alone for a model
+//! trained without one. The mid render alone is biased by a camera that moves unevenly inside
+//! the exposure (a hand's tremor): the blurred frame's centroid is then not the mid image. The gradient is the rasterizer's camera gradient (`rasterize_cpu::camera_pose_gradient`)
 //! chained through the twist (`crate::pose::camera_correction::twist_backward`), both checked
 //! against finite differences in `gradient-checks`. The camera of lowest loss seen, the start
 //! included, is the one returned: alignment never raises the loss it minimises.
 
+use crate::data::{Dataset, TrainFrame};
 use crate::loss::image::{luminance3, luminance3_backward};
-use crate::model::{Model, PassCamera};
+use crate::model::{corrected_camera, Model, PassCamera};
+use crate::pose::body::Cast;
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::{corrected_world_to_camera, twist_backward, TWIST_VALUES};
+use crate::pose::correction::exposure_offset;
+use crate::pose::exposure::{subframe_times, CameraTrack, PoseTrack};
 use crate::TrainError;
 use nn::{Adam, AdamConfig};
 use rasterize_cpu::Camera;
@@ -34,17 +39,43 @@ pub struct AlignmentSettings {
     pub translation_rate: f64,
     /// The step sizes fall exponentially to this fraction of themselves over the steps.
     pub final_fraction: f64,
+    /// The renders a frame's exposure is modelled with ([`crate::pose::exposure::subframe_times`]),
+    /// the body and the camera at each render's time; `None` (or 1): the mid-exposure render
+    /// alone, which a camera moving unevenly inside the exposure biases.
+    pub exposure: Option<ExposureSampling>,
+}
+
+/// How the exposure of a frame is sampled for alignment: the trained model's own rule.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExposureSampling {
+    /// Renders per exposure.
+    pub subframes: usize,
+    /// How the body's and the camera's paths are interpolated between frames.
+    pub rules: crate::pose::exposure::TrackRules,
+}
+
+impl ExposureSampling {
+    /// The exposure model of `config`, `None` when it renders one image per frame.
+    pub fn of(config: &crate::config::TrainConfig) -> Option<Self> {
+        (config.blur_model == crate::config::BlurModel::Exposure && config.subframes > 1).then(
+            || Self {
+                subframes: config.subframes,
+                rules: crate::pose::exposure::TrackRules::of(config),
+            },
+        )
+    }
 }
 
 impl AlignmentSettings {
     /// `steps` Adam steps from 1 mrad and 1 mm per step (a 0.5° / 1 cm camera error is 9–10
-    /// steps away), falling to a tenth.
-    pub fn with_steps(steps: usize) -> Self {
+    /// steps away), falling to a tenth, on the exposure `exposure` samples.
+    pub fn with_steps(steps: usize, exposure: Option<ExposureSampling>) -> Self {
         Self {
             steps,
             rotation_rate: 1e-3,
             translation_rate: 1e-3,
             final_fraction: 0.1,
+            exposure,
         }
     }
 }
@@ -62,34 +93,125 @@ pub struct AlignedCamera {
     pub loss_after: f64,
 }
 
-/// Aligns the camera `start` (the frame's given camera with its learned correction) of a frame
-/// the model renders in `pose` with latent `latent` (colours viewed from the given camera `given`,
-/// as in training) to the frame's observed image `observed` ((3, H, W) linear RGB; with `grey`
-/// its three planes hold the luminance and the render's luminance is compared).
+/// The body's, the other people's and (when it moves) the camera's paths through a scene's frames,
+/// to sample any frame's exposure as training samples a training frame's
+/// (`TrainingData::enable_exposure`).
+pub struct ExposurePaths {
+    body: PoseTrack,
+    others: Vec<PoseTrack>,
+    camera: Option<CameraTrack>,
+    subframes: usize,
+}
+
+impl ExposurePaths {
+    /// The paths through every frame of `data`, interpolated by `sampling`'s rules.
+    pub fn new(data: &Dataset, sampling: &ExposureSampling) -> Self {
+        let body_keys: Vec<(f64, &smpl_deform::SmplParams)> =
+            data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
+        let people = data.frames.first().map_or(0, |f| f.others.len());
+        let others = (0..people)
+            .map(|j| {
+                let keys: Vec<(f64, &smpl_deform::SmplParams)> = data
+                    .frames
+                    .iter()
+                    .map(|f| (f.time_s, &f.others[j]))
+                    .collect();
+                PoseTrack::new(&keys, sampling.rules.body)
+            })
+            .collect();
+        let camera = data.camera_moves.then(|| {
+            let keys: Vec<(f64, [[f64; 4]; 4])> = data
+                .frames
+                .iter()
+                .map(|f| (f.time_s, f.camera.world_to_camera))
+                .collect();
+            CameraTrack::new(&keys, sampling.rules.camera)
+        });
+        Self {
+            body: PoseTrack::new(&body_keys, sampling.rules.body),
+            others,
+            camera,
+            subframes: sampling.subframes,
+        }
+    }
+
+    /// Frame `f`'s exposure renders: at each sub-exposure time the camera (the path's, else the
+    /// frame's) with the model's correction of the frame at that offset, and the body's pose
+    /// with the model's pose correction of the frame, prepared with `cast`.
+    pub fn renders(
+        &self,
+        model: &Model,
+        cast: &Cast<'_>,
+        f: &TrainFrame,
+    ) -> Result<Vec<(Camera, PreparedPose)>, TrainError> {
+        let correction = model.camera_correction_for(f.index);
+        let count = self.subframes;
+        subframe_times(f.time_s, f.exposure_s, count)
+            .iter()
+            .enumerate()
+            .map(|(s, &t)| {
+                let camera = Camera {
+                    world_to_camera: self
+                        .camera
+                        .as_ref()
+                        .map_or(f.camera.world_to_camera, |c| c.at(t)),
+                    ..f.camera.clone()
+                };
+                let camera = if correction.is_empty() {
+                    camera
+                } else {
+                    corrected_camera(&camera, &correction, exposure_offset(s, count))
+                };
+                let others: Vec<_> = self.others.iter().map(|o| o.at(t)).collect();
+                let pose =
+                    cast.prepare(&model.corrected_params(f.index, &self.body.at(t)), &others)?;
+                Ok((camera, pose))
+            })
+            .collect()
+    }
+}
+
+/// One render of a frame's modelled exposure: the frame's corrected camera and the body's pose
+/// at the render's time.
+pub type ExposureRender<'a> = (Camera, &'a PreparedPose);
+
+/// Aligns the camera `mid` (the frame's given camera `given` with its learned correction, at mid
+/// exposure) of a frame the model renders with latent `latent` to the frame's observed image
+/// `observed` ((3, H, W) linear RGB; with `grey` its three planes hold the luminance and the
+/// render's luminance is compared). The prediction is the mean of the renders `exposure` (each
+/// camera moved by the same left twist; colours viewed from `given`, as in training): the
+/// frame's exposure, or its mid-exposure render alone.
 pub fn align_camera(
     model: &Model,
-    (start, given): (&Camera, &Camera),
-    pose: &PreparedPose,
+    (mid, given): (&Camera, &Camera),
+    exposure: &[ExposureRender<'_>],
     latent: &[f32],
     (observed, grey): (&[f32], bool),
     settings: &AlignmentSettings,
 ) -> Result<AlignedCamera, TrainError> {
-    let hw = start.width as usize * start.height as usize;
-    if observed.len() != 3 * hw {
+    let hw = mid.width as usize * mid.height as usize;
+    if observed.len() != 3 * hw || exposure.is_empty() {
         return Err(TrainError::Config(format!(
-            "camera alignment: the observed frame has {} values, the camera's image {}",
+            "camera alignment: the observed frame has {} values, the camera's image {}, over {} renders",
             observed.len(),
-            3 * hw
+            3 * hw,
+            exposure.len()
         )));
     }
-    let pass = model.forward_from(
-        PassCamera {
-            raster: start,
-            view_centre: PassCamera::of(given).view_centre,
-        },
-        pose,
-        latent,
-    )?;
+    let view_centre = PassCamera::of(given).view_centre;
+    let passes = exposure
+        .iter()
+        .map(|(raster, pose)| {
+            model.forward_from(
+                PassCamera {
+                    raster,
+                    view_centre,
+                },
+                pose,
+                latent,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let rate = |base: f64, k: usize| {
         base * settings
             .final_fraction
@@ -105,16 +227,28 @@ pub fn align_camera(
         )
     };
     let (mut rotation, mut translation) = (adam(0.0), adam(0.0));
+    let twisted = |camera: &Camera, twist: &[f64; TWIST_VALUES]| Camera {
+        world_to_camera: corrected_world_to_camera(&camera.world_to_camera, twist),
+        ..camera.clone()
+    };
     let mut twist = [0.0f64; TWIST_VALUES];
     let mut best: Option<AlignedCamera> = None;
     let mut loss_before = f64::NAN;
+    let scale = 1.0 / exposure.len() as f32;
     for k in 0..=settings.steps {
-        let camera = Camera {
-            world_to_camera: corrected_world_to_camera(&start.world_to_camera, &twist),
-            ..start.clone()
-        };
-        let out = pass.render_from(&camera)?;
-        let (loss, d_rgb) = squared_error(&out.image[..3 * hw], observed, hw, grey);
+        let cameras: Vec<Camera> = exposure.iter().map(|(c, _)| twisted(c, &twist)).collect();
+        let outs = passes
+            .iter()
+            .zip(&cameras)
+            .map(|(pass, camera)| pass.render_from(camera))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut mean = vec![0.0f32; 3 * hw];
+        for out in &outs {
+            for (m, &v) in mean.iter_mut().zip(&out.image[..3 * hw]) {
+                *m += scale * v;
+            }
+        }
+        let (loss, d_mean) = squared_error(&mean, observed, hw, grey);
         if !loss.is_finite() {
             break;
         }
@@ -123,7 +257,7 @@ pub fn align_camera(
         }
         if best.as_ref().is_none_or(|b| loss < b.loss_after) {
             best = Some(AlignedCamera {
-                camera: camera.clone(),
+                camera: twisted(mid, &twist),
                 twist,
                 loss_before,
                 loss_after: loss,
@@ -132,10 +266,18 @@ pub fn align_camera(
         if k == settings.steps {
             break;
         }
-        let mut d_image = vec![0.0f32; out.image.len()];
-        d_image[..3 * hw].copy_from_slice(&d_rgb);
-        let d_left = pass.camera_twist_gradient(&camera, &out, &d_image)?;
-        let g = twist_backward(&d_left, &twist);
+        // Every render gets 1/S of the mean's cotangent; the twist's gradient sums theirs.
+        let mut d_image = vec![0.0f32; outs[0].image.len()];
+        for (d, &g) in d_image.iter_mut().zip(&d_mean) {
+            *d = scale * g;
+        }
+        let mut g = [0.0f64; TWIST_VALUES];
+        for ((pass, camera), out) in passes.iter().zip(&cameras).zip(&outs) {
+            let d_left = pass.camera_twist_gradient(camera, out, &d_image)?;
+            for (a, b) in g.iter_mut().zip(twist_backward(&d_left, &twist)) {
+                *a += b;
+            }
+        }
         if !g.iter().all(|v| v.is_finite()) {
             break;
         }

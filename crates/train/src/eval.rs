@@ -10,7 +10,7 @@
 //! that size for LPIPS only — so a small box's LPIPS also sees a little of the scene around it — and
 //! a frame smaller than that gets NaN.
 
-use crate::camera_alignment::{align_camera, AlignedCamera, AlignmentSettings};
+use crate::camera_alignment::{align_camera, AlignedCamera, AlignmentSettings, ExposurePaths};
 use crate::loss::image::{crop, ssim, ImageShape};
 use crate::loss::perceptual::{lpips_distance, reference_features};
 use crate::TrainError;
@@ -466,20 +466,31 @@ pub fn evaluate_split(
 ) -> Result<Vec<EvaluatedFrame>, crate::TrainError> {
     let (w, h) = (data.camera.width as usize, data.camera.height as usize);
     let grey = data.scene.images.is_grey();
+    let paths = alignment
+        .filter(|a| a.steps > 0)
+        .and_then(|a| a.exposure.as_ref())
+        .map(|sampling| ExposurePaths::new(data, sampling));
     let mut out = Vec::new();
     for f in data.frames.iter().filter(|f| f.split == split) {
         let pose = cast.prepare(&model.corrected_params(f.index, &f.smpl), &f.others)?;
         let latent = model.latent_for(f.index);
         let corrected = model.corrected_camera(f.index, &f.camera);
         let alignment = match alignment {
-            Some(settings) if settings.steps > 0 => Some(align_camera(
-                model,
-                (&corrected, &f.camera),
-                &pose,
-                latent,
-                (&f.image, grey),
-                settings,
-            )?),
+            Some(settings) if settings.steps > 0 => {
+                let renders = match &paths {
+                    Some(paths) if f.exposure_s > 0.0 => paths.renders(model, cast, f)?,
+                    _ => vec![(corrected.clone(), pose.clone())],
+                };
+                let renders: Vec<_> = renders.iter().map(|(c, p)| (c.clone(), p)).collect();
+                Some(align_camera(
+                    model,
+                    (&corrected, &f.camera),
+                    &renders,
+                    latent,
+                    (&f.image, grey),
+                    settings,
+                )?)
+            }
             _ => None,
         };
         let raster = alignment.as_ref().map_or(&corrected, |a| &a.camera);

@@ -1,6 +1,7 @@
 //! Test-time camera alignment (`train::camera_alignment`) on the tiny fixture: a frame rendered
 //! from a known camera and then handed a camera off by a known twist is aligned back towards the
-//! right one, and the alignment never raises its loss.
+//! right one, from its mid-exposure render and from an exposure of renders whose cameras move, and
+//! the alignment never raises its loss.
 #![allow(clippy::unwrap_used)]
 
 use train::camera_alignment::{align_camera, AlignmentSettings};
@@ -44,11 +45,11 @@ fn a_camera_off_by_a_known_twist_is_aligned_back() {
         ..given.clone()
     };
     let (angle0, centre0) = camera_error(&start.world_to_camera, &given.world_to_camera);
-    let settings = AlignmentSettings::with_steps(60);
+    let settings = AlignmentSettings::with_steps(60, None);
     let aligned = align_camera(
         model,
         (&start, &given),
-        &pose,
+        &[(start.clone(), &pose)],
         &latent,
         (&observed, false),
         &settings,
@@ -69,13 +70,54 @@ fn a_camera_off_by_a_known_twist_is_aligned_back() {
     let none = align_camera(
         model,
         (&start, &given),
-        &pose,
+        &[(start.clone(), &pose)],
         &latent,
         (&observed, false),
-        &AlignmentSettings::with_steps(0),
+        &AlignmentSettings::with_steps(0, None),
     )
     .unwrap();
     assert_eq!(none.camera.world_to_camera, start.world_to_camera);
     assert_eq!(none.loss_before, none.loss_after);
     assert_eq!(none.loss_before, aligned.loss_before);
+
+    // An exposure of three renders whose cameras move inside it: the observed frame is their
+    // mean from the right cameras; every render's camera starts off by the same twist, and the
+    // mid camera comes back.
+    let path = [
+        [0.0, 0.003, 0.0, -0.004, 0.0, 0.0],
+        [0.0; 6],
+        [0.0, -0.003, 0.0, 0.004, 0.0, 0.0],
+    ];
+    let moved = |twist: &[f64; 6], from: &rasterize_cpu::Camera| rasterize_cpu::Camera {
+        world_to_camera: corrected_world_to_camera(&from.world_to_camera, twist),
+        ..from.clone()
+    };
+    let truth: Vec<_> = path.iter().map(|p| moved(p, &given)).collect();
+    let renders: Vec<Vec<f32>> = truth
+        .iter()
+        .map(|c| model.render(c, &pose, &latent).unwrap().rgb)
+        .collect();
+    let observed: Vec<f32> = (0..renders[0].len())
+        .map(|i| renders.iter().map(|r| r[i]).sum::<f32>() / 3.0)
+        .collect();
+    let exposure: Vec<_> = truth.iter().map(|c| (moved(&off, c), &pose)).collect();
+    let aligned = align_camera(
+        model,
+        (&exposure[1].0, &given),
+        &exposure,
+        &latent,
+        (&observed, false),
+        &settings,
+    )
+    .unwrap();
+    let (angle, centre) = camera_error(&aligned.camera.world_to_camera, &given.world_to_camera);
+    assert!(aligned.loss_after < 0.2 * aligned.loss_before);
+    assert!(
+        angle < 0.5 * angle0,
+        "exposure: rotation {angle0}° → {angle}°"
+    );
+    assert!(
+        centre < centre0,
+        "exposure: centre {centre0} m → {centre} m"
+    );
 }

@@ -8,6 +8,7 @@ use crate::outputs::evaluation::{write_evaluation, EvalSummary};
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::{Path, PathBuf};
+use train::camera_alignment::ExposureSampling;
 
 /// Arguments of `eval`.
 #[derive(clap::Args, Debug)]
@@ -78,6 +79,7 @@ pub fn run(args: Args) -> Result<()> {
         &EvalSummary {
             split,
             camera_alignment_steps: args.align_test_cameras,
+            camera_alignment_exposure: ExposureSampling::of(&loaded.manifest.config),
             train_seconds: f64::NAN,
             steps: loaded.manifest.steps,
             gaussians_human: human,

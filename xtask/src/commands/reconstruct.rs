@@ -474,6 +474,7 @@ pub fn run(args: Args) -> Result<()> {
     let summary = EvalSummary {
         split: scene::Split::Test,
         camera_alignment_steps: args.align_test_cameras,
+        camera_alignment_exposure: train::camera_alignment::ExposureSampling::of(&config),
         train_seconds,
         steps: trainer.step,
         gaussians_human: model.human_count(),

@@ -5,7 +5,7 @@
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::Path;
-use train::camera_alignment::AlignmentSettings;
+use train::camera_alignment::{AlignmentSettings, ExposureSampling};
 use train::eval::{evaluate_split, mean_metrics, mean_person_metrics, PersonMetrics};
 use train::model::Model;
 use train::pose::body::Cast;
@@ -31,6 +31,9 @@ pub struct EvalSummary {
     /// Each scored frame's camera aligned to its observed frame first, in this many Adam steps
     /// (`train::camera_alignment`; 0: the cameras as the model has them).
     pub camera_alignment_steps: usize,
+    /// The trained model's exposure model, which alignment predicts each frame with
+    /// (`train::camera_alignment::ExposureSampling::of` the run's configuration).
+    pub camera_alignment_exposure: Option<ExposureSampling>,
 }
 
 /// One point of the held-out curve (`reconstruct --eval-every N`): the test split's mean PSNR
@@ -133,7 +136,10 @@ pub fn write_evaluation(
     let weights = crate::common::shipped_lpips_weights();
     let lpips = lpips::load_safetensors(&weights)
         .with_context(|| format!("loading the LPIPS weights {}", weights.display()))?;
-    let alignment = AlignmentSettings::with_steps(summary.camera_alignment_steps);
+    let alignment = AlignmentSettings::with_steps(
+        summary.camera_alignment_steps,
+        summary.camera_alignment_exposure,
+    );
     let frames = evaluate_split(
         model,
         cast,
