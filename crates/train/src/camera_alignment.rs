@@ -16,14 +16,14 @@
 //! against finite differences in `gradient-checks`. The camera of lowest loss seen, the start
 //! included, is the one returned: alignment never raises the loss it minimises.
 
-use crate::data::{Dataset, TrainFrame};
+use crate::data::{Dataset, ScenePaths, TrainFrame};
 use crate::loss::image::{luminance3, luminance3_backward};
 use crate::model::{corrected_camera, Model, PassCamera};
 use crate::pose::body::Cast;
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::{corrected_world_to_camera, twist_backward, TWIST_VALUES};
 use crate::pose::correction::exposure_offset;
-use crate::pose::exposure::{subframe_times, CameraTrack, PoseTrack};
+use crate::pose::exposure::subframe_times;
 use crate::TrainError;
 use nn::{Adam, AdamConfig};
 use rasterize_cpu::Camera;
@@ -97,40 +97,16 @@ pub struct AlignedCamera {
 /// to sample any frame's exposure as training samples a training frame's
 /// (`TrainingData::enable_exposure`).
 pub struct ExposurePaths {
-    body: PoseTrack,
-    others: Vec<PoseTrack>,
-    camera: Option<CameraTrack>,
+    paths: ScenePaths,
     subframes: usize,
 }
 
 impl ExposurePaths {
     /// The paths through every frame of `data`, interpolated by `sampling`'s rules.
     pub fn new(data: &Dataset, sampling: &ExposureSampling) -> Self {
-        let body_keys: Vec<(f64, &smpl_deform::SmplParams)> =
-            data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
         let people = data.frames.first().map_or(0, |f| f.others.len());
-        let others = (0..people)
-            .map(|j| {
-                let keys: Vec<(f64, &smpl_deform::SmplParams)> = data
-                    .frames
-                    .iter()
-                    .map(|f| (f.time_s, &f.others[j]))
-                    .collect();
-                PoseTrack::new(&keys, sampling.rules.body)
-            })
-            .collect();
-        let camera = data.camera_moves.then(|| {
-            let keys: Vec<(f64, [[f64; 4]; 4])> = data
-                .frames
-                .iter()
-                .map(|f| (f.time_s, f.camera.world_to_camera))
-                .collect();
-            CameraTrack::new(&keys, sampling.rules.camera)
-        });
         Self {
-            body: PoseTrack::new(&body_keys, sampling.rules.body),
-            others,
-            camera,
+            paths: data.paths(sampling.rules, people),
             subframes: sampling.subframes,
         }
     }
@@ -152,6 +128,7 @@ impl ExposurePaths {
             .map(|(s, &t)| {
                 let camera = Camera {
                     world_to_camera: self
+                        .paths
                         .camera
                         .as_ref()
                         .map_or(f.camera.world_to_camera, |c| c.at(t)),
@@ -162,9 +139,11 @@ impl ExposurePaths {
                 } else {
                     corrected_camera(&camera, &correction, exposure_offset(s, count))
                 };
-                let others: Vec<_> = self.others.iter().map(|o| o.at(t)).collect();
-                let pose =
-                    cast.prepare(&model.corrected_params(f.index, &self.body.at(t)), &others)?;
+                let others: Vec<_> = self.paths.others.iter().map(|o| o.at(t)).collect();
+                let pose = cast.prepare(
+                    &model.corrected_params(f.index, &self.paths.body.at(t)),
+                    &others,
+                )?;
                 Ok((camera, pose))
             })
             .collect()

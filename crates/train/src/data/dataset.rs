@@ -53,7 +53,48 @@ pub struct Dataset {
     pub frames: Vec<TrainFrame>,
 }
 
+/// The body's, the other people's and (when it moves) the camera's paths through a scene's frames
+/// ([`Dataset::paths`]): what the exposure model samples a frame's sub-exposure renders from.
+pub struct ScenePaths {
+    /// The first person's body.
+    pub body: crate::pose::exposure::PoseTrack,
+    /// Each other person's, in the scene's order.
+    pub others: Vec<crate::pose::exposure::PoseTrack>,
+    /// The camera's, `None` for a static camera.
+    pub camera: Option<crate::pose::exposure::CameraTrack>,
+}
+
 impl Dataset {
+    /// The paths through every frame, interpolated by `rules`, with `people` other people.
+    pub fn paths(&self, rules: crate::pose::exposure::TrackRules, people: usize) -> ScenePaths {
+        use crate::pose::exposure::{CameraTrack, PoseTrack};
+        let keys: Vec<(f64, &SmplParams)> =
+            self.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
+        let others = (0..people)
+            .map(|j| {
+                let keys: Vec<(f64, &SmplParams)> = self
+                    .frames
+                    .iter()
+                    .map(|f| (f.time_s, &f.others[j]))
+                    .collect();
+                PoseTrack::new(&keys, rules.body)
+            })
+            .collect();
+        let camera = self.camera_moves.then(|| {
+            let keys: Vec<(f64, [[f64; 4]; 4])> = self
+                .frames
+                .iter()
+                .map(|f| (f.time_s, f.camera.world_to_camera))
+                .collect();
+            CameraTrack::new(&keys, rules.camera)
+        });
+        ScenePaths {
+            body: PoseTrack::new(&keys, rules.body),
+            others,
+            camera,
+        }
+    }
+
     /// The body the scene names (`scene.json`'s `body`), a relative SMPL path taken relative to
     /// the scene directory.
     pub fn body(&self) -> Result<crate::pose::body::Body, TrainError> {

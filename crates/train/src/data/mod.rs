@@ -12,7 +12,7 @@ mod event_files;
 mod prepare;
 mod training;
 
-pub use dataset::{load_dataset, Dataset, TrainFrame};
+pub use dataset::{load_dataset, Dataset, ScenePaths, TrainFrame};
 pub use event_files::event_read_options;
 pub use prepare::{LossNetworks, Preparation};
 pub use training::{

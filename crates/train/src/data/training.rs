@@ -216,19 +216,8 @@ impl TrainingData {
                 f.exposure_s
             )));
         }
-        let keys: Vec<(f64, &smpl_deform::SmplParams)> =
-            data.frames.iter().map(|f| (f.time_s, &f.smpl)).collect();
-        let track = crate::pose::exposure::PoseTrack::new(&keys, rules.body);
-        let other_tracks: Vec<_> = (0..self.others.len())
-            .map(|j| {
-                let keys: Vec<(f64, &smpl_deform::SmplParams)> = data
-                    .frames
-                    .iter()
-                    .map(|f| (f.time_s, &f.others[j]))
-                    .collect();
-                crate::pose::exposure::PoseTrack::new(&keys, rules.body)
-            })
-            .collect();
+        let paths = data.paths(rules, self.others.len());
+        let (track, other_tracks) = (&paths.body, &paths.others);
         let cast = self.cast();
         let mut poses = Vec::with_capacity(self.frames.len());
         for frame in data.frames.iter().filter(|f| f.split == Split::Train) {
@@ -245,13 +234,7 @@ impl TrainingData {
             );
         }
         self.exposure_poses = poses;
-        if data.camera_moves {
-            let keys: Vec<(f64, [[f64; 4]; 4])> = data
-                .frames
-                .iter()
-                .map(|f| (f.time_s, f.camera.world_to_camera))
-                .collect();
-            let track = crate::pose::exposure::CameraTrack::new(&keys, rules.camera);
+        if let Some(track) = &paths.camera {
             self.exposure_cameras = data
                 .frames
                 .iter()
