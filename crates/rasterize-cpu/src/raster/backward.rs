@@ -17,7 +17,7 @@ use crate::project::{project_cov_backward, CameraParams, ProjectedGrad};
 use crate::{Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
 
 #[cfg(target_arch = "x86_64")]
-use super::avx512;
+use super::{avx2, avx512};
 
 /// One Gaussian's gradients: (mean, Σ, opacity logit, screen mean).
 type GaussianGrad<T> = ([T; 3], Mat3<T>, T, [T; 2]);
@@ -411,19 +411,13 @@ fn backward_tile_dispatch<T: Real>(
                 alpha: cot.alpha.and_then(T::as_f32),
                 depth: cot.depth.and_then(T::as_f32),
             };
+            let list = &st.pair_splats[range.clone()];
+            let channels = &st.pair_channels[range.start * c..range.end * c];
+            let (origin, size, width, used) = (g.origin, g.size, g.width, replay.used);
             if avx512::try_backward_tile(
-                &st.pair_splats[range.clone()],
-                &st.pair_channels[range.start * c..range.end * c],
-                bg,
-                c,
-                g.origin,
-                g.size,
-                g.width,
-                buf,
-                replay.used,
-                &cot,
-                s,
-                out,
+                list, channels, bg, c, origin, size, width, buf, used, &cot, s, out,
+            ) || avx2::try_backward_tile(
+                list, channels, bg, c, origin, size, width, buf, used, &cot, s, out,
             ) {
                 return;
             }

@@ -14,7 +14,7 @@ use crate::project::{CameraParams, Projected};
 use crate::{Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
 
 #[cfg(target_arch = "x86_64")]
-use super::avx512;
+use super::{avx2, avx512};
 
 /// Everything the backward pass needs from the forward pass.
 #[derive(Clone, Debug)]
@@ -518,7 +518,9 @@ fn forward_tile_dispatch<T: Real>(
             T::as_f32_mut(&mut *alive),
         ) {
             let list = &splats[range.clone()];
-            if avx512::try_forward_tile(list, channels, c, origin, size, buf, used, alive) {
+            if avx512::try_forward_tile(list, channels, c, origin, size, buf, used, alive)
+                || avx2::try_forward_tile(list, channels, c, origin, size, buf, used, alive)
+            {
                 return;
             }
         }
