@@ -1,9 +1,9 @@
-//! Safe wrapper around `matrixmultiply`'s `sgemm`/`dgemm` (with `gemm_avx512`, the only places in
+//! Safe wrapper around `matrixmultiply`'s `sgemm`/`dgemm` (with `gemm_packing_free`, the only places in
 //! the crate that need `unsafe`): every strided view is bounds-checked against its slice before the
 //! raw call.
 //!
 //! On AVX-512 machines, f32 products with `alpha = 1`, `beta ∈ {0, 1}` and a row-major C go to the
-//! packing-free kernel of `gemm_avx512`, which gives the same bits as `matrixmultiply` (see there).
+//! packing-free kernel of `gemm_packing_free`, which gives the same bits as `matrixmultiply` (see there).
 //!
 //! `matrixmultiply` splits work over output blocks only (never over the inner dimension), so a GEMM
 //! result does not depend on how many threads run it.
@@ -134,7 +134,7 @@ macro_rules! impl_real {
     };
 }
 
-impl_real!(f32, sgemm, crate::gemm_avx512::try_sgemm);
+impl_real!(f32, sgemm, crate::gemm_packing_free::try_sgemm);
 impl_real!(f64, dgemm);
 
 /// General matrix product `C = alpha·op(A)·op(B) + beta·C` on dense row-major matrices.

@@ -22,7 +22,7 @@ mod conv;
 mod conv_strided;
 mod dense;
 mod gemm;
-mod gemm_avx512;
+mod gemm_packing_free;
 pub mod mlp;
 mod pool;
 mod resize;

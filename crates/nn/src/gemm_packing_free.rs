@@ -1,4 +1,5 @@
-//! A packing-free f32 GEMM for AVX-512. `matrixmultiply` packs both operands of every call, which
+//! A packing-free f32 GEMM for AVX-512 (16 lanes) and for AVX2 with FMA (8 lanes, on CPUs without
+//! AVX-512: AMD Zen 2/3, Intel client cores). `matrixmultiply` packs both operands of every call, which
 //! on the project's narrow products (the deformation networks' `240 × 64 · 64 × 64` chunks, the flow
 //! network's convolutions with 2–64 output channels, the colour networks) costs up to two thirds of
 //! its kernel time; this kernel reads `A` in place (one broadcast per element and row block) and `B`
@@ -68,16 +69,34 @@ fn pack_row(row: &mut [f32], b: &[f32], csb: usize) {
     }
 }
 
-/// Whether this CPU runs this kernel: it has AVX-512F, and the environment variable
-/// `E_SEM3DGS_PORTABLE_KERNELS` is not set (set, every product goes to `matrixmultiply`, with the
-/// same bits: for measuring one against the other on a CPU, as the rasterizer's kernels are).
+/// The vector width this CPU runs the kernel at: 16 lanes with AVX-512F, 8 with AVX2 and FMA, or
+/// `None` (every product goes to `matrixmultiply`) without either or when the environment variable
+/// `E_SEM3DGS_PORTABLE_KERNELS` is set (same bits: for measuring one against the other on a CPU,
+/// as the rasterizer's kernels are).
 #[cfg(target_arch = "x86_64")]
-fn available() -> bool {
-    static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *AVAILABLE.get_or_init(|| {
-        std::arch::is_x86_feature_detected!("avx512f")
-            && std::env::var_os("E_SEM3DGS_PORTABLE_KERNELS").is_none()
+fn lanes() -> Option<usize> {
+    static LANES: std::sync::OnceLock<Option<usize>> = std::sync::OnceLock::new();
+    *LANES.get_or_init(|| {
+        if std::env::var_os("E_SEM3DGS_PORTABLE_KERNELS").is_some() {
+            None
+        } else {
+            detected_lanes()
+        }
     })
+}
+
+/// The widest kernel this CPU has (16, 8 or none), whatever the environment says.
+#[cfg(target_arch = "x86_64")]
+fn detected_lanes() -> Option<usize> {
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        Some(16)
+    } else if std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+    {
+        Some(8)
+    } else {
+        None
+    }
 }
 
 /// Runs `C = op(A)·op(B) + β·C` (`α = 1`) on the AVX-512 path if it applies, returning whether it
@@ -111,11 +130,10 @@ pub(crate) fn try_sgemm(
             && rsa >= 0
             && csa >= 0
             && rsb >= 0
-            && csb >= 0
-            && available();
-        if !applies {
+            && csb >= 0;
+        let Some(lanes) = lanes().filter(|_| applies) else {
             return false;
-        }
+        };
         let (rsa, csa, rsb, csb, rsc) = (
             rsa as usize,
             csa as usize,
@@ -128,12 +146,12 @@ pub(crate) fn try_sgemm(
         let npad = n.div_ceil(16) * 16;
         if m * k + k * n < PARALLEL_WORK {
             if in_place {
-                run(m, k, n, a, rsa, csa, b, rsb, c, rsc, beta_one);
+                run(lanes, m, k, n, a, rsa, csa, b, rsb, c, rsc, beta_one);
             } else {
                 PACKED_B.with(|cell| {
                     let mut packed = cell.borrow_mut();
                     pack_b(k, n, b, rsb, csb, npad, &mut packed);
-                    run(m, k, n, a, rsa, csa, &packed, npad, c, rsc, beta_one);
+                    run(lanes, m, k, n, a, rsa, csa, &packed, npad, c, rsc, beta_one);
                 });
             }
         } else {
@@ -159,6 +177,7 @@ pub(crate) fn try_sgemm(
                     if i0 < m {
                         let rows = task_rows.min(m - i0);
                         run(
+                            lanes,
                             rows,
                             k,
                             n,
@@ -189,6 +208,7 @@ pub(crate) fn try_sgemm(
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 fn run(
+    lanes: usize,
     m: usize,
     k: usize,
     n: usize,
@@ -206,21 +226,26 @@ fn run(
     let npad = n.div_ceil(16) * 16;
     assert!(
         (m - 1) * rsa + (k - 1) * csa < a.len(),
-        "gemm_avx512: A out of bounds"
+        "gemm_packing_free: A out of bounds"
     );
     assert!(
         (k - 1) * rsb + npad <= b.len(),
-        "gemm_avx512: B out of bounds"
+        "gemm_packing_free: B out of bounds"
     );
-    assert!((m - 1) * rsc + n <= c.len(), "gemm_avx512: C out of bounds");
+    assert!(
+        (m - 1) * rsc + n <= c.len(),
+        "gemm_packing_free: C out of bounds"
+    );
     let mut kb = 0;
     while kb < k {
         let kc = (k - kb).min(KC);
-        // SAFETY: avx512f was detected by the caller; the asserts above bound every read of A
-        // (rows < m, columns < k), of B (rows < k, 16-wide loads within `npad` of each row start)
-        // and every write of C (rows < m, columns < n, masked beyond).
+        let gemm = if lanes == 16 { imp::gemm } else { imp8::gemm };
+        // SAFETY: the caller detected avx512f (16 lanes) or avx2 and fma (8 lanes); the asserts
+        // above bound every read of A (rows < m, columns < k), of B (rows < k, 16- or 8-wide loads
+        // within `npad` of each row start) and every write of C (rows < m, columns < n, masked or
+        // copied through a buffer beyond).
         unsafe {
-            imp::gemm(
+            gemm(
                 m,
                 kc,
                 n,
@@ -380,6 +405,155 @@ mod imp {
     }
 }
 
+/// The 8-lane twin of [`imp`] for CPUs with AVX2 and FMA: the same chains of fused multiply-adds in
+/// increasing `k`, so the same bits. A panel's last partial vector of `C` goes through a small
+/// buffer instead of a masked load and store (`vmaskmovps` is microcoded on AMD).
+#[cfg(target_arch = "x86_64")]
+mod imp8 {
+    use std::arch::x86_64::*;
+
+    /// One block of `MR` rows × `8·NV` columns (the first `w` of which are stored), as
+    /// [`super::imp`]'s `block`.
+    ///
+    /// # Safety
+    /// avx2 and fma available; `a + r·rsa + kk·csa` readable for r < MR, kk < k; `b + kk·rsb + j`
+    /// readable for kk < k, j < 8·NV; `c + r·rsc + j` writable for r < MR, j < w ≤ 8·NV.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn block<const MR: usize, const NV: usize>(
+        k: usize,
+        a: *const f32,
+        rsa: usize,
+        csa: usize,
+        b: *const f32,
+        rsb: usize,
+        c: *mut f32,
+        rsc: usize,
+        w: usize,
+        beta_one: bool,
+    ) {
+        let mut acc = [[_mm256_setzero_ps(); NV]; MR];
+        for kk in 0..k {
+            let brow = b.add(kk * rsb);
+            let mut bv = [_mm256_setzero_ps(); NV];
+            for (v, x) in bv.iter_mut().enumerate() {
+                *x = _mm256_loadu_ps(brow.add(8 * v));
+            }
+            let acol = a.add(kk * csa);
+            for (r, row) in acc.iter_mut().enumerate() {
+                let av = _mm256_set1_ps(*acol.add(r * rsa));
+                for (x, &bx) in row.iter_mut().zip(&bv) {
+                    *x = _mm256_fmadd_ps(av, bx, *x);
+                }
+            }
+        }
+        for (r, row) in acc.iter().enumerate() {
+            let crow = c.add(r * rsc);
+            for (v, &x) in row.iter().enumerate() {
+                let cols = (w - 8 * v).min(8); // ≥ 1 by the caller's choice of NV
+                let p = crow.add(8 * v);
+                if cols == 8 {
+                    let out = if beta_one {
+                        _mm256_add_ps(x, _mm256_loadu_ps(p))
+                    } else {
+                        x
+                    };
+                    _mm256_storeu_ps(p, out);
+                } else {
+                    let mut tail = [0.0f32; 8];
+                    if beta_one {
+                        std::ptr::copy_nonoverlapping(p, tail.as_mut_ptr(), cols);
+                    }
+                    let out = if beta_one {
+                        _mm256_add_ps(x, _mm256_loadu_ps(tail.as_ptr()))
+                    } else {
+                        x
+                    };
+                    _mm256_storeu_ps(tail.as_mut_ptr(), out);
+                    std::ptr::copy_nonoverlapping(tail.as_ptr(), p, cols);
+                }
+            }
+        }
+    }
+
+    /// All rows of one column panel: blocks of `MR` rows, then of 4, 2 and 1.
+    ///
+    /// # Safety
+    /// As [`block`], for every row of the panel.
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn panel<const MR: usize, const NV: usize>(
+        m: usize,
+        k: usize,
+        a: *const f32,
+        rsa: usize,
+        csa: usize,
+        b: *const f32,
+        rsb: usize,
+        c: *mut f32,
+        rsc: usize,
+        w: usize,
+        beta_one: bool,
+    ) {
+        let mut i = 0;
+        macro_rules! rows_of {
+            ($r:expr) => {
+                while m - i >= $r {
+                    block::<{ $r }, NV>(
+                        k,
+                        a.add(i * rsa),
+                        rsa,
+                        csa,
+                        b,
+                        rsb,
+                        c.add(i * rsc),
+                        rsc,
+                        w,
+                        beta_one,
+                    );
+                    i += $r;
+                }
+            };
+        }
+        rows_of!(MR);
+        rows_of!(4);
+        rows_of!(2);
+        rows_of!(1);
+    }
+
+    /// `C (m × n) = A·B (+ C)`, in panels of up to 16 columns.
+    ///
+    /// # Safety
+    /// avx2 and fma available; A readable at `r·rsa + kk·csa`, B at `kk·rsb + j` for j < n rounded
+    /// up to 8, C writable at `r·rsc + j` for j < n.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn gemm(
+        m: usize,
+        k: usize,
+        n: usize,
+        a: *const f32,
+        rsa: usize,
+        csa: usize,
+        b: *const f32,
+        rsb: usize,
+        c: *mut f32,
+        rsc: usize,
+        beta_one: bool,
+    ) {
+        let mut j = 0;
+        while j < n {
+            let w = (n - j).min(16);
+            let (bj, cj) = (b.add(j), c.add(j));
+            // Register budget (16 ymm): MR·NV accumulators + NV B vectors + one broadcast.
+            match w.div_ceil(8) {
+                2 => panel::<6, 2>(m, k, a, rsa, csa, bj, rsb, cj, rsc, w, beta_one),
+                _ => panel::<12, 1>(m, k, a, rsa, csa, bj, rsb, cj, rsc, w, beta_one),
+            }
+            j += 16;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -423,8 +597,8 @@ mod tests {
 
     #[test]
     fn same_bits_as_matrixmultiply_on_random_shapes() {
-        if !std::arch::is_x86_feature_detected!("avx512f") {
-            eprintln!("no avx512f on this machine: the fast path is never taken");
+        if detected_lanes().is_none() {
+            eprintln!("neither avx512f nor avx2 with fma here: the fast path is never taken");
             return;
         }
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
