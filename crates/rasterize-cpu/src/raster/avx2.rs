@@ -1,13 +1,14 @@
 //! The tile kernels for f32 on x86-64 CPUs with AVX2 but without AVX-512 (AMD Zen 2 and 3, most
-//! Intel client cores): each tile row is two 8-lane halves, and a pair visits only the halves its
-//! pixel box overlaps. The portable kernels run SSE2's four lanes on such CPUs, since the build
+//! Intel client cores): a pair visits each tile row of its box as one 8-lane window when the box
+//! spans at most two quads of four columns (most of a person's small splats), else as the row's two
+//! halves. The portable kernels run SSE2's four lanes on such CPUs, since the build
 //! sets no target flags.
 //!
 //! Same bits as [`super::kernels::forward_tile`] and [`super::kernels::backward_tile`]: every lane
 //! runs the same IEEE operations in the same order (no fused multiply-adds; [`exp`] repeats
 //! [`crate::fast_exp_f32`]), and each pixel sees the pairs in list order. The backward walks a
-//! pair's box half by half, rows inside (pixels are independent within a pair, and each column
-//! still sums its rows in row order), so only one half's seven accumulators are live at a time,
+//! pair's box window by window, rows inside (pixels are independent within a pair, and each column
+//! still sums its rows in row order), so only one window's seven accumulators are live at a time,
 //! and reduces the per-column sums in column order; lanes outside a pair's box add exact zeros to
 //! sums that are never −0. The unit test below compares the kernels bit for bit.
 //!
@@ -159,10 +160,19 @@ fn exp(x: __m256) -> __m256 {
     mul(p, _mm256_castsi256_ps(_mm256_slli_epi32::<23>(bits)))
 }
 
-/// The halves of a tile row (`h0..h1`, 8 columns each) that a pair's pixel columns overlap, from
-/// the portable kernels' quads of four.
-fn halves(q0: usize, q1: usize) -> std::ops::Range<usize> {
-    q0 / 2..q1.div_ceil(2).min(TILE_SIZE / LANES)
+/// The 8-column windows of a tile row a pair visits, from its box's quads of four columns
+/// `q0..q1`: one window starting at the box's first quad when the box spans at most two quads
+/// (shifted left to stay inside the row), else the row's two halves. Each column of the box lies
+/// in exactly one window.
+fn windows(q0: usize, q1: usize) -> impl Iterator<Item = usize> {
+    const QUAD: usize = 4;
+    let last = TILE_SIZE - LANES;
+    let (first, count) = if q1 <= q0 + 2 {
+        ((q0 * QUAD).min(last), 1)
+    } else {
+        (0, 2)
+    };
+    (0..count).map(move |i| first + i * LANES)
 }
 
 /// One pair's α on eight lanes of a row: (exp(power), α where the 0.99 clamp is inactive else 0,
@@ -173,9 +183,10 @@ struct RowAlpha {
     a: __m256,
 }
 
-/// The per-half constants of one pair: dx per lane, the box mask and the conic.
+/// The constants of one pair on one window of 8 columns: dx per lane, the box mask, the conic
+/// and the opacity.
 #[derive(Clone, Copy)]
-struct HalfSplat {
+struct WindowSplat {
     dx: __m256,
     in_box: __m256,
     ca: __m256,
@@ -183,11 +194,11 @@ struct HalfSplat {
     opacity: __m256,
 }
 
-/// α of one pair on one half row with offset `dy` (mean y − pixel-centre y) and `cc_dy_dy` =
+/// α of one pair on one window of a row with offset `dy` (mean y − pixel-centre y) and `cc_dy_dy` =
 /// (conic c · dy) · dy.
 #[target_feature(enable = "avx2")]
 #[inline]
-fn row_alpha(h: &HalfSplat, dy: f32, cc_dy_dy: f32) -> RowAlpha {
+fn row_alpha(h: &WindowSplat, dy: f32, cc_dy_dy: f32) -> RowAlpha {
     let v = _mm256_set1_ps;
     let (add, sub, mul) = (_mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps);
     let zero = v(0.0);
@@ -239,17 +250,17 @@ fn blend(a: __m256, t: __m256, alive: __m256) -> (__m256, __m256, __m256, __m256
     )
 }
 
-/// The constants of pair `p` (its lanes `sl`) on half `h` of a row.
+/// The constants of pair `p` (its lanes `sl`) on the window of a row starting at column `x0`.
 #[target_feature(enable = "avx2")]
 #[inline]
-fn half_splat(
+fn window_splat(
     sl: &super::kernels::SplatLanes<f32>,
     centre: &[f32; TILE_SIZE],
-    h: usize,
-) -> HalfSplat {
+    x0: usize,
+) -> WindowSplat {
     let v = _mm256_set1_ps;
-    let cx = load(&centre[h * LANES..]);
-    HalfSplat {
+    let cx = load(&centre[x0..]);
+    WindowSplat {
         dx: _mm256_sub_ps(v(sl.mx), cx),
         in_box: and(
             _mm256_cmp_ps::<_CMP_GT_OQ>(cx, v(sl.lo)),
@@ -301,13 +312,13 @@ fn backward_tile(
         s.acc_channels.fill(0.0);
         // Per-column sums of mean x, y, conic a, b, c, opacity, depth.
         let mut geo = [[0.0f32; TILE_SIZE]; 7];
-        for h in halves(sl.q0, sl.q1) {
-            let hs = half_splat(&sl, &centre, h);
+        for x0 in windows(sl.q0, sl.q1) {
+            let hs = window_splat(&sl, &centre, x0);
             let [mut a_mx, mut a_my, mut a_ca, mut a_cb, mut a_cc, mut a_op, mut a_z] = [zero; 7];
             for y in (y0..y1).filter(|&y| s.live_rows[y]) {
                 let dy = sl.my - centre[y];
                 let v_dy = v(dy);
-                let at = y * TILE_SIZE + h * LANES;
+                let at = y * TILE_SIZE + x0;
                 let RowAlpha { gauss, slope, a } = row_alpha(&hs, dy, cc * dy * dy);
                 let t_old = load(&s.t[at..]);
                 let (w, t_new, alive, _, stop) = blend(a, t_old, load(&s.alive[at..]));
@@ -332,7 +343,7 @@ fn backward_tile(
                     let behind = add(sub(load(&c_final[o..]), pre), mul(tn, b));
                     let gi = load(&s.g_img[o..]);
                     d_alpha = add(d_alpha, mul(gi, sub(mul(t_old, value), mul(behind, inv))));
-                    let acc = &mut acc[h * LANES..];
+                    let acc = &mut acc[x0..];
                     store(add(load(acc), mul(w, gi)), acc);
                 }
                 if has_depth {
@@ -359,7 +370,7 @@ fn backward_tile(
                 .iter_mut()
                 .zip([a_mx, a_my, a_ca, a_cb, a_cc, a_op, a_z])
             {
-                store(acc, &mut columns[h * LANES..]);
+                store(acc, &mut columns[x0..]);
             }
         }
         let dst = &mut out[idx * slot..(idx + 1) * slot];
@@ -410,11 +421,11 @@ fn forward_tile(
         let ch = &channels[k * c..(k + 1) * c];
         let z = v(p.depth);
         let cc = p.conic[2];
-        for h in halves(sl.q0, sl.q1) {
-            let hs = half_splat(&sl, &centre, h);
+        for x0 in windows(sl.q0, sl.q1) {
+            let hs = window_splat(&sl, &centre, x0);
             for y in y0..y1 {
                 let dy = sl.my - centre[y];
-                let at = y * TILE_SIZE + h * LANES;
+                let at = y * TILE_SIZE + x0;
                 let a = row_alpha(&hs, dy, cc * dy * dy).a;
                 let t = load(&tbuf[at..]);
                 let (w, t_new, al, blends, stop) = blend(a, t, load(&alive[at..]));
