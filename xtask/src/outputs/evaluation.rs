@@ -4,9 +4,13 @@
 
 use anyhow::{Context, Result};
 use serde_json::json;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use train::camera_alignment::{AlignmentSettings, ExposureSampling};
-use train::eval::{evaluate_split, mean_metrics, mean_person_metrics, PersonMetrics};
+use train::eval::{
+    evaluate_split, mean_metrics, mean_person_metrics, EvaluatedFrame, FrameMetrics, PersonMetrics,
+};
+
+use crate::outputs::camera_report::CameraError;
 use train::model::Model;
 use train::pose::body::Cast;
 
@@ -147,9 +151,59 @@ pub fn write_evaluation(
         (summary.split, Some(&alignment)),
         Some(&lpips),
     )?;
+    let strips = write_strips(&frames, out)?;
+    let per_frame: Vec<_> = frames.iter().map(|f| f.metrics).collect();
+    let m = mean_metrics(&per_frame);
+    let people = people_means(model, &frames);
+    let ids = data.scene.person_ids();
+    let mut metrics = metrics_json(&m, &frames, &people, &ids, summary);
+    let aligned: Vec<_> = frames
+        .iter()
+        .filter_map(|f| {
+            f.alignment
+                .as_ref()
+                .map(|a| (f.index, a.camera.world_to_camera))
+        })
+        .collect();
+    let aligned_error = crate::outputs::camera_report::aligned_error(data, &aligned)?;
+    if let Some(e) = &aligned_error {
+        metrics["camera_error_aligned"] = json!(e);
+    }
+    let path = out.join("metrics.json");
+    if summary.train_seconds.is_nan() {
+        keep_what_the_run_recorded(&path, &mut metrics);
+    }
+    std::fs::write(&path, serde_json::to_string_pretty(&metrics)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    let sharp = data.scene.frames.iter().any(|f| f.sharp.is_some());
+    print_metrics_table(&m, summary.split, frames.len(), sharp);
+    print_run_rows(&people, &ids, summary);
+    print_alignment(
+        &frames,
+        aligned_error.as_ref(),
+        summary.camera_alignment_steps,
+    );
+    let title = out
+        .canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "run".into());
+    let report = crate::outputs::report::write_run_report(out, &format!("E-Sem3DGS run: {title}"))?;
+    println!(
+        "metrics: {}; strips: {}; report: {}",
+        path.display(),
+        strips.display(),
+        report.display()
+    );
+    Ok(())
+}
+
+/// Writes each evaluated frame's strip (reference | render | …) as `out/eval/strip_NNNNNN.png`
+/// (8-bit sRGB) and returns the folder.
+fn write_strips(frames: &[EvaluatedFrame], out: &Path) -> Result<PathBuf> {
     let strips = out.join("eval");
     std::fs::create_dir_all(&strips).with_context(|| format!("creating {}", strips.display()))?;
-    for f in &frames {
+    for f in frames {
         let (w, h, data) = &f.strip;
         let path = strips.join(format!("strip_{:06}.png", f.index));
         scene::write_rgb(
@@ -163,9 +217,12 @@ pub fn write_evaluation(
         )
         .with_context(|| format!("writing {}", path.display()))?;
     }
-    let per_frame: Vec<_> = frames.iter().map(|f| f.metrics).collect();
-    let m = mean_metrics(&per_frame);
-    let people: Vec<PersonMetrics> = (0..model.people())
+    Ok(strips)
+}
+
+/// Each person's figures averaged over the frames, when the model has several people (else none).
+fn people_means(model: &Model, frames: &[EvaluatedFrame]) -> Vec<PersonMetrics> {
+    (0..model.people())
         .filter(|_| model.people() > 1)
         .map(|j| {
             let own: Vec<_> = frames
@@ -174,8 +231,18 @@ pub fn write_evaluation(
                 .collect();
             mean_person_metrics(&own)
         })
-        .collect();
-    let ids = data.scene.person_ids();
+        .collect()
+}
+
+/// The contents of `metrics.json`: the split's means, the run's figures, each frame's and each
+/// person's, and `summary.extra` (the run's configuration) merged in.
+fn metrics_json(
+    m: &FrameMetrics,
+    frames: &[EvaluatedFrame],
+    people: &[PersonMetrics],
+    ids: &[u32],
+    summary: &EvalSummary,
+) -> serde_json::Value {
     let mut metrics = json!({
         "split": summary.split.as_str(),
         "test_frames": frames.len(),
@@ -202,54 +269,46 @@ pub fn write_evaluation(
         "gaussians_scene": summary.gaussians_scene,
         "camera_alignment_steps": summary.camera_alignment_steps,
         "lpips": "AlexNet v0.1 on sRGB-encoded images (lower is closer); a human box below 31 px per side is grown to 31 for LPIPS",
-        "per_frame": frames.iter().map(|f| per_frame_json(f, &ids)).collect::<Vec<_>>(),
+        "per_frame": frames.iter().map(|f| per_frame_json(f, ids)).collect::<Vec<_>>(),
     });
     if !people.is_empty() {
         metrics["people"] = people
             .iter()
-            .zip(&ids)
+            .zip(ids)
             .map(|(p, id)| person_json(p, *id))
             .collect();
-    }
-    let aligned: Vec<_> = frames
-        .iter()
-        .filter_map(|f| {
-            f.alignment
-                .as_ref()
-                .map(|a| (f.index, a.camera.world_to_camera))
-        })
-        .collect();
-    let aligned_error = crate::outputs::camera_report::aligned_error(data, &aligned)?;
-    if let Some(e) = &aligned_error {
-        metrics["camera_error_aligned"] = json!(e);
     }
     if let (Some(obj), Some(extra)) = (metrics.as_object_mut(), summary.extra.as_object()) {
         for (k, v) in extra {
             obj.insert(k.clone(), v.clone());
         }
     }
-    let path = out.join("metrics.json");
-    // Re-scoring a run in its own folder keeps what the run recorded and this evaluation does
-    // not know (the training configuration, the step breakdown, the training time).
-    if summary.train_seconds.is_nan() {
-        if let Some(serde_json::Value::Object(mut previous)) = std::fs::read_to_string(&path)
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok())
-        {
-            if let Some(obj) = metrics.as_object_mut() {
-                obj.remove("train_seconds");
-                for (k, v) in std::mem::take(obj) {
-                    previous.insert(k, v);
-                }
-                *obj = previous;
-            }
+    metrics
+}
+
+/// Re-scoring a run in its own folder keeps what the run recorded in `path` and this evaluation
+/// does not know (the training configuration, the step breakdown, the training time): the new
+/// figures are written over the previous file's.
+fn keep_what_the_run_recorded(path: &Path, metrics: &mut serde_json::Value) {
+    let Some(serde_json::Value::Object(mut previous)) = std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+    else {
+        return;
+    };
+    if let Some(obj) = metrics.as_object_mut() {
+        obj.remove("train_seconds");
+        for (k, v) in std::mem::take(obj) {
+            previous.insert(k, v);
         }
+        *obj = previous;
     }
-    std::fs::write(&path, serde_json::to_string_pretty(&metrics)?)
-        .with_context(|| format!("writing {}", path.display()))?;
-    let sharp = data.scene.frames.iter().any(|f| f.sharp.is_some());
-    print_metrics_table(&m, summary.split, frames.len(), sharp);
-    for (p, id) in people.iter().zip(&ids) {
+}
+
+/// The table's rows after the metrics: each person's box PSNR and IoU, training time and steps,
+/// the Gaussians.
+fn print_run_rows(people: &[PersonMetrics], ids: &[u32], summary: &EvalSummary) {
+    for (p, id) in people.iter().zip(ids) {
         let label = format!("person {id}: box PSNR, IoU");
         println!(
             "| {label:<28} | {:>7.2} dB | {:>9.3} |",
@@ -271,35 +330,27 @@ pub fn write_evaluation(
         "| Gaussians (human + scene)    | {:>10} | {:>9} |",
         summary.gaussians_human, summary.gaussians_scene
     );
+}
+
+/// One line on the test-time camera alignment, when it ran: the mean loss before and after, and
+/// the aligned cameras' error against the truth when the scene has it.
+fn print_alignment(frames: &[EvaluatedFrame], aligned_error: Option<&CameraError>, steps: usize) {
     let alignments: Vec<_> = frames.iter().filter_map(|f| f.alignment.as_ref()).collect();
-    if !alignments.is_empty() {
-        let n = alignments.len() as f64;
-        let before = alignments.iter().map(|a| a.loss_before).sum::<f64>() / n;
-        let after = alignments.iter().map(|a| a.loss_after).sum::<f64>() / n;
-        let truth = aligned_error.map_or(String::new(), |e| {
-            format!(
-                "; RMS error against cameras_true.json {:.3}° / {:.2} cm",
-                e.rotation_rms_deg, e.centre_rms_cm
-            )
-        });
-        println!(
-            "cameras aligned in {} steps: MSE against the observed frames {before:.3e} → {after:.3e}{truth}",
-            summary.camera_alignment_steps
-        );
+    if alignments.is_empty() {
+        return;
     }
-    let title = out
-        .canonicalize()
-        .ok()
-        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .unwrap_or_else(|| "run".into());
-    let report = crate::outputs::report::write_run_report(out, &format!("E-Sem3DGS run: {title}"))?;
+    let n = alignments.len() as f64;
+    let before = alignments.iter().map(|a| a.loss_before).sum::<f64>() / n;
+    let after = alignments.iter().map(|a| a.loss_after).sum::<f64>() / n;
+    let truth = aligned_error.map_or(String::new(), |e| {
+        format!(
+            "; RMS error against cameras_true.json {:.3}° / {:.2} cm",
+            e.rotation_rms_deg, e.centre_rms_cm
+        )
+    });
     println!(
-        "metrics: {}; strips: {}; report: {}",
-        path.display(),
-        strips.display(),
-        report.display()
+        "cameras aligned in {steps} steps: MSE against the observed frames {before:.3e} → {after:.3e}{truth}"
     );
-    Ok(())
 }
 
 /// One evaluated frame in `metrics.json`: its figures and, with several people, each person's.
