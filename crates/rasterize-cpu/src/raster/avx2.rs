@@ -198,21 +198,21 @@ struct WindowSplat {
 /// (conic c · dy) · dy.
 #[target_feature(enable = "avx2")]
 #[inline]
-fn row_alpha(h: &WindowSplat, dy: f32, cc_dy_dy: f32) -> RowAlpha {
+fn row_alpha(ws: &WindowSplat, dy: f32, cc_dy_dy: f32) -> RowAlpha {
     let v = _mm256_set1_ps;
     let (add, sub, mul) = (_mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps);
     let zero = v(0.0);
     let max_alpha = v(lit(0.99));
     let power = sub(
-        mul(v(-0.5), add(mul(mul(h.ca, h.dx), h.dx), v(cc_dy_dy))),
-        mul(mul(h.cb, h.dx), v(dy)),
+        mul(v(-0.5), add(mul(mul(ws.ca, ws.dx), ws.dx), v(cc_dy_dy))),
+        mul(mul(ws.cb, ws.dx), v(dy)),
     );
     let gauss = exp(power);
-    let raw = mul(h.opacity, gauss);
+    let raw = mul(ws.opacity, gauss);
     let unclamped = _mm256_cmp_ps::<_CMP_LT_OQ>(raw, max_alpha);
     let a = select(unclamped, raw, max_alpha);
     let ok = and(
-        and(h.in_box, _mm256_cmp_ps::<_CMP_LE_OQ>(power, zero)),
+        and(ws.in_box, _mm256_cmp_ps::<_CMP_LE_OQ>(power, zero)),
         _mm256_cmp_ps::<_CMP_GE_OQ>(a, v(lit(1.0 / 255.0))),
     );
     let a = select(ok, a, zero);
@@ -272,7 +272,7 @@ fn window_splat(
     }
 }
 
-/// [`super::kernels::backward_tile`] for f32, two registers per row. Same arguments and output.
+/// [`super::kernels::backward_tile`] for f32 on 8-lane windows. Same arguments and output.
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2")]
 fn backward_tile(
@@ -313,13 +313,13 @@ fn backward_tile(
         // Per-column sums of mean x, y, conic a, b, c, opacity, depth.
         let mut geo = [[0.0f32; TILE_SIZE]; 7];
         for x0 in windows(sl.q0, sl.q1) {
-            let hs = window_splat(&sl, &centre, x0);
+            let ws = window_splat(&sl, &centre, x0);
             let [mut a_mx, mut a_my, mut a_ca, mut a_cb, mut a_cc, mut a_op, mut a_z] = [zero; 7];
             for y in (y0..y1).filter(|&y| s.live_rows[y]) {
                 let dy = sl.my - centre[y];
                 let v_dy = v(dy);
                 let at = y * TILE_SIZE + x0;
-                let RowAlpha { gauss, slope, a } = row_alpha(&hs, dy, cc * dy * dy);
+                let RowAlpha { gauss, slope, a } = row_alpha(&ws, dy, cc * dy * dy);
                 let t_old = load(&s.t[at..]);
                 let (w, t_new, alive, _, stop) = blend(a, t_old, load(&s.alive[at..]));
                 let contrib = _mm256_cmp_ps::<_CMP_NEQ_UQ>(w, zero);
@@ -355,11 +355,11 @@ fn backward_tile(
                     d_alpha = add(d_alpha, mul(gd, sub(mul(t_old, z), mul(behind, inv))));
                     a_z = add(a_z, mul(w, gd));
                 }
-                let dx = hs.dx;
+                let dx = ws.dx;
                 let da = select(contrib, d_alpha, zero);
                 let d_power = mul(slope, da);
-                a_mx = sub(a_mx, mul(d_power, add(mul(hs.ca, dx), v(cb * dy))));
-                a_my = sub(a_my, mul(d_power, add(v(cc * dy), mul(hs.cb, dx))));
+                a_mx = sub(a_mx, mul(d_power, add(mul(ws.ca, dx), v(cb * dy))));
+                a_my = sub(a_my, mul(d_power, add(v(cc * dy), mul(ws.cb, dx))));
                 a_ca = sub(a_ca, mul(mul(mul(half, d_power), dx), dx));
                 a_cb = sub(a_cb, mul(mul(d_power, dx), v_dy));
                 a_cc = sub(a_cc, mul(mul(mul(half, d_power), v_dy), v_dy));
@@ -386,7 +386,7 @@ fn backward_tile(
     }
 }
 
-/// [`super::kernels::forward_tile`] for f32, two registers per row. Same arguments and output.
+/// [`super::kernels::forward_tile`] for f32 on 8-lane windows. Same arguments and output.
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2")]
 fn forward_tile(
@@ -422,11 +422,11 @@ fn forward_tile(
         let z = v(p.depth);
         let cc = p.conic[2];
         for x0 in windows(sl.q0, sl.q1) {
-            let hs = window_splat(&sl, &centre, x0);
+            let ws = window_splat(&sl, &centre, x0);
             for y in y0..y1 {
                 let dy = sl.my - centre[y];
                 let at = y * TILE_SIZE + x0;
-                let a = row_alpha(&hs, dy, cc * dy * dy).a;
+                let a = row_alpha(&ws, dy, cc * dy * dy).a;
                 let t = load(&tbuf[at..]);
                 let (w, t_new, al, blends, stop) = blend(a, t, load(&alive[at..]));
                 if bits(_mm256_or_ps(blends, stop)) == 0 {
