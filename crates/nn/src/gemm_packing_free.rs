@@ -263,6 +263,60 @@ fn run(
     }
 }
 
+/// `panel`, the row loop of a column panel over a module's `block`, compiled for the module's
+/// target features (`"avx512f"` or `"avx2,fma"`): one definition for both widths.
+#[cfg(target_arch = "x86_64")]
+macro_rules! define_panel {
+    ($feature:literal) => {
+        /// All rows of one column panel: blocks of `MR` rows, then of 4, 2 and 1.
+        ///
+        /// # Safety
+        /// As [`block`], for every row of the panel.
+        #[target_feature(enable = $feature)]
+        #[allow(clippy::too_many_arguments)]
+        unsafe fn panel<const MR: usize, const NV: usize>(
+            m: usize,
+            k: usize,
+            a: *const f32,
+            rsa: usize,
+            csa: usize,
+            b: *const f32,
+            rsb: usize,
+            c: *mut f32,
+            rsc: usize,
+            w: usize,
+            beta_one: bool,
+        ) {
+            let mut i = 0;
+            // Full blocks, then the remainder in blocks of 4, 2 and 1 rows (a lone row streams its B
+            // rows for only NV multiply-adds per load).
+            macro_rules! rows_of {
+                ($r:expr) => {
+                    while m - i >= $r {
+                        block::<{ $r }, NV>(
+                            k,
+                            a.add(i * rsa),
+                            rsa,
+                            csa,
+                            b,
+                            rsb,
+                            c.add(i * rsc),
+                            rsc,
+                            w,
+                            beta_one,
+                        );
+                        i += $r;
+                    }
+                };
+            }
+            rows_of!(MR);
+            rows_of!(4);
+            rows_of!(2);
+            rows_of!(1);
+        }
+    };
+}
+
 #[cfg(target_arch = "x86_64")]
 mod imp {
     use std::arch::x86_64::*;
@@ -323,52 +377,7 @@ mod imp {
         }
     }
 
-    /// All rows of one column panel: blocks of `MR` rows, then of 4, 2 and 1.
-    ///
-    /// # Safety
-    /// As [`block`], for every row of the panel.
-    #[target_feature(enable = "avx512f")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn panel<const MR: usize, const NV: usize>(
-        m: usize,
-        k: usize,
-        a: *const f32,
-        rsa: usize,
-        csa: usize,
-        b: *const f32,
-        rsb: usize,
-        c: *mut f32,
-        rsc: usize,
-        w: usize,
-        beta_one: bool,
-    ) {
-        let mut i = 0;
-        // Full blocks, then the remainder in blocks of 4, 2 and 1 rows (a lone row streams its B
-        // rows for only NV multiply-adds per load).
-        macro_rules! rows_of {
-            ($r:expr) => {
-                while m - i >= $r {
-                    block::<{ $r }, NV>(
-                        k,
-                        a.add(i * rsa),
-                        rsa,
-                        csa,
-                        b,
-                        rsb,
-                        c.add(i * rsc),
-                        rsc,
-                        w,
-                        beta_one,
-                    );
-                    i += $r;
-                }
-            };
-        }
-        rows_of!(MR);
-        rows_of!(4);
-        rows_of!(2);
-        rows_of!(1);
-    }
+    define_panel!("avx512f");
 
     /// `C (m × n) = A·B (+ C)`, in panels of up to 64 columns.
     ///
@@ -476,50 +485,7 @@ mod imp8 {
         }
     }
 
-    /// All rows of one column panel: blocks of `MR` rows, then of 4, 2 and 1.
-    ///
-    /// # Safety
-    /// As [`block`], for every row of the panel.
-    #[target_feature(enable = "avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn panel<const MR: usize, const NV: usize>(
-        m: usize,
-        k: usize,
-        a: *const f32,
-        rsa: usize,
-        csa: usize,
-        b: *const f32,
-        rsb: usize,
-        c: *mut f32,
-        rsc: usize,
-        w: usize,
-        beta_one: bool,
-    ) {
-        let mut i = 0;
-        macro_rules! rows_of {
-            ($r:expr) => {
-                while m - i >= $r {
-                    block::<{ $r }, NV>(
-                        k,
-                        a.add(i * rsa),
-                        rsa,
-                        csa,
-                        b,
-                        rsb,
-                        c.add(i * rsc),
-                        rsc,
-                        w,
-                        beta_one,
-                    );
-                    i += $r;
-                }
-            };
-        }
-        rows_of!(MR);
-        rows_of!(4);
-        rows_of!(2);
-        rows_of!(1);
-    }
+    define_panel!("avx2,fma");
 
     /// `C (m × n) = A·B (+ C)`, in panels of up to 16 columns.
     ///
