@@ -1,10 +1,11 @@
-//! A packing-free f32 GEMM for AVX-512 (16 lanes) and for AVX2 with FMA (8 lanes, on CPUs without
-//! AVX-512: AMD Zen 2/3, Intel client cores). `matrixmultiply` packs both operands of every call, which
-//! on the project's narrow products (the deformation networks' `240 × 64 · 64 × 64` chunks, the flow
-//! network's convolutions with 2–64 output channels, the colour networks) costs up to two thirds of
-//! its kernel time; this kernel reads `A` in place (one broadcast per element and row block) and `B`
-//! in place when its rows are contiguous and a multiple of 16 wide, else from a zero-padded copy.
-//! Large products are split over rows with rayon.
+//! A packing-free f32 GEMM for AVX-512 (16 lanes) and for AVX2 with FMA (8 lanes, on CPUs
+//! without AVX-512: AMD Zen 2/3, Intel client cores). `matrixmultiply` packs both operands of
+//! every call, which on the project's narrow products (the deformation networks' `240 × 64 ·
+//! 64 × 64` chunks, the flow network's convolutions with 2–64 output channels, the colour
+//! networks) costs up to two thirds of its kernel time; this kernel reads `A` in place (one
+//! broadcast per element and row block) and `B` in place when its rows are contiguous and a
+//! multiple of 16 wide, else from a zero-padded copy. Large products are split over rows with
+//! rayon.
 //!
 //! **Same bits as `matrixmultiply`.** `matrixmultiply` computes every output element as in-order
 //! chains of fused multiply-adds over blocks of `KC = 256` values of `k`, each chain starting from

@@ -194,8 +194,8 @@ struct WindowSplat {
     opacity: __m256,
 }
 
-/// α of one pair on one window of a row with offset `dy` (mean y − pixel-centre y) and `cc_dy_dy` =
-/// (conic c · dy) · dy.
+/// α of one pair on one window of a row with offset `dy` (mean y − pixel-centre y) and
+/// `cc_dy_dy` = (conic c · dy) · dy.
 #[target_feature(enable = "avx2")]
 #[inline]
 fn row_alpha(ws: &WindowSplat, dy: f32, cc_dy_dy: f32) -> RowAlpha {

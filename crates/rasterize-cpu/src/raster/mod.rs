@@ -24,11 +24,11 @@
 //! The code follows these steps, one module each: `inputs` (the public input, settings and output
 //! types and their validation), `binning` (tile lists sorted by depth), `kernels` (the per-tile
 //! blend loops of forward and backward and the lane arithmetic they share; `avx512` holds their
-//! 16-lane twins, `avx2` their 8-lane ones), `forward` (projection, binning and blending into the outputs) and `backward`
-//! (replay of every tile and the fixed-order reduction per Gaussian); `shared` renders several
-//! passes of one camera that share their static Gaussians, blending and replaying the tiles only
-//! those reach once, and `layer` blends once the static Gaussians behind every moving one in the
-//! other tiles.
+//! 16-lane twins, `avx2` their 8-lane ones), `forward` (projection, binning and blending into the
+//! outputs) and `backward` (replay of every tile and the fixed-order reduction per Gaussian);
+//! `shared` renders several passes of one camera that share their static Gaussians, blending and
+//! replaying the tiles only those reach once, and `layer` blends once the static Gaussians behind
+//! every moving one in the other tiles.
 
 mod backward;
 mod binning;
