@@ -273,6 +273,11 @@ pub(super) fn backward_inputs<'a, T: Real>(
             return;
         }
         let ci = ci as usize;
+        // A Gaussian without pairs in this render (a static one whose tiles another render of
+        // its exposure owns) has no gradient: its zeros stand, without the projection's backward.
+        if offsets[ci] == offsets[ci + 1] {
+            return;
+        }
         let mut acc = [T::zero(); 7];
         for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
             let s = &pair_grads[pos as usize * slot..(pos as usize + 1) * slot];
