@@ -206,7 +206,9 @@ pub fn write_corrected_poses(
 pub fn load_model(dir: &Path) -> Result<LoadedModel, TrainError> {
     let json = dir.join("model.json");
     let text = std::fs::read_to_string(&json).map_err(|e| io_err(&json, e))?;
-    let manifest: ModelManifest = serde_json::from_str(&text).map_err(|e| io_err(&json, e))?;
+    let mut manifest: ModelManifest = serde_json::from_str(&text).map_err(|e| io_err(&json, e))?;
+    let stored: serde_json::Value = serde_json::from_str(&text).map_err(|e| io_err(&json, e))?;
+    manifest.config.pin_options_missing_from(&stored["config"]);
     if manifest.format != MODEL_FORMAT {
         return Err(io_err(
             &json,

@@ -32,7 +32,7 @@ use train::blend::SemanticMode;
 use train::colour::{ColourNet, ColourNetConfig};
 use train::pose::posing::{
     pose_frame_backward, pose_frame_backward_with, pose_frame_gated, FrameCotangents, FrameInputs,
-    GaussianParams, ModelNets, PosedFrame,
+    GaussianParams, ModelNets, PosedFrame, ViewRotation,
 };
 use train::pose::reposing::{repose_frame, repose_frame_backward, ReposeCotangents};
 
@@ -56,6 +56,7 @@ struct Case {
     centre: [f64; 3],
     mode: SemanticMode,
     gate: f64,
+    view_rotation: ViewRotation,
 }
 
 fn case(seed: u64, scalar: bool, gate: f64) -> Case {
@@ -133,6 +134,7 @@ fn case_of(seed: u64, scalar: bool, gate: f64, people: usize) -> Case {
         centre: [0.2 * r(), 0.1 * r(), -3.0],
         mode,
         gate,
+        view_rotation: ViewRotation::Canonical,
     }
 }
 
@@ -154,6 +156,7 @@ fn outputs(
         bones: &c.bones,
         camera_centre: c.centre,
         latent: &c.latent,
+        view_rotation: c.view_rotation,
     };
     pose_frame_gated(&c.nets, c.mode, c.gate, &g, &f).expect("forward")
 }
@@ -244,6 +247,17 @@ fn fd(c: &Case, cot: &[f64], x: Vec<f64>, set: impl Fn(&mut Case, &[f64])) -> Ve
     )
 }
 
+/// `c` with the view directions canonicalised by the deformation's own weights at the moved
+/// means when `moved`, else by the field at the canonical means.
+fn with_view_rotation(c: Case, moved: bool) -> Case {
+    let view_rotation = if moved {
+        ViewRotation::Moved
+    } else {
+        ViewRotation::Canonical
+    };
+    Case { view_rotation, ..c }
+}
+
 fn clone_case(c: &Case) -> Case {
     Case {
         nets: c.nets.clone(),
@@ -258,6 +272,7 @@ fn clone_case(c: &Case) -> Case {
         centre: c.centre,
         mode: c.mode,
         gate: c.gate,
+        view_rotation: c.view_rotation,
     }
 }
 
@@ -271,14 +286,14 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(8))]
 
     #[test]
-    fn model_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>(), people in 1usize..=3) {
-        let c = case_of(seed, scalar, if gated { 0.5 } else { 0.0 }, people);
+    fn model_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>(), people in 1usize..=3, moved in any::<bool>()) {
+        let c = with_view_rotation(case_of(seed, scalar, if gated { 0.5 } else { 0.0 }, people), moved);
         let n = c.n();
         let cot = symmetric_from_seed(seed ^ 0xabc, c.outputs_len());
         let (_, cache) = outputs(&c);
         let split = frame_cotangents(&cot, n);
         let g = GaussianParams { means: &c.means, log_scales: &c.log_scales, quats: &c.quats, features: &c.features, semantic_logits: &c.logits };
-        let f = FrameInputs { pose_code: &c.pose_code, bones: &c.bones, camera_centre: c.centre, latent: &c.latent };
+        let f = FrameInputs { pose_code: &c.pose_code, bones: &c.bones, camera_centre: c.centre, latent: &c.latent, view_rotation: c.view_rotation };
         let grads = pose_frame_backward(&c.nets, c.mode, &g, &f, &cache, &cotangents(&cot, n, &split)).expect("backward");
         let flat = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
         let mut checker = GradientChecker::new();
@@ -314,8 +329,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(6))]
 
     #[test]
-    fn reposed_frame_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>(), people in 1usize..=3) {
-        let c = case_of(seed, scalar, if gated { 0.5 } else { 0.0 }, people);
+    fn reposed_frame_gradients_match_finite_differences(seed in any::<u64>(), scalar in any::<bool>(), gated in any::<bool>(), people in 1usize..=3, moved in any::<bool>()) {
+        let c = with_view_rotation(case_of(seed, scalar, if gated { 0.5 } else { 0.0 }, people), moved);
         let n = c.n();
         let mut rng = rng(seed ^ 0x5eb);
         let reposings: Vec<Vec<[f64; 12]>> = (0..2)
@@ -336,7 +351,7 @@ proptest! {
             summed.add(&d);
             sub_bones.push(d_bones);
         }
-        let f = FrameInputs { pose_code: &c.pose_code, bones: &c.bones, camera_centre: c.centre, latent: &c.latent };
+        let f = FrameInputs { pose_code: &c.pose_code, bones: &c.bones, camera_centre: c.centre, latent: &c.latent, view_rotation: c.view_rotation };
         let split = frame_cotangents(&cots[0], n);
         let grads = pose_frame_backward_with(&c.nets, c.mode, &g, &f, &cache, &cotangents(&cots[0], n, &split), Some(&summed)).expect("backward");
         let flat = |v: &[[f64; 3]]| v.iter().flatten().copied().collect::<Vec<_>>();
@@ -481,7 +496,7 @@ proptest! {
             summed.add(&d);
             d_bones[s] = bones;
         }
-        let f = FrameInputs { pose_code: &mid.pose_code, bones: &mid.bones, camera_centre: mid.centre, latent: &mid.latent };
+        let f = FrameInputs { pose_code: &mid.pose_code, bones: &mid.bones, camera_centre: mid.centre, latent: &mid.latent, view_rotation: mid.view_rotation };
         let split = frame_cotangents(&cots[1], N);
         let grads = pose_frame_backward_with(&mid.nets, mid.mode, &g, &f, &cache, &cotangents(&cots[1], N, &split), Some(&summed)).expect("backward");
         d_bones[1] = grads.bones.clone();

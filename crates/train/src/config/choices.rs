@@ -64,6 +64,21 @@ pub enum ExposureNetworks {
     PerSubframe,
 }
 
+/// Whose skinning weights turn a human Gaussian's view direction into the canonical frame for the
+/// human colour network, d = Rᵀ (x_def − c) with R = Σ_b w_b R_b (see
+/// [`TrainConfig::view_rotation`]). Both are differentiated exactly.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ViewRotation {
+    /// The skinning field at the canonical mean x: a second pass of the field beside the
+    /// deformation's own (the project's choice until 2026-12-06).
+    Canonical,
+    /// The deformation's own weights, at the non-rigidly moved mean x + Δx: the rotation that
+    /// posed the Gaussian, 3DGS-Avatar's `fwd_transform`; no second pass of the field.
+    #[default]
+    Moved,
+}
+
 /// What sets the clip's common camera offset under camera correction (see
 /// [`TrainConfig::camera_gauge`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]

@@ -45,6 +45,9 @@ pub struct ModelConfig {
     /// [`CAMERA_CORRECTION_VALUES`], or the mid-exposure twist's [`TWIST_VALUES`]
     /// (`TrainConfig::camera_correction_smooth_change` off).
     pub camera_correction_smoothed_values: usize,
+    /// Whose skinning weights canonicalise the human colour network's view directions
+    /// (`TrainConfig::view_rotation`).
+    pub view_rotation: crate::config::ViewRotation,
 }
 
 impl From<&TrainConfig> for ModelConfig {
@@ -74,6 +77,7 @@ impl From<&TrainConfig> for ModelConfig {
             } else {
                 TWIST_VALUES
             },
+            view_rotation: config.view_rotation,
         }
     }
 }

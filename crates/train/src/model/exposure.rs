@@ -200,6 +200,7 @@ impl Model {
                 reference_pass.view_centre,
                 reference_pass.pose,
                 reference_pass.latent,
+                self.config.view_rotation,
             ),
             reference_cache,
             &posed[reference].cotangents(),

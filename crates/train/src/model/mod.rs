@@ -16,7 +16,7 @@ use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
 use crate::pose::correction::{knot_slots, CORRECTION_VALUES};
 use crate::pose::posing::{
     pose_frame_backward_with, pose_frame_gated, FrameCache, FrameCotangents, FrameInputs,
-    GaussianParams, ModelGradients, ModelNets, PosedFrame,
+    GaussianParams, ModelGradients, ModelNets, PosedFrame, ViewRotation,
 };
 use crate::pose::reposing::{repose_frame, repose_frame_backward, ReposeCotangents, ReposedCache};
 use crate::TrainError;
@@ -399,7 +399,7 @@ impl Model {
             self.config.semantic,
             self.config.semantic_gate,
             &self.params(),
-            &frame_inputs(view_centre, pose, latent),
+            &frame_inputs(view_centre, pose, latent, self.config.view_rotation),
         )?;
         Ok(PosedPass {
             view_centre,
@@ -457,12 +457,14 @@ fn frame_inputs<'a>(
     view_centre: [f32; 3],
     pose: &'a PreparedPose,
     latent: &'a [f32],
+    view_rotation: ViewRotation,
 ) -> FrameInputs<'a, f32> {
     FrameInputs {
         pose_code: &pose.pose_code,
         bones: &pose.bones,
         camera_centre: view_centre,
         latent,
+        view_rotation,
     }
 }
 

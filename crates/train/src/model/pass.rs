@@ -156,7 +156,12 @@ impl FramePass<'_> {
             &model.nets,
             model.config.semantic,
             &model.params(),
-            &frame_inputs(self.view_centre, self.pose, self.latent),
+            &frame_inputs(
+                self.view_centre,
+                self.pose,
+                self.latent,
+                model.config.view_rotation,
+            ),
             cache,
             &posed.cotangents(),
             None,

@@ -85,7 +85,10 @@ impl Trainer {
         if meta.format != CHECKPOINT_FORMAT {
             return Err(r.error(format!("unknown checkpoint format `{}`", meta.format)));
         }
-        let config = meta.config;
+        let mut config = meta.config;
+        let stored: serde_json::Value =
+            serde_json::from_str(&r.metadata).map_err(|e| r.error(format!("metadata: {e}")))?;
+        config.pin_options_missing_from(&stored["config"]);
         config.validate()?;
         let k = config.semantic.logits_for(data.cast().len());
         let set = r.set("set", meta.sh_degree, config.feature_dim, k)?;

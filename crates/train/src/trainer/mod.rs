@@ -195,6 +195,14 @@ impl Trainer {
         self.config.static_layer = layer;
     }
 
+    /// Sets whose skinning weights canonicalise the human colour network's view directions
+    /// ([`TrainConfig::view_rotation`]) in the options and the model: to time a saved run's step
+    /// both ways. Unlike the two speed options above it changes the function the model computes.
+    pub fn set_view_rotation(&mut self, rotation: crate::config::ViewRotation) {
+        self.config.view_rotation = rotation;
+        self.model.config.view_rotation = rotation;
+    }
+
     /// Runs steps until `self.step == until`, calling `on_step` after each.
     pub fn run(
         &mut self,

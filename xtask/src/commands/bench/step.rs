@@ -36,6 +36,10 @@ pub struct Args {
     /// without it.
     #[arg(long, value_parser = train::config::parse_on_off, value_name = "on|off")]
     pub static_layer: Option<bool>,
+    /// Overrides the run's `view_rotation` (whose skinning weights canonicalise the human colour
+    /// network's view directions), to time the step both ways.
+    #[arg(long, value_enum)]
+    pub view_rotation: Option<train::config::ViewRotation>,
 }
 
 /// Runs the benchmark.
@@ -73,6 +77,9 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(layer) = args.static_layer {
         trainer.set_static_layer(layer);
     }
+    if let Some(rotation) = args.view_rotation {
+        trainer.set_view_rotation(rotation);
+    }
     let config = trainer.config().clone();
     crate::training::prepare_training_data(&mut ctx, &data, &config)?;
     let (from, gaussians) = (trainer.step, trainer.model.set.len());
@@ -92,6 +99,7 @@ pub fn run(args: Args) -> Result<()> {
         "share_static_tiles": config.share_static_tiles,
         "shared_tiles": reports.iter().map(|r| r.shared_tiles).sum::<f64>() / args.steps.max(1) as f64,
         "static_layer": config.static_layer,
+        "view_rotation": config.view_rotation,
         "layered_tiles": reports.iter().map(|r| r.layered_tiles).sum::<f64>() / args.steps.max(1) as f64,
     });
     if let Some(obj) = line.as_object_mut() {

@@ -18,12 +18,16 @@
 //!
 //! View directions: `x − camera centre` (world) for the scene network; for the human network the
 //! direction to the deformed mean rotated back into canonical space by the transpose of the
-//! skinning-blended bone rotation R = Σ_b w_b R_b at the canonical mean (w from the skinning field), as
-//! 3DGS-Avatar canonicalises it. Both are differentiated (into the means, the skinning field and the
-//! bones), so the gradients are those of the function computed. While the non-rigid offsets are
-//! exactly zero (before the non-rigid network is switched on) the deformation has already evaluated
-//! the skinning field at the canonical means, and that pass is reused, forward and backward
-//! (`DeformCache::skinning_at`: bit for bit what a second evaluation would give).
+//! skinning-blended bone rotation R = Σ_b w_b R_b ([`ViewRotation`]): with `moved`, w are the
+//! deformation's own weights at the non-rigidly moved mean x + Δx (the rotation that posed the
+//! Gaussian, as 3DGS-Avatar's `fwd_transform`, which it detaches); with `canonical`, a second pass
+//! of the skinning field at the canonical mean x. Both are differentiated (into the means, the
+//! skinning field, the non-rigid network and the bones), so the gradients are those of the
+//! function computed; `moved` hands its weights' cotangent to the deformation's own backward. With
+//! `canonical`, while the non-rigid offsets are exactly zero (before the non-rigid network is
+//! switched on) the deformation has already evaluated the field at the canonical means, and that
+//! pass is reused, forward and backward (`DeformCache::skinning_at`: bit for bit what a second
+//! evaluation would give).
 
 mod active_blend;
 mod people;
@@ -47,11 +51,13 @@ use nn::Real;
 use people::{DeformCotangents, DeformNets, PeopleDeform};
 use rayon::prelude::*;
 use smpl_deform::deform_net::{
-    CanonicalGaussians, NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
+    CanonicalGaussians, MovedCotangents, NonRigidNet, SkinningCache, SkinningField, NR_FEATURE_DIM,
 };
 use smpl_deform::math::{Affine, Mat3};
 use smpl_deform::{NUM_JOINTS, NUM_POSE_FEATURES};
 use views::CanonicalViews;
+
+pub use crate::config::ViewRotation;
 
 /// The four networks of the model.
 #[derive(Clone, Debug)]
@@ -103,6 +109,8 @@ pub struct FrameInputs<'a, T> {
     pub camera_centre: [T; 3],
     /// Per-frame latent of the human colour network.
     pub latent: &'a [T],
+    /// Whose skinning weights canonicalise the human colour network's view directions.
+    pub view_rotation: ViewRotation,
 }
 
 impl<T> FrameInputs<'_, T> {
@@ -160,13 +168,24 @@ pub struct FrameCache<T: Real> {
     human_colour: crate::colour::ColourCache<T>,
     scene_colour: crate::colour::ColourCache<T>,
     pub(crate) inputs: Vec<BlendInputs<T>>,
-    /// Skinning weights at the canonical means (for the canonicalised direction) and their cache;
-    /// `None` when the deformation's own skinning pass is that one (`DeformCache::skinning_at`).
+    /// The skinning weights of the canonicalised directions' rotation, and where they came from.
     direction_weights: Vec<T>,
-    direction_skinning: Option<SkinningCache<T>>,
+    direction_skinning: DirectionSkinning<T>,
     /// The human Gaussians' canonical view directions, with the world direction x_def − c and the
     /// blended rotation R (row-major) of each.
     views: CanonicalViews<T>,
+}
+
+/// Where the view directions' skinning weights came from, for the backward.
+#[derive(Clone, Debug)]
+enum DirectionSkinning<T: Real> {
+    /// A pass of the field at the canonical means of its own.
+    Own(SkinningCache<T>),
+    /// The deformation's pass, bit for bit the field at the canonical means (`skinning_at`).
+    Reused,
+    /// The deformation's weights at the moved means ([`ViewRotation::Moved`]): their cotangent
+    /// joins the deformation's own.
+    Moved,
 }
 
 /// Cotangents of the four outputs.
@@ -325,15 +344,17 @@ pub fn pose_frame_gated<T: Real>(
         frame.bones,
     )?;
     // Canonicalised view directions for the human colour network: Rᵀ (x_def − c), R = Σ_b w_b R_b.
-    let (direction_weights, direction_skinning) = match deform.skinning_at(&a_means) {
-        Some(reused) => (reused.weights(), None),
-        None => {
-            let (weights, skinning) = nets.skinning.forward(&a_means)?;
-            (weights, Some(skinning))
-        }
+    let (direction_weights, direction_skinning) = match frame.view_rotation {
+        ViewRotation::Moved => (deform.weights(), DirectionSkinning::Moved),
+        ViewRotation::Canonical => match deform.skinning_at(&a_means) {
+            Some(reused) => (reused.weights(), DirectionSkinning::Reused),
+            None => {
+                let (weights, skinning) = nets.skinning.forward(&a_means)?;
+                (weights, DirectionSkinning::Own(skinning))
+            }
+        },
     };
     let c = frame.camera_centre;
-    let na = active.len();
     let views = deform.views(frame.bones, c, &posed.positions, &direction_weights);
     let scene_dirs: Vec<[T; 3]> = g
         .means
@@ -355,27 +376,34 @@ pub fn pose_frame_gated<T: Real>(
     let mut out = PosedFrame {
         means: g.means.to_vec(),
         covariances: (0..n)
+            .into_par_iter()
             .map(|i| covariance_3d(g.log_scales[i], g.quats[i]))
             .collect(),
         colours: scene_rgb.clone(),
         human_probability: probability,
         person_probability,
     };
-    let mut inputs = Vec::with_capacity(na);
-    for (a, &i) in active.iter().enumerate() {
-        let input = BlendInputs {
-            x_def: posed.positions[a],
-            x_static: g.means[i],
-            cov_def: deformed_covariance(&posed.mats[a], &posed.log_scales[a]),
-            cov_static: out.covariances[i],
-            c_human: [human_rgb[a * 3], human_rgb[a * 3 + 1], human_rgb[a * 3 + 2]],
-            c_scene: [scene_rgb[i * 3], scene_rgb[i * 3 + 1], scene_rgb[i * 3 + 2]],
-        };
-        let b = blend(out.human_probability[i], &input);
+    // The active Gaussians' blends in parallel, then written to their slots.
+    let (inputs, blended): (Vec<_>, Vec<_>) = active
+        .par_iter()
+        .enumerate()
+        .map(|(a, &i)| {
+            let input = BlendInputs {
+                x_def: posed.positions[a],
+                x_static: g.means[i],
+                cov_def: deformed_covariance(&posed.mats[a], &posed.log_scales[a]),
+                cov_static: out.covariances[i],
+                c_human: [human_rgb[a * 3], human_rgb[a * 3 + 1], human_rgb[a * 3 + 2]],
+                c_scene: [scene_rgb[i * 3], scene_rgb[i * 3 + 1], scene_rgb[i * 3 + 2]],
+            };
+            let b = blend(out.human_probability[i], &input);
+            (input, b)
+        })
+        .unzip();
+    for (&i, b) in active.iter().zip(&blended) {
         out.means[i] = b.x;
         out.covariances[i] = b.cov;
         out.colours[i * 3..i * 3 + 3].copy_from_slice(&b.c);
-        inputs.push(input);
     }
     Ok((
         out,
@@ -481,14 +509,30 @@ pub fn pose_frame_backward_with<T: Real>(
     let mut d_nonrigid = vec![T::zero(); nets.nonrigid.mlp.num_params()];
     let mut d_skinning = vec![T::zero(); nets.skinning.mlp.num_params()];
     let direction_skinning = match &cache.direction_skinning {
-        Some(skinning) => skinning,
-        None => cache.deform.reused_skinning().ok_or_else(|| {
+        DirectionSkinning::Own(skinning) => Some(skinning),
+        DirectionSkinning::Reused => Some(cache.deform.reused_skinning().ok_or_else(|| {
             TrainError::Config("the view directions' skinning pass was not kept".into())
-        })?,
+        })?),
+        DirectionSkinning::Moved => None,
     };
-    let d_means_from_weights =
-        nets.skinning
-            .backward(direction_skinning, &d_direction_weights, &mut d_skinning)?;
+    let d_means_from_weights = match direction_skinning {
+        Some(skinning) => {
+            nets.skinning
+                .backward(skinning, &d_direction_weights, &mut d_skinning)?
+        }
+        None => vec![[T::zero(); 3]; na],
+    };
+    // With the moved means' weights, their cotangent joins the re-posings' on the deformation's
+    // own weights: one backward of the field for both.
+    let moved_with_views =
+        matches!(cache.direction_skinning, DirectionSkinning::Moved).then(|| {
+            let mut moved =
+                reposings.map_or_else(|| MovedCotangents::zeros(na), |r| r.moved.clone());
+            for (w, &d) in moved.weights.iter_mut().zip(&d_direction_weights) {
+                *w = *w + d;
+            }
+            moved
+        });
     debug_assert_eq!(human.extra.len(), na * NR_FEATURE_DIM);
     let deform = cache.deform.backward(
         nets.deform_nets(),
@@ -499,7 +543,7 @@ pub fn pose_frame_backward_with<T: Real>(
             mats: &d_mats,
             features: &human.extra,
         },
-        reposings.map(|r| &r.moved),
+        moved_with_views.as_ref().or(reposings.map(|r| &r.moved)),
         &mut d_nonrigid,
         &mut d_skinning,
     )?;

@@ -149,6 +149,21 @@ impl<T: Real> PeopleDeform<T> {
         self.single().and_then(|c| c.skinning_at(points))
     }
 
+    /// The deformation's own skinning weights at the moved means `x + Δx`, `(active, 24)` in active
+    /// order: each person's from that person's pass.
+    pub(crate) fn weights(&self) -> Vec<T> {
+        if let Some(cache) = self.single() {
+            return cache.skinning().weights();
+        }
+        let mut weights = vec![T::zero(); self.active * NUM_JOINTS];
+        for person in &self.persons {
+            if let (Some(rows), Some(cache)) = (&person.rows, &person.cache) {
+                scatter(&mut weights, &cache.skinning().weights(), NUM_JOINTS, rows);
+            }
+        }
+        weights
+    }
+
     /// The skinning pass [`PeopleDeform::skinning_at`] handed out (one person only).
     pub(crate) fn reused_skinning(&self) -> Option<&SkinningCache<T>> {
         self.single().map(DeformCache::skinning)

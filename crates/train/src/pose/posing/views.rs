@@ -3,6 +3,7 @@
 //! that map (to the deformed positions, the skinning weights and the bones' rotations).
 
 use nn::Real;
+use rayon::prelude::*;
 use smpl_deform::math::Affine;
 
 /// The human Gaussians' view directions in the canonical frame, d = Rᵀ (x_def − c) with
@@ -24,10 +25,9 @@ pub(super) fn canonical_view_directions<T: Real>(
     weights: &[T],
 ) -> CanonicalViews<T> {
     let nb = bones.len();
-    let mut world = Vec::with_capacity(positions.len());
-    let mut rotations = Vec::with_capacity(positions.len());
-    let directions = positions
-        .iter()
+    // Row by row in parallel (each row its own).
+    let rows: Vec<([T; 3], [T; 3], [T; 9])> = positions
+        .par_iter()
         .enumerate()
         .map(|(i, x)| {
             let v = [0, 1, 2].map(|a| x[a] - c[a]);
@@ -40,15 +40,15 @@ pub(super) fn canonical_view_directions<T: Real>(
                     }
                 }
             }
-            world.push(v);
-            rotations.push(r);
-            [0, 1, 2].map(|col| (0..3).fold(T::zero(), |acc, row| acc + r[row * 3 + col] * v[row]))
+            let d = [0, 1, 2]
+                .map(|col| (0..3).fold(T::zero(), |acc, row| acc + r[row * 3 + col] * v[row]));
+            (d, v, r)
         })
         .collect();
     CanonicalViews {
-        directions,
-        world,
-        rotations,
+        directions: rows.iter().map(|row| row.0).collect(),
+        world: rows.iter().map(|row| row.1).collect(),
+        rotations: rows.iter().map(|row| row.2).collect(),
     }
 }
 
@@ -68,25 +68,43 @@ pub(super) fn view_directions_backward<T: Real>(
     let nb = bones.len();
     let na = views.world.len();
     let mut d_direction_weights = vec![T::zero(); na * nb];
-    let mut d_bone_rotations = vec![[T::zero(); 9]; nb];
-    for a in 0..na {
-        let dd = d_directions[a];
-        let v = views.world[a];
-        let r = &views.rotations[a];
-        for ax in 0..3 {
-            let dv = (0..3).fold(T::zero(), |acc, col| acc + r[ax * 3 + col] * dd[col]);
-            d_x_def[a][ax] = d_x_def[a][ax] + dv;
-        }
-        let d_r: [T; 9] = std::array::from_fn(|e| v[e / 3] * dd[e % 3]);
-        for (b, bone) in bones.iter().enumerate() {
-            let w = weights[a * nb + b];
-            let mut dw = T::zero();
-            for e in 0..9 {
-                dw = dw + d_r[e] * bone[(e / 3) * 4 + e % 3];
-                d_bone_rotations[b][e] = d_bone_rotations[b][e] + w * d_r[e];
+    // Row by row in parallel: dv, dR and the row's weight gradients.
+    let d_r: Vec<[T; 9]> = d_x_def[..na]
+        .par_iter_mut()
+        .zip(d_direction_weights.par_chunks_mut(nb.max(1)))
+        .enumerate()
+        .map(|(a, (dx, dw_row))| {
+            let dd = d_directions[a];
+            let v = views.world[a];
+            let r = &views.rotations[a];
+            for ax in 0..3 {
+                let dv = (0..3).fold(T::zero(), |acc, col| acc + r[ax * 3 + col] * dd[col]);
+                dx[ax] = dx[ax] + dv;
             }
-            d_direction_weights[a * nb + b] = dw;
-        }
-    }
+            let d_r: [T; 9] = std::array::from_fn(|e| v[e / 3] * dd[e % 3]);
+            for (dw, bone) in dw_row.iter_mut().zip(bones) {
+                let mut acc = T::zero();
+                for e in 0..9 {
+                    acc = acc + d_r[e] * bone[(e / 3) * 4 + e % 3];
+                }
+                *dw = acc;
+            }
+            d_r
+        })
+        .collect();
+    // dR_b = Σ_a w_ab dR_a, each sum over the rows in order (bone by bone in parallel).
+    let d_bone_rotations = (0..nb)
+        .into_par_iter()
+        .map(|b| {
+            let mut acc = [T::zero(); 9];
+            for (a, d_r) in d_r.iter().enumerate() {
+                let w = weights[a * nb + b];
+                for e in 0..9 {
+                    acc[e] = acc[e] + w * d_r[e];
+                }
+            }
+            acc
+        })
+        .collect();
     (d_direction_weights, d_bone_rotations)
 }
