@@ -252,8 +252,8 @@ training_options! {
     /// (the deformation's own, at x + Δx, as 3DGS-Avatar's `fwd_transform`; no second pass of
     /// the skinning field) or `canonical` (a second pass at the canonical mean; the default until
     /// 2026-12-06, and what a stored model that does not name the option was trained with).
-    /// `moved` scores 36.67 / 32.34 dB (full frame / human box) against 36.63 / 32.30 with a
-    /// step ≈ 4 % shorter (AMD Zen 3; docs/notes/2026-12-06-view-rotation-and-step.md).
+    /// `moved` scores 36.67 / 32.34 dB (full frame / human box) against 36.63 / 32.30, with a
+    /// step 8 % shorter (AMD Zen 3; docs/notes/2026-12-06-view-rotation-and-step.md).
     view_rotation: ViewRotation = ViewRotation::Moved,
     /// With `blur_model = exposure`: the tiles that only static Gaussians (human probability
     /// below `semantic_gate`, the same in every sub-exposure render) reach are blended once per
