@@ -273,11 +273,6 @@ pub(super) fn backward_inputs<'a, T: Real>(
             return;
         }
         let ci = ci as usize;
-        // A Gaussian without pairs in this render (a static one whose tiles another render of
-        // its exposure owns) has no gradient: its zeros stand, without the projection's backward.
-        if offsets[ci] == offsets[ci + 1] {
-            return;
-        }
         let mut acc = [T::zero(); 7];
         for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
             let s = &pair_grads[pos as usize * slot..(pos as usize + 1) * slot];
@@ -287,6 +282,13 @@ pub(super) fn backward_inputs<'a, T: Real>(
             for (d, &g) in d_ch.iter_mut().zip(&s[7..]) {
                 *d = *d + g;
             }
+        }
+        // A zero screen-space gradient (a Gaussian without pairs in this render, such as a static
+        // one whose tiles another render of its exposure owns, or whose pairs all lie in such
+        // tiles) leaves its zeros standing, without the projection's backward: the same values,
+        // whether or not the render binned the tiles it does not own.
+        if acc.iter().all(|&v| v == T::zero()) {
+            return;
         }
         let g = ProjectedGrad {
             mean2d: [acc[0], acc[1]],
