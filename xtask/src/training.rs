@@ -69,6 +69,14 @@ fn report_cameras(data: &train::data::Dataset, config: &TrainConfig) {
              learned from step {} (rotation rate {}, shift rate {})",
             config.camera_correction_from, config.lr_camera_rotation, config.lr_camera_translation
         );
+        if config.camera_correction_basis == train::config::CameraCorrectionBasis::Image {
+            println!(
+                "camera correction basis: the mid-exposure twists step in coordinates of the \
+                 scene's image motion, {} px RMS per step (the shift and rotation rates above \
+                 apply to the motion over the exposure)",
+                config.lr_camera_pixels
+            );
+        }
         if config.camera_gauge == train::config::CameraGauge::Person {
             println!(
                 "camera gauge: the offset common to every camera is learned from the person alone \

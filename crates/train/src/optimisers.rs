@@ -4,9 +4,10 @@
 //! the pose corrections, which only the step's frames may move; with their checkpoint form.
 
 use crate::checkpoint::{CheckpointReader, CheckpointWriter};
-use crate::config::{ExposureMotion, TrainConfig};
+use crate::config::{CameraCorrectionBasis, ExposureMotion, TrainConfig};
 use crate::model::{Model, NETWORK_GROUPS};
-use crate::pose::camera_correction::CAMERA_CORRECTION_VALUES;
+use crate::pose::camera_basis::{apply_basis, BASIS_VALUES};
+use crate::pose::camera_correction::{CAMERA_CORRECTION_VALUES, TWIST_VALUES};
 use crate::pose::correction::{root_indices, CORRECTION_VALUES, POSE_VALUES};
 use crate::TrainError;
 use gaussians::adam::{AdamConfig, GaussianAdam, GaussianLearningRates};
@@ -27,10 +28,16 @@ pub struct Optimisers {
     cameras: nn::RowAdam<f32>,
     /// The clip-wide camera twist's Adam (one row; none without one).
     camera_gauge: nn::RowAdam<f32>,
+    /// With `camera_correction_basis = image`: the basis P (row-major 6 × 6) in whose coordinates
+    /// `cameras` steps the mid-exposure twists, ξ = P u (`crate::pose::camera_basis`).
+    camera_basis: Option<[f32; BASIS_VALUES]>,
 }
 
 /// The prefix of the camera corrections' Adam tensors.
 const CAMERA_ADAM: &str = "camera_correction_adam";
+
+/// The tensor of the camera corrections' image-motion basis.
+const CAMERA_BASIS: &str = "camera_correction_basis";
 
 /// The prefix of the clip-wide camera twist's Adam tensors.
 const CAMERA_GAUGE_ADAM: &str = "camera_gauge_adam";
@@ -102,7 +109,9 @@ fn correction_adam(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<
 
 /// The camera corrections' per-frame Adam for `rows` frames: `lr_camera_rotation` for the
 /// twists' rotations, `lr_camera_translation` for their shifts.
-fn camera_adam(rows: usize, config: &TrainConfig) -> nn::RowAdam<f32> {
+/// With `whitened`, the mid-exposure twists' columns step at `lr_camera_pixels` (the image-motion
+/// basis' coordinates).
+fn camera_adam(rows: usize, config: &TrainConfig, whitened: bool) -> nn::RowAdam<f32> {
     camera_rates(
         nn::RowAdam::new(
             rows,
@@ -110,19 +119,80 @@ fn camera_adam(rows: usize, config: &TrainConfig) -> nn::RowAdam<f32> {
             adam_config(config.lr_camera_rotation),
         ),
         config,
+        whitened,
     )
 }
 
-/// `adam` with the camera corrections' column rates.
-fn camera_rates(adam: nn::RowAdam<f32>, config: &TrainConfig) -> nn::RowAdam<f32> {
+/// `adam` with the camera corrections' column rates (the mid-exposure twist's at
+/// `lr_camera_pixels` when `whitened`).
+fn camera_rates(adam: nn::RowAdam<f32>, config: &TrainConfig, whitened: bool) -> nn::RowAdam<f32> {
     let (rotation, shift) = (
         f64::from(config.lr_camera_rotation),
         f64::from(config.lr_camera_translation),
     );
-    let rates = [rotation, rotation, rotation, shift, shift, shift].repeat(2);
+    let twist = [rotation, rotation, rotation, shift, shift, shift];
+    let mid = if whitened {
+        [f64::from(config.lr_camera_pixels); TWIST_VALUES]
+    } else {
+        twist
+    };
+    let rates = [mid, twist].concat();
     // One rate per column of the rows (`CAMERA_CORRECTION_VALUES`): this cannot fail.
     adam.with_column_rates(rates)
         .unwrap_or_else(|e| unreachable!("{e}"))
+}
+
+/// One lazy Adam step of the camera corrections' rows `slots` in the coordinates u of the
+/// image-motion basis `basis` (ξ = P u, `crate::pose::camera_basis`) for their mid-exposure
+/// twists: the twists' gradients as u's (Pᵀ g), Adam's step of u from zero (its step does not
+/// depend on the values it moves), then ξ += P Δu; the change over the exposure steps as itself.
+fn whitened_camera_step(
+    adam: &mut nn::RowAdam<f32>,
+    basis: &[f32; BASIS_VALUES],
+    corrections: &mut [f32],
+    grads: &[f32],
+    slots: &[usize],
+    rate_scale: f32,
+) -> Result<(), TrainError> {
+    let n = CAMERA_CORRECTION_VALUES;
+    if grads.len() != corrections.len() || slots.iter().any(|&s| (s + 1) * n > grads.len()) {
+        return Err(TrainError::Config(format!(
+            "camera correction step: {} gradients for {} values, slots {slots:?}",
+            grads.len(),
+            corrections.len()
+        )));
+    }
+    let to_f64 = |x: &[f32]| x.iter().map(|&v| f64::from(v)).collect::<Vec<_>>();
+    let mut coordinate_grads = grads.to_vec();
+    for &slot in slots {
+        let span = slot * n..slot * n + TWIST_VALUES;
+        let gu = apply_basis(basis, &to_f64(&grads[span.clone()]), true);
+        for (d, v) in coordinate_grads[span].iter_mut().zip(gu) {
+            *d = v as f32;
+        }
+    }
+    let mut steps = vec![0.0f32; corrections.len()];
+    adam.step_rows_scaled(&mut steps, &coordinate_grads, slots, f64::from(rate_scale))?;
+    let mut done: Vec<usize> = Vec::with_capacity(slots.len());
+    for &slot in slots {
+        if done.contains(&slot) {
+            continue;
+        }
+        done.push(slot);
+        let (row, steps) = (
+            &mut corrections[slot * n..(slot + 1) * n],
+            &steps[slot * n..(slot + 1) * n],
+        );
+        let dxi = apply_basis(basis, &to_f64(&steps[..TWIST_VALUES]), false);
+        let (mid, change) = row.split_at_mut(TWIST_VALUES);
+        for (x, d) in mid.iter_mut().zip(dxi) {
+            *x = (f64::from(*x) + d) as f32;
+        }
+        for (x, &d) in change.iter_mut().zip(&steps[TWIST_VALUES..]) {
+            *x += d;
+        }
+    }
+    Ok(())
 }
 
 /// Adam's defaults with the learning rate `lr`.
@@ -143,7 +213,13 @@ fn group_index(group: &str) -> Result<usize, TrainError> {
 
 impl Optimisers {
     /// Fresh optimiser state (zero moments) for `model` at the rates of `config`.
-    pub fn new(model: &Model, config: &TrainConfig) -> Self {
+    /// `camera_basis`: the image-motion basis of the camera corrections' steps, with
+    /// `camera_correction_basis = image` (`crate::pose::camera_basis`).
+    pub fn new(
+        model: &Model,
+        config: &TrainConfig,
+        camera_basis: Option<[f32; BASIS_VALUES]>,
+    ) -> Self {
         let networks = NETWORK_GROUPS
             .iter()
             .zip(model.network_groups())
@@ -170,8 +246,14 @@ impl Optimisers {
             cameras: camera_adam(
                 model.camera_corrections.len() / CAMERA_CORRECTION_VALUES,
                 config,
+                camera_basis.is_some(),
             ),
-            camera_gauge: camera_adam(model.camera_gauge.len() / CAMERA_CORRECTION_VALUES, config),
+            camera_gauge: camera_adam(
+                model.camera_gauge.len() / CAMERA_CORRECTION_VALUES,
+                config,
+                false,
+            ),
+            camera_basis,
         }
     }
 
@@ -235,9 +317,22 @@ impl Optimisers {
         slots: &[usize],
         rate_scale: f32,
     ) -> Result<(), TrainError> {
-        Ok(self
-            .cameras
-            .step_rows_scaled(corrections, grads, slots, f64::from(rate_scale))?)
+        let Some(basis) = &self.camera_basis else {
+            return Ok(self.cameras.step_rows_scaled(
+                corrections,
+                grads,
+                slots,
+                f64::from(rate_scale),
+            )?);
+        };
+        whitened_camera_step(
+            &mut self.cameras,
+            basis,
+            corrections,
+            grads,
+            slots,
+            rate_scale,
+        )
     }
 
     /// One Adam step of the clip-wide camera twist at `rate_scale` times the camera rates.
@@ -280,6 +375,9 @@ impl Optimisers {
                 }
             })
             .collect();
+        if let Some(basis) = &self.camera_basis {
+            w.push(CAMERA_BASIS, basis.to_vec());
+        }
         for (prefix, adam) in [
             (CAMERA_ADAM, &self.cameras),
             (CAMERA_GAUGE_ADAM, &self.camera_gauge),
@@ -334,15 +432,41 @@ impl Optimisers {
             .collect::<Result<_, _>>()?;
         let corrections =
             Self::load_corrections(r, model, config, counts[group_index(CORRECTION_GROUP)?])?;
-        let cameras = Self::load_cameras(r, CAMERA_ADAM, model.camera_corrections.len(), config)?;
-        let camera_gauge =
-            Self::load_cameras(r, CAMERA_GAUGE_ADAM, model.camera_gauge.len(), config)?;
+        let camera_basis = if config.camera_correction_basis == CameraCorrectionBasis::Image
+            && !model.camera_corrections.is_empty()
+        {
+            let values = r.get_len(CAMERA_BASIS, BASIS_VALUES)?;
+            let basis: [f32; BASIS_VALUES] = values
+                .try_into()
+                .map_err(|_| r.error(format!("{CAMERA_BASIS}: expected {BASIS_VALUES} values")))?;
+            if basis.iter().any(|v| !v.is_finite()) {
+                return Err(r.error(format!("{CAMERA_BASIS}: a value is not finite")));
+            }
+            Some(basis)
+        } else {
+            None
+        };
+        let cameras = Self::load_cameras(
+            r,
+            CAMERA_ADAM,
+            model.camera_corrections.len(),
+            config,
+            camera_basis.is_some(),
+        )?;
+        let camera_gauge = Self::load_cameras(
+            r,
+            CAMERA_GAUGE_ADAM,
+            model.camera_gauge.len(),
+            config,
+            false,
+        )?;
         Ok(Self {
             gaussians,
             networks,
             corrections,
             cameras,
             camera_gauge,
+            camera_basis,
         })
     }
 
@@ -353,10 +477,11 @@ impl Optimisers {
         prefix: &str,
         len: usize,
         config: &TrainConfig,
+        whitened: bool,
     ) -> Result<nn::RowAdam<f32>, TrainError> {
         let rows = len / CAMERA_CORRECTION_VALUES;
         if len == 0 {
-            return Ok(camera_adam(0, config));
+            return Ok(camera_adam(0, config, whitened));
         }
         let m = r.get_len(&format!("{prefix}.m"), len)?;
         let v = r.get_len(&format!("{prefix}.v"), len)?;
@@ -370,6 +495,7 @@ impl Optimisers {
                 steps,
             )?,
             config,
+            whitened,
         ))
     }
 
@@ -418,4 +544,69 @@ fn row_steps(r: &CheckpointReader, name: &str, rows: usize) -> Result<Vec<u64>, 
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A first whitened step moves a row's mid-exposure twist by −lr · P · sign(Pᵀ g) (Adam's
+    /// first step is −lr · sign per coordinate), its change by −lr · sign(g), and leaves other
+    /// rows alone; P is not symmetric here, so a transposition in either direction fails.
+    #[test]
+    fn a_whitened_step_moves_the_twist_along_the_basis() {
+        let lr = 0.25f64;
+        let config = TrainConfig {
+            lr_camera_pixels: lr as f32,
+            lr_camera_rotation: 0.01,
+            lr_camera_translation: 0.02,
+            ..TrainConfig::default()
+        };
+        let mut adam = camera_adam(2, &config, true);
+        // Upper triangular: Pᵀ g and P g differ in sign for these gradients.
+        let basis: [f32; BASIS_VALUES] = std::array::from_fn(|k| {
+            let (r, c) = (k / TWIST_VALUES, k % TWIST_VALUES);
+            if c >= r {
+                1.0 + c as f32
+            } else {
+                0.0
+            }
+        });
+        let n = CAMERA_CORRECTION_VALUES;
+        let mut corrections = vec![0.5f32; 2 * n];
+        let grads: Vec<f32> = (0..2 * n).map(|k| (k as f32 * 0.37).sin()).collect();
+        whitened_camera_step(&mut adam, &basis, &mut corrections, &grads, &[1, 1], 1.0).unwrap();
+        assert!(corrections[..n].iter().all(|&v| v == 0.5), "row 0 moved");
+        let g: Vec<f64> = grads[n..n + TWIST_VALUES]
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect();
+        let signs: Vec<f64> = apply_basis(&basis, &g, true)
+            .iter()
+            .map(|v| v.signum())
+            .collect();
+        let want = apply_basis(&basis, &signs, false);
+        for k in 0..TWIST_VALUES {
+            let got = f64::from(corrections[n + k]) - 0.5;
+            // Adam's ε and f32 storage: 1e-4 relative.
+            let tol = 1e-4 * (lr * want[k]).abs().max(0.1);
+            assert!(
+                (got + lr * want[k]).abs() < tol,
+                "twist {k}: {got} against {}",
+                -lr * want[k]
+            );
+        }
+        for k in 0..TWIST_VALUES {
+            let rate = if k < 3 { 0.01 } else { 0.02 };
+            let got = f64::from(corrections[n + TWIST_VALUES + k]) - 0.5;
+            let want = -rate * f64::from(grads[n + TWIST_VALUES + k]).signum();
+            assert!(
+                (got - want).abs() < 1e-6,
+                "change {k}: {got} against {want}"
+            );
+        }
+        assert!(
+            whitened_camera_step(&mut adam, &basis, &mut corrections, &grads, &[2], 1.0).is_err()
+        );
+    }
 }

@@ -4,7 +4,7 @@
 //! interpolated between their neighbours' corrections.
 #![allow(clippy::unwrap_used)]
 
-use train::config::{CameraGauge, TrainConfig};
+use train::config::{CameraCorrectionBasis, CameraGauge, TrainConfig};
 use train::pose::camera_correction::{CAMERA_CORRECTION_VALUES, TWIST_VALUES};
 use train::trainer::Trainer;
 
@@ -241,6 +241,30 @@ fn smoothing_the_mid_exposure_twist_alone_keeps_each_frames_own_change() {
 fn a_person_gauge_resumes_bit_identically() {
     let config = gauge_config(16);
     resume_is_bit_identical(&exposure_context(&config), config);
+}
+
+/// Steps in the image-motion basis (`--camera-correction-basis image`).
+fn basis_config(steps: usize) -> TrainConfig {
+    TrainConfig {
+        camera_correction_basis: CameraCorrectionBasis::Image,
+        ..gauge_config(steps)
+    }
+}
+
+#[test]
+fn the_image_basis_moves_the_cameras_otherwise_alike_on_any_thread_count_and_resumes() {
+    let config = basis_config(12);
+    let ctx = exposure_context(&config);
+    let whitened = trained_alike_on_one_and_two_threads(&ctx, &config, 12);
+    let twist = trained_alike_on_one_and_two_threads(&ctx, &gauge_config(12), 12);
+    let (a, b) = (
+        &whitened.model.camera_corrections,
+        &twist.model.camera_corrections,
+    );
+    assert!(a.iter().all(|v| v.is_finite()));
+    assert!(a.iter().any(|&v| v != 0.0));
+    assert_ne!(a, b, "the basis changed no step");
+    resume_is_bit_identical(&ctx, basis_config(16));
 }
 
 #[test]

@@ -92,6 +92,19 @@ pub enum CameraGauge {
     Person,
 }
 
+/// The coordinates in which Adam steps the camera corrections' mid-exposure twists
+/// ([`TrainConfig::camera_correction_basis`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraCorrectionBasis {
+    /// The twist's own values (radians, metres), at `lr_camera_rotation` / `lr_camera_translation`.
+    #[default]
+    Twist,
+    /// Coordinates in which a unit step moves the scene's image by one pixel RMS in every
+    /// direction (`train::pose::camera_basis`), at `lr_camera_pixels`.
+    Image,
+}
+
 /// How a track's tangents at its keys (the frames) are estimated, for the cubic Hermite path
 /// between them (a moving camera's: [`TrainConfig::camera_interpolation`]; the body's:
 /// [`TrainConfig::body_interpolation`]).

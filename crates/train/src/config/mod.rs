@@ -573,6 +573,16 @@ training_options! {
     /// camera's in-exposure motion, for exact cameras).
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     camera_correction_mid: bool = true,
+    /// The coordinates in which Adam steps the camera corrections' mid-exposure twists: `twist`
+    /// (radians and metres, at `lr_camera_rotation` / `lr_camera_translation`) or `image`
+    /// (`train::pose::camera_basis`: whitened by the scene's image motion, so that a step moves
+    /// the image by about `lr_camera_pixels` pixels along every direction, a pitch traded for a
+    /// vertical shift as fast as a roll; the basis is fixed at the start from the initial scene
+    /// and the first training frame's camera). Only the optimiser's coordinates change.
+    camera_correction_basis: CameraCorrectionBasis = CameraCorrectionBasis::Twist,
+    /// Adam learning rate of the camera corrections' mid-exposure twists with
+    /// `camera_correction_basis = image` (pixels of RMS image motion per step of a frame).
+    lr_camera_pixels: f32 = 0.5,
     /// With camera correction, what sets the offset common to every frame's camera — a gauge the
     /// static room cannot see, since it can turn with the cameras and fit the images as well:
     /// `free` (every frame's twist learns from every Gaussian) or `person` (the frames' twists are

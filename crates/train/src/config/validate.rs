@@ -196,6 +196,7 @@ impl TrainConfig {
             ),
             ("lr_camera_rotation", self.lr_camera_rotation),
             ("lr_camera_translation", self.lr_camera_translation),
+            ("lr_camera_pixels", self.lr_camera_pixels),
             (
                 "camera_correction_zero_weight",
                 self.camera_correction_zero_weight,

@@ -11,6 +11,7 @@
 //! `exposure` and `correction` import none of the others.
 
 pub mod body;
+pub mod camera_basis;
 pub mod camera_correction;
 pub mod correction;
 pub mod exposure;

@@ -3,7 +3,9 @@
 //! rasterizer-input gradients.
 
 use crate::config::TrainConfig;
+use crate::data::TrainingData;
 use crate::model::{corrected_camera, FramePass, Model, PassCamera, PosedGradients};
+use crate::pose::camera_basis::{image_motion_metric, whitening_basis, BASIS_VALUES};
 use crate::pose::camera_correction::{
     correction_backward, smoothing_weights, tracker_prior_terms, twist_at, twist_backward,
     CAMERA_CORRECTION_VALUES, TWIST_VALUES,
@@ -192,4 +194,39 @@ impl CameraGradient {
     pub fn all_finite(&self) -> bool {
         self.values.iter().chain(&self.gauge).all(|v| v.is_finite()) && self.prior.is_finite()
     }
+}
+
+/// The image-motion basis of the camera corrections' steps (`crate::pose::camera_basis`), from the
+/// initial `model` seen by the first training frame's camera: its scene Gaussians' means weighted
+/// by their opacity, and the person as its root in that frame weighted by its Gaussians' summed
+/// opacity (their canonical means are not in the world yet).
+pub(super) fn image_motion_basis(
+    model: &Model,
+    data: &TrainingData,
+) -> Result<[f32; BASIS_VALUES], TrainError> {
+    let refuse = |why: &str| {
+        TrainError::Config(format!(
+            "camera_correction_basis = image: {why} (use camera_correction_basis = twist)"
+        ))
+    };
+    let first = data
+        .frames
+        .first()
+        .ok_or_else(|| refuse("no training frame"))?;
+    let set = &model.set;
+    let (mut points, mut weights) = (Vec::with_capacity(set.len() + 1), Vec::new());
+    let mut person = 0.0f32;
+    for i in 0..set.len() {
+        if model.probability(i) >= 0.5 {
+            person += set.opacity(i);
+        } else {
+            points.push(set.means[i]);
+            weights.push(set.opacity(i));
+        }
+    }
+    points.push(first.pose.prepared.root);
+    weights.push(person);
+    let metric = image_motion_metric(&first.camera, &points, &weights)
+        .ok_or_else(|| refuse("nothing of the initial scene is in front of the first camera"))?;
+    whitening_basis(&metric).ok_or_else(|| refuse("the scene's image does not move"))
 }

@@ -21,12 +21,13 @@ pub use report::{StageTimes, StepReport};
 pub use surfaces::person_box;
 pub use terms::warm_up_skinning;
 
-use crate::config::{ExposureMotion, TrainConfig};
+use crate::config::{CameraCorrectionBasis, ExposureMotion, TrainConfig};
 use crate::data::TrainingData;
 use crate::density::{DensityStrategy, StepStatistics};
 use crate::init::{initialise_people, BodySurface, InitConfig};
 use crate::model::{Model, ModelConfig};
 use crate::optimisers::{Optimisers, PoseRateScales};
+use crate::pose::camera_basis::BASIS_VALUES;
 use crate::pose::posing::ModelGradients;
 use crate::schedule::{correction_rate_scale, exponential_rate};
 use crate::TrainError;
@@ -135,13 +136,22 @@ impl Trainer {
             frame_indices,
             extent_of(&init.cube),
         )?;
-        Ok(Self::with_model(model, config))
+        let camera_basis = (config.camera_correction
+            && config.camera_correction_basis == CameraCorrectionBasis::Image)
+            .then(|| camera::image_motion_basis(&model, data))
+            .transpose()?;
+        Ok(Self::with_model(model, config, camera_basis))
     }
 
-    /// A trainer with fresh optimiser state around `model`, built from `config`.
-    fn with_model(model: Model, config: TrainConfig) -> Self {
+    /// A trainer with fresh optimiser state around `model`, built from `config` (`camera_basis`:
+    /// the camera corrections' image-motion basis, [`Optimisers::new`]).
+    fn with_model(
+        model: Model,
+        config: TrainConfig,
+        camera_basis: Option<[f32; BASIS_VALUES]>,
+    ) -> Self {
         Self {
-            optimisers: Optimisers::new(&model, &config),
+            optimisers: Optimisers::new(&model, &config, camera_basis),
             stats: DensityStats::new(model.set.len()),
             rng: ChaCha8Rng::seed_from_u64(config.seed ^ 0x0dde_0000),
             config,
