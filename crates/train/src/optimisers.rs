@@ -162,9 +162,13 @@ fn whitened_camera_step(
             corrections.len()
         )));
     }
+    // A slot named twice steps once (as `RowAdam` does).
+    let mut slots = slots.to_vec();
+    slots.sort_unstable();
+    slots.dedup();
     let to_f64 = |x: &[f32]| x.iter().map(|&v| f64::from(v)).collect::<Vec<_>>();
     let mut coordinate_grads = grads.to_vec();
-    for &slot in slots {
+    for &slot in &slots {
         let span = slot * n..slot * n + TWIST_VALUES;
         let gu = apply_basis(basis, &to_f64(&grads[span.clone()]), true);
         for (d, v) in coordinate_grads[span].iter_mut().zip(gu) {
@@ -172,13 +176,8 @@ fn whitened_camera_step(
         }
     }
     let mut steps = vec![0.0f32; corrections.len()];
-    adam.step_rows_scaled(&mut steps, &coordinate_grads, slots, f64::from(rate_scale))?;
-    let mut done: Vec<usize> = Vec::with_capacity(slots.len());
-    for &slot in slots {
-        if done.contains(&slot) {
-            continue;
-        }
-        done.push(slot);
+    adam.step_rows_scaled(&mut steps, &coordinate_grads, &slots, f64::from(rate_scale))?;
+    for &slot in &slots {
         let (row, steps) = (
             &mut corrections[slot * n..(slot + 1) * n],
             &steps[slot * n..(slot + 1) * n],
