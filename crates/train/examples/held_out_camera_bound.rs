@@ -13,9 +13,12 @@
 //! carry that remainder (the data directories linked, not copied). Scoring a model trained on
 //! `EXACT` there (`cargo xtask eval --model RUN/model --data OUT`) gives what the held-out frames
 //! of a flawless corrector would score as trained, the bound for the "as trained" share.
+//! With `SIGMA` (slots; default 0) the perfect corrections are first smoothed over the training
+//! frames as `--camera-correction-smoothing SIGMA` smooths the learned ones (the six mid-exposure
+//! values), which keeps the training frames' own jitter out of the held-out frames' cameras.
 //!
 //! ```text
-//! cargo run --release -p train --example held_out_camera_bound -- ESTIMATED EXACT OUT
+//! cargo run --release -p train --example held_out_camera_bound -- ESTIMATED EXACT OUT [SIGMA]
 //! ```
 
 use std::path::Path;
@@ -24,8 +27,8 @@ use glam::{DMat3, DQuat};
 use serde_json::Value;
 use synth::camera_error::TrueCameras;
 use train::pose::camera_correction::{
-    corrected_world_to_camera, interpolated_camera_correction, CAMERA_CORRECTION_VALUES,
-    TWIST_VALUES,
+    corrected_world_to_camera, interpolated_camera_correction, smoothed_corrections,
+    CAMERA_CORRECTION_VALUES, TWIST_VALUES,
 };
 
 /// A 3×4 `world_to_camera` from JSON rows, as a 4×4 rigid transform.
@@ -79,8 +82,10 @@ fn camera_error(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> (f64, f64) {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let [_, estimated, exact, out] = args.as_slice() else {
-        return Err("usage: held_out_camera_bound ESTIMATED EXACT OUT".into());
+    let (estimated, exact, out, sigma) = match args.as_slice() {
+        [_, e, x, o] => (e, x, o, 0.0),
+        [_, e, x, o, s] => (e, x, o, s.parse::<f32>()?),
+        _ => return Err("usage: held_out_camera_bound ESTIMATED EXACT OUT [SIGMA]".into()),
     };
     let (estimated, exact, out) = (Path::new(estimated), Path::new(exact), Path::new(out));
     let given: Value =
@@ -131,13 +136,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         given_cams.push(g);
         true_cams.push(tm);
     }
+    let smoothed = smoothed_corrections(&corrections, sigma, TWIST_VALUES);
     let (mut sum_px, mut count) = (0.0, 0usize);
     for (k, frame) in frames.iter().enumerate() {
         if frame["split"].as_str() == Some("train") {
             continue;
         }
         let index = truth.frames[k].index;
-        let correction = interpolated_camera_correction(&train_indices, &corrections, index);
+        let correction = interpolated_camera_correction(&train_indices, &smoothed, index);
         let twist: [f64; TWIST_VALUES] = std::array::from_fn(|i| f64::from(correction[i]));
         let camera = corrected_world_to_camera(&given_cams[k], &twist);
         let (deg, cm) = camera_error(&camera, &true_cams[k]);

@@ -522,7 +522,7 @@ training_options! {
     /// coordinates) and, with `blur_model = exposure`, its change over the exposure (the camera's
     /// path inside the exposure, which the frames' cameras sample too coarsely to follow a hand's
     /// tremor), regularised towards zero and towards the neighbouring frames'. Held-out frames take
-    /// the twist interpolated from their neighbouring training frames. Off in the presets;
+    /// the twist of a least-squares line through the 8 nearest training frames. Off in the presets;
     /// `cargo xtask reconstruct` turns it on when the scene's camera moves: on the `handheld`
     /// benchmark (`quick`) it recovers 7 dB full frame of a tracker's 0.5° / 1 cm camera error, and
     /// with exact cameras it lifts the room outside the person's box by 0.6 dB for 0.9 dB inside

@@ -59,8 +59,9 @@ impl Model {
         ))
     }
 
-    /// The camera correction of frame `index` at mid exposure, interpolated between the training
-    /// frames around it, with the clip-wide twist (empty when camera correction is off).
+    /// The camera correction of frame `index` at mid exposure — a training frame's own, another
+    /// frame's fitted to the training frames nearest to it (`interpolated_camera_correction`) —
+    /// with the clip-wide twist (empty when camera correction is off).
     pub fn camera_correction_for(&self, index: u32) -> Vec<f32> {
         self.with_gauge(interpolated_camera_correction(
             &self.frame_indices,

@@ -22,8 +22,9 @@
 //! camera the Gaussians are rasterized from (for the few millimetres and tenths of a degree a
 //! tracker errs by, the view directions change by far less than a degree).
 //!
-//! **Held-out frames** take the mid-exposure correction interpolated in frame number between the
-//! training frames around them, never fitted to held-out images. The regulariser is the pose
+//! **Held-out frames** take the mid-exposure correction of a least-squares line, in frame number,
+//! through the training frames nearest to them ([`interpolated_camera_correction`]), never fitted
+//! to held-out images. The regulariser is the pose
 //! correction's (`crate::pose::correction::knot_prior_terms`), one knot per training frame.
 //!
 //! **The gauge** (`TrainConfig::camera_gauge`): an offset common to every camera is nearly
@@ -36,8 +37,6 @@
 //! is a sum over Gaussians), the room's pull on the common offset left out. It steps on every
 //! step, a frame's twist once per pass over the frames, so its rates are the frames' divided by
 //! the number of training frames (an Adam step moves a value by about its rate).
-
-use crate::pose::correction::KnotSpan;
 
 /// Values of one twist: ω (radians), then v (metres), camera coordinates.
 pub const TWIST_VALUES: usize = 6;
@@ -174,14 +173,50 @@ pub fn correction_backward(d_twist: &[f64; TWIST_VALUES], offset: f32, grad: &mu
     }
 }
 
+/// Training frames a held-out frame's camera correction is fitted to ([`interpolated_camera_correction`]).
+pub const HELD_OUT_FIT_FRAMES: usize = 8;
+
 /// The mid-exposure correction of frame `index` ([`CAMERA_CORRECTION_VALUES`] values, the change
-/// zero): the training frames' (`frames`, ascending, one row of `corrections` each) interpolated
-/// linearly in frame number, the nearest one's outside their range. Empty when `corrections` is.
+/// zero) from the training frames' (`frames`, ascending, one row of `corrections` each): a training
+/// frame's own row; any other frame's is the value at `index` of the least-squares line, in frame
+/// number, through the [`HELD_OUT_FIT_FRAMES`] training frames nearest to it (ties: the earlier
+/// frame), each value on its own (one frame: its row). A tracker errs by a slow drift plus a
+/// per-frame jitter; the line follows the drift and averages the jitter of the frames it is fitted
+/// to, where joining the two frames around `index` would carry their jitter into it (and hold the
+/// last one past the clip's ends). Empty when `corrections` is.
 pub fn interpolated_camera_correction(frames: &[u32], corrections: &[f32], index: u32) -> Vec<f32> {
+    let n = CAMERA_CORRECTION_VALUES;
     if corrections.is_empty() || frames.is_empty() {
         return Vec::new();
     }
-    KnotSpan::of(frames, index).blend(corrections, CAMERA_CORRECTION_VALUES, TWIST_VALUES)
+    let row = |k: usize| &corrections[k * n..(k + 1) * n];
+    let mut out = vec![0.0f32; n];
+    if let Ok(k) = frames.binary_search(&index) {
+        out[..TWIST_VALUES].copy_from_slice(&row(k)[..TWIST_VALUES]);
+        return out;
+    }
+    let offset = |k: usize| f64::from(frames[k]) - f64::from(index);
+    let mut nearest: Vec<usize> = (0..frames.len()).collect();
+    nearest.sort_by(|&a, &b| offset(a).abs().total_cmp(&offset(b).abs()).then(a.cmp(&b)));
+    nearest.truncate(HELD_OUT_FIT_FRAMES);
+    let count = nearest.len() as f64;
+    let sum_d: f64 = nearest.iter().map(|&k| offset(k)).sum();
+    let sum_dd: f64 = nearest.iter().map(|&k| offset(k) * offset(k)).sum();
+    let det = count * sum_dd - sum_d * sum_d;
+    for (v, o) in out[..TWIST_VALUES].iter_mut().enumerate() {
+        let sum_y: f64 = nearest.iter().map(|&k| f64::from(row(k)[v])).sum();
+        let sum_dy: f64 = nearest
+            .iter()
+            .map(|&k| offset(k) * f64::from(row(k)[v]))
+            .sum();
+        // The line's value at offset 0; one frame (det = 0) gives its own value.
+        *o = if det > 0.0 {
+            ((sum_dd * sum_y - sum_d * sum_dy) / det) as f32
+        } else {
+            (sum_y / count) as f32
+        };
+    }
+    out
 }
 
 /// Training slot `slot`'s weights over the stored corrections of the `slots` training slots under
@@ -415,18 +450,63 @@ mod tests {
         }
     }
 
-    #[test]
-    fn held_out_frames_interpolate_the_training_frames_mid_exposure_twists() {
-        let rows: Vec<f32> = [1.0f32, 3.0]
+    /// Rows of `CAMERA_CORRECTION_VALUES` whose six mid-exposure values are `value(frame)` and
+    /// whose change is 7.
+    fn rows_of(frames: &[u32], value: impl Fn(u32) -> f32) -> Vec<f32> {
+        frames
             .iter()
-            .flat_map(|&v| [[v; 6], [7.0; 6]].concat())
-            .collect();
-        let at = interpolated_camera_correction(&[2, 6], &rows, 3);
-        assert_eq!(at.len(), CAMERA_CORRECTION_VALUES);
-        assert_eq!(at[0], 1.5);
-        assert!(at[TWIST_VALUES..].iter().all(|&v| v == 0.0));
-        assert_eq!(interpolated_camera_correction(&[2, 6], &rows, 9)[2], 3.0);
-        assert!(interpolated_camera_correction(&[2, 6], &[], 3).is_empty());
+            .flat_map(|&f| [[value(f); TWIST_VALUES], [7.0; TWIST_VALUES]].concat())
+            .collect()
+    }
+
+    /// A training frame keeps its own row; a held-out frame gets the fitted line's value at its
+    /// frame number (exact for values on a line, inside the clip and past its ends), the change
+    /// zero; one training frame gives its row, none an empty correction.
+    #[test]
+    fn held_out_frames_take_the_line_through_the_nearest_training_frames() {
+        let frames: Vec<u32> = (0..30).filter(|f| f % 10 < 7).collect();
+        let line = |f: u32| 0.25 + 0.125 * f as f32;
+        let rows = rows_of(&frames, |f| line(f) + if f == 12 { 1.0 } else { 0.0 });
+        let own = interpolated_camera_correction(&frames, &rows, 12);
+        assert_eq!(own[..TWIST_VALUES], [line(12) + 1.0; TWIST_VALUES]);
+        assert!(own[TWIST_VALUES..].iter().all(|&v| v == 0.0));
+        let rows = rows_of(&frames, line);
+        for index in [8, 9, 18, 27, 29, 40] {
+            let at = interpolated_camera_correction(&frames, &rows, index);
+            assert_eq!(at.len(), CAMERA_CORRECTION_VALUES);
+            for &v in &at[..TWIST_VALUES] {
+                assert!(
+                    (v - line(index)).abs() < 1e-5,
+                    "frame {index}: {v} against {}",
+                    line(index)
+                );
+            }
+            assert!(at[TWIST_VALUES..].iter().all(|&v| v == 0.0));
+        }
+        assert_eq!(
+            interpolated_camera_correction(&[4], &rows[..12], 9)[0],
+            line(0)
+        );
+        assert!(interpolated_camera_correction(&frames, &[], 3).is_empty());
+    }
+
+    /// The line averages the jitter of the frames it is fitted to: two neighbours 0.2 above a
+    /// line move a held-out frame between them by 0.4 / 8 (the eight frames sit symmetrically
+    /// about it), where joining the two neighbours would move it by the whole 0.2.
+    #[test]
+    fn a_held_out_frame_averages_its_neighbours_jitter() {
+        let frames: Vec<u32> = (6..15).filter(|&f| f != 10).collect();
+        let line = |f: u32| -0.5 + 0.0625 * f as f32;
+        let rows = rows_of(&frames, |f| {
+            line(f) + if f == 9 || f == 11 { 0.2 } else { 0.0 }
+        });
+        let at = interpolated_camera_correction(&frames, &rows, 10);
+        assert!(
+            (at[0] - (line(10) + 0.05)).abs() < 1e-6,
+            "{} against {}",
+            at[0],
+            line(10) + 0.05
+        );
     }
 
     /// The tracker prior's gradient against f64 central differences of its value (h = 1e-6; the
