@@ -80,6 +80,18 @@ fn camera_error(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> (f64, f64) {
     )
 }
 
+/// Links directory `target` to `source` (a symbolic link; copying would duplicate gigabytes).
+#[cfg(unix)]
+fn link_dir(source: &Path, target: &Path) -> std::io::Result<()> {
+    std::os::unix::fs::symlink(source, target)
+}
+
+/// Links directory `target` to `source` (a directory symbolic link; Windows may need developer mode).
+#[cfg(windows)]
+fn link_dir(source: &Path, target: &Path) -> std::io::Result<()> {
+    std::os::windows::fs::symlink_dir(source, target)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let (estimated, exact, out, sigma) = match args.as_slice() {
@@ -165,7 +177,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let entry = entry?;
         let target = out.join(entry.file_name());
         if entry.file_type()?.is_dir() && !target.exists() {
-            std::os::unix::fs::symlink(std::fs::canonicalize(entry.path())?, target)?;
+            link_dir(&std::fs::canonicalize(entry.path())?, &target)?;
         }
     }
     std::fs::write(
