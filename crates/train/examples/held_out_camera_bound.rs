@@ -3,8 +3,8 @@
 //! (`ESTIMATED`, with its `cameras_true.json`) and the same scene with exact cameras (`EXACT`),
 //! this takes every training frame's *perfect* correction — the twist that turns its given camera
 //! into the true one — and gives each held-out frame the correction the trainer would give it
-//! (`interpolated_camera_correction`: linear in frame number between the training frames around
-//! it, the nearest one's outside them) applied to its own given camera. What remains is the part
+//! (`fitted_camera_correction`: the least-squares line, in frame number, through the training
+//! frames nearest to it) applied to its own given camera. What remains is the part
 //! of the tracker's error that the training frames cannot tell (the per-frame jitter), exactly as
 //! a flawless corrector would leave it.
 //!
@@ -27,7 +27,7 @@ use glam::{DMat3, DQuat};
 use serde_json::Value;
 use synth::camera_error::TrueCameras;
 use train::pose::camera_correction::{
-    corrected_world_to_camera, interpolated_camera_correction, smoothed_corrections,
+    corrected_world_to_camera, fitted_camera_correction, smoothed_corrections,
     CAMERA_CORRECTION_VALUES, TWIST_VALUES,
 };
 
@@ -155,7 +155,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             continue;
         }
         let index = truth.frames[k].index;
-        let correction = interpolated_camera_correction(&train_indices, &smoothed, index);
+        let correction = fitted_camera_correction(&train_indices, &smoothed, index);
         let twist: [f64; TWIST_VALUES] = std::array::from_fn(|i| f64::from(correction[i]));
         let camera = corrected_world_to_camera(&given_cams[k], &twist);
         let (deg, cm) = camera_error(&camera, &true_cams[k]);

@@ -268,7 +268,7 @@ fn the_image_basis_moves_the_cameras_otherwise_alike_on_any_thread_count_and_res
 }
 
 #[test]
-fn held_out_frames_take_the_camera_between_their_neighbours() {
+fn held_out_frames_take_the_camera_fitted_to_the_training_frames() {
     let ctx = context();
     let mut t = Trainer::new(&ctx, camera_config(4)).unwrap();
     let n = CAMERA_CORRECTION_VALUES;

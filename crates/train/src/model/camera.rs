@@ -5,7 +5,7 @@
 use super::{Model, Rendered};
 use crate::pose::body::PreparedPose;
 use crate::pose::camera_correction::{
-    corrected_world_to_camera, interpolated_camera_correction, smoothed_corrections, smoothed_row,
+    corrected_world_to_camera, fitted_camera_correction, smoothed_corrections, smoothed_row,
     twist_at, CAMERA_CORRECTION_VALUES, TWIST_VALUES,
 };
 use crate::TrainError;
@@ -60,10 +60,10 @@ impl Model {
     }
 
     /// The camera correction of frame `index` at mid exposure — a training frame's own, another
-    /// frame's fitted to the training frames nearest to it (`interpolated_camera_correction`) —
+    /// frame's fitted to the training frames nearest to it (`fitted_camera_correction`) —
     /// with the clip-wide twist (empty when camera correction is off).
     pub fn camera_correction_for(&self, index: u32) -> Vec<f32> {
-        self.with_gauge(interpolated_camera_correction(
+        self.with_gauge(fitted_camera_correction(
             &self.frame_indices,
             &smoothed_corrections(
                 &self.camera_corrections,

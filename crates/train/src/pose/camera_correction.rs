@@ -23,9 +23,9 @@
 //! tracker errs by, the view directions change by far less than a degree).
 //!
 //! **Held-out frames** take the mid-exposure correction of a least-squares line, in frame number,
-//! through the training frames nearest to them ([`interpolated_camera_correction`]), never fitted
-//! to held-out images. The regulariser is the pose
-//! correction's (`crate::pose::correction::knot_prior_terms`), one knot per training frame.
+//! through the training frames nearest to them ([`fitted_camera_correction`]), never fitted to
+//! held-out images. The regulariser is the pose correction's
+//! (`crate::pose::correction::knot_prior_terms`), one knot per training frame.
 //!
 //! **The gauge** (`TrainConfig::camera_gauge`): an offset common to every camera is nearly
 //! invisible to the static room, which can turn with the cameras and fit the images as well; only
@@ -173,7 +173,8 @@ pub fn correction_backward(d_twist: &[f64; TWIST_VALUES], offset: f32, grad: &mu
     }
 }
 
-/// Training frames a held-out frame's camera correction is fitted to ([`interpolated_camera_correction`]).
+/// Training frames a held-out frame's camera correction is fitted to
+/// ([`fitted_camera_correction`]).
 pub const HELD_OUT_FIT_FRAMES: usize = 8;
 
 /// The mid-exposure correction of frame `index` ([`CAMERA_CORRECTION_VALUES`] values, the change
@@ -184,7 +185,7 @@ pub const HELD_OUT_FIT_FRAMES: usize = 8;
 /// per-frame jitter; the line follows the drift and averages the jitter of the frames it is fitted
 /// to, where joining the two frames around `index` would carry their jitter into it (and hold the
 /// last one past the clip's ends). Empty when `corrections` is.
-pub fn interpolated_camera_correction(frames: &[u32], corrections: &[f32], index: u32) -> Vec<f32> {
+pub fn fitted_camera_correction(frames: &[u32], corrections: &[f32], index: u32) -> Vec<f32> {
     let n = CAMERA_CORRECTION_VALUES;
     if corrections.is_empty() || frames.is_empty() {
         return Vec::new();
@@ -467,12 +468,12 @@ mod tests {
         let frames: Vec<u32> = (0..30).filter(|f| f % 10 < 7).collect();
         let line = |f: u32| 0.25 + 0.125 * f as f32;
         let rows = rows_of(&frames, |f| line(f) + if f == 12 { 1.0 } else { 0.0 });
-        let own = interpolated_camera_correction(&frames, &rows, 12);
+        let own = fitted_camera_correction(&frames, &rows, 12);
         assert_eq!(own[..TWIST_VALUES], [line(12) + 1.0; TWIST_VALUES]);
         assert!(own[TWIST_VALUES..].iter().all(|&v| v == 0.0));
         let rows = rows_of(&frames, line);
         for index in [8, 9, 18, 27, 29, 40] {
-            let at = interpolated_camera_correction(&frames, &rows, index);
+            let at = fitted_camera_correction(&frames, &rows, index);
             assert_eq!(at.len(), CAMERA_CORRECTION_VALUES);
             for &v in &at[..TWIST_VALUES] {
                 assert!(
@@ -483,11 +484,8 @@ mod tests {
             }
             assert!(at[TWIST_VALUES..].iter().all(|&v| v == 0.0));
         }
-        assert_eq!(
-            interpolated_camera_correction(&[4], &rows[..12], 9)[0],
-            line(0)
-        );
-        assert!(interpolated_camera_correction(&frames, &[], 3).is_empty());
+        assert_eq!(fitted_camera_correction(&[4], &rows[..12], 9)[0], line(0));
+        assert!(fitted_camera_correction(&frames, &[], 3).is_empty());
     }
 
     /// The line averages the jitter of the frames it is fitted to: two neighbours 0.2 above a
@@ -500,7 +498,7 @@ mod tests {
         let rows = rows_of(&frames, |f| {
             line(f) + if f == 9 || f == 11 { 0.2 } else { 0.0 }
         });
-        let at = interpolated_camera_correction(&frames, &rows, 10);
+        let at = fitted_camera_correction(&frames, &rows, 10);
         assert!(
             (at[0] - (line(10) + 0.05)).abs() < 1e-6,
             "{} against {}",
