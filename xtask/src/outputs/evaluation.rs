@@ -363,6 +363,7 @@ fn per_frame_json(f: &train::eval::EvaluatedFrame, ids: &[u32]) -> serde_json::V
             "loss_after": a.loss_after,
             "rotation_deg": norm(&a.twist[..3]).to_degrees(),
             "translation_cm": norm(&a.twist[3..]) * 100.0,
+            "twist": a.twist,
         });
     }
     if !f.people.is_empty() {
