@@ -188,29 +188,6 @@ fn reconstruct_eval_and_render_pose_write_every_output() {
     assert!(String::from_utf8_lossy(&o.stdout)
         .contains(&format!("train split ({train_frames} frames)")));
 
-    // --align-test-cameras N aligns each scored frame's camera first and reports each twist.
-    let aligned_out = dir.path().join("aligned");
-    let (_, aligned) = eval(
-        &out,
-        &[
-            "--align-test-cameras",
-            "2",
-            "--out",
-            aligned_out.to_str().unwrap(),
-        ],
-        &aligned_out.join("metrics.json"),
-    );
-    assert_eq!(aligned["camera_alignment_steps"], 2);
-    let per_frame = aligned["per_frame"].as_array().unwrap();
-    assert_eq!(per_frame.len(), test_frames);
-    for entry in per_frame {
-        let a = &entry["camera_alignment"];
-        let twist = a["twist"].as_array().unwrap();
-        assert_eq!(twist.len(), 6, "{a}");
-        assert!(twist.iter().all(|v| v.as_f64().unwrap().is_finite()));
-        assert!(a["loss_after"].as_f64().unwrap() <= a["loss_before"].as_f64().unwrap());
-    }
-
     // render-pose: a new pose renders to a PNG and a posed PLY.
     let poses = dir.path().join("poses.json");
     let mut pose = vec![0.0f32; 72];
