@@ -1,7 +1,8 @@
 //! Learned camera correction on the tiny fixture: a correction that cannot move leaves the run's
 //! bits alone, a learning one moves the cameras (the change over the exposure too) whatever the
 //! thread count, resumes bit for bit, and held-out frames are rendered from the camera
-//! interpolated between their neighbours' corrections.
+//! interpolated between their neighbours' corrections; the scale prior keeps the corrections
+//! from following the given camera path.
 #![allow(clippy::unwrap_used)]
 
 use train::config::{CameraCorrectionBasis, CameraGauge, TrainConfig};
@@ -297,4 +298,42 @@ fn held_out_frames_take_the_camera_fitted_to_the_training_frames() {
     t.model.camera_corrections.fill(0.0);
     let zero = t.model.render_frame(b, &given, &pose, &latent).unwrap();
     assert_eq!(zero.rgb, plain.rgb);
+}
+
+#[test]
+fn the_scale_prior_keeps_the_corrections_off_the_given_path() {
+    use train::pose::camera_scale::{centre_deviations, scale_prior_terms};
+    let config = gauge_config(12);
+    let mut ctx = exposure_context(&config);
+    // The fixture's camera is bolted down: give each frame's camera a vertical path for the
+    // prior to see (the renders keep their cameras).
+    let frames = ctx.frames.len();
+    for (k, f) in ctx.frames.iter_mut().enumerate() {
+        f.camera.world_to_camera[1][3] += 0.02 * (k as f64 - 0.5 * frames as f64);
+    }
+    let trained = |weight: f32| {
+        let config = TrainConfig {
+            camera_scale_prior_weight: weight,
+            ..config.clone()
+        };
+        trained_alike_on_one_and_two_threads(&ctx, &config, 12)
+    };
+    let given: Vec<_> = ctx
+        .frames
+        .iter()
+        .map(|f| f.camera.world_to_camera)
+        .collect();
+    let deviations = centre_deviations(&given);
+    let along_the_path = |t: &Trainer| {
+        let rows: Vec<f64> = t
+            .model
+            .camera_corrections
+            .iter()
+            .map(|&v| f64::from(v))
+            .collect();
+        scale_prior_terms(&rows, &deviations, (1.0, 0.01), &mut vec![0.0; rows.len()])
+    };
+    let (free, held) = (along_the_path(&trained(0.0)), along_the_path(&trained(1e3)));
+    assert!(free > 0.0, "the free corrections follow no path: {free}");
+    assert!(held < 0.5 * free, "held {held} against free {free}");
 }

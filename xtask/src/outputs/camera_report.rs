@@ -29,6 +29,23 @@ pub struct CameraReport {
     pub test_given: CameraError,
     /// Held-out frames, corrected (interpolated corrections).
     pub test_corrected: Option<CameraError>,
+    /// Training frames, corrected: the scale of the corrected camera path against the true one
+    /// ([`path_scale`]; 1 = the true motion, below 1 a path that moves less).
+    pub train_corrected_path_scale: Option<[f64; 3]>,
+}
+
+/// Per camera axis (x right, y down, z forward), the least-squares slope of the `estimated`
+/// camera centres' deviations from their mean on the `truth`'s, each in its own camera's
+/// coordinates (`train::pose::camera_scale::centre_deviations`): how much of the true path's
+/// motion along that axis the estimated path makes. NaN on an axis the truth does not move along.
+pub fn path_scale(estimated: &[[[f64; 4]; 4]], truth: &[[[f64; 4]; 4]]) -> [f64; 3] {
+    use train::pose::camera_scale::centre_deviations;
+    let (a, b) = (centre_deviations(estimated), centre_deviations(truth));
+    std::array::from_fn(|axis| {
+        let along: f64 = a.iter().zip(&b).map(|(a, b)| a[axis] * b[axis]).sum();
+        let spread: f64 = b.iter().map(|b| b[axis] * b[axis]).sum();
+        along / spread
+    })
 }
 
 /// The report for `data`, or `None` when the scene has no `cameras_true.json`.
@@ -39,7 +56,7 @@ pub fn camera_report(data: &Dataset, model: &Model) -> Result<Option<CameraRepor
     }
     let truth =
         TrueCameras::read(&data.dir).with_context(|| format!("reading {}", path.display()))?;
-    let errors = |split: Split| -> Result<(CameraError, CameraError)> {
+    let errors = |split: Split| -> Result<(CameraError, CameraError, [f64; 3])> {
         let mut true_frames = Vec::new();
         let (mut given, mut corrected) = (Vec::new(), Vec::new());
         for f in data.frames.iter().filter(|f| f.split == split) {
@@ -63,17 +80,29 @@ pub fn camera_report(data: &Dataset, model: &Model) -> Result<Option<CameraRepor
                 centre_rms_cm,
             }
         };
-        Ok((error(&given), error(&corrected)))
+        let truth: Vec<_> = of_split.frames.iter().map(true_world_to_camera).collect();
+        Ok((
+            error(&given),
+            error(&corrected),
+            path_scale(&corrected, &truth),
+        ))
     };
-    let (train_given, train_corrected) = errors(Split::Train)?;
-    let (test_given, test_corrected) = errors(Split::Test)?;
+    let (train_given, train_corrected, train_scale) = errors(Split::Train)?;
+    let (test_given, test_corrected, _) = errors(Split::Test)?;
     let correcting = model.config.camera_correction;
     Ok(Some(CameraReport {
         train_given,
         train_corrected: correcting.then_some(train_corrected),
         test_given,
         test_corrected: correcting.then_some(test_corrected),
+        train_corrected_path_scale: correcting.then_some(train_scale),
     }))
+}
+
+/// A true camera's `world_to_camera` as a 4×4 rigid transform.
+fn true_world_to_camera(t: &synth::camera_error::TrueCamera) -> [[f64; 4]; 4] {
+    let r = &t.world_to_camera;
+    [r[0], r[1], r[2], [0.0, 0.0, 0.0, 1.0]]
 }
 
 /// The RMS error of the cameras `aligned` (frame index, world-to-camera; the held-out frames'
@@ -117,11 +146,17 @@ pub fn summary_line(r: &CameraReport) -> String {
     match (&r.train_corrected, &r.test_corrected) {
         (Some(train), Some(test)) => format!(
             "camera error (RMS rotation / centre, against cameras_true.json): training frames {} → \
-             {}, held-out frames {} → {}",
+             {}, held-out frames {} → {}{}",
             pair(&r.train_given),
             pair(train),
             pair(&r.test_given),
-            pair(test)
+            pair(test),
+            r.train_corrected_path_scale
+                .map(|s| format!(
+                    "; the corrected path moves {:.2} / {:.2} / {:.2} of the true one (x / y / z)",
+                    s[0], s[1], s[2]
+                ))
+                .unwrap_or_default()
         ),
         _ => format!(
             "camera error (RMS rotation / centre, against cameras_true.json): training frames {}, \
@@ -129,5 +164,36 @@ pub fn summary_line(r: &CameraReport) -> String {
             pair(&r.train_given),
             pair(&r.test_given)
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(centre: [f64; 3]) -> [[f64; 4]; 4] {
+        // Identity rotation: t = −c.
+        [
+            [1.0, 0.0, 0.0, -centre[0]],
+            [0.0, 1.0, 0.0, -centre[1]],
+            [0.0, 0.0, 1.0, -centre[2]],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    }
+
+    #[test]
+    fn a_path_that_moves_three_quarters_vertically_scales_by_three_quarters() {
+        let truth: Vec<_> = [[0.0, -0.02, 0.01], [0.01, 0.0, 0.0], [0.02, 0.02, -0.01]]
+            .map(at)
+            .to_vec();
+        let estimated: Vec<_> = [[0.0, -0.015, 0.01], [0.01, 0.0, 0.0], [0.02, 0.015, -0.01]]
+            .map(|c| at([c[0] + 0.3, c[1], c[2]]))
+            .to_vec();
+        let s = path_scale(&estimated, &truth);
+        assert!(
+            (s[0] - 1.0).abs() < 1e-12 && (s[2] - 1.0).abs() < 1e-12,
+            "{s:?}"
+        );
+        assert!((s[1] - 0.75).abs() < 1e-12, "{s:?}");
     }
 }

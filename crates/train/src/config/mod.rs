@@ -562,6 +562,18 @@ training_options! {
     camera_tracker_error_deg: f32 = 0.5,
     /// σ_v of the tracker prior: the tracker's typical camera-centre error (centimetres).
     camera_tracker_error_cm: f32 = 1.0,
+    /// λ of a prior on the scale of the corrected camera path (`train::pose::camera_scale`): the
+    /// mean square, in units of `camera_tracker_error_cm`, of the part of the corrections' shifts
+    /// that follows the given camera centres' own deviation from their clip mean, per camera
+    /// axis. A tracker errs by drift and jitter, not by rescaling the path it tracks; without the
+    /// prior the corrected cameras rise and fall a quarter less than the truth on `handheld-err`
+    /// while the room sits deeper (`docs/notes/2026-12-07-camera-height-drift.md`). 0 (the
+    /// default): no such prior. On `handheld-err` (`quick`, the estimated-camera settings of
+    /// `docs/BENCHMARKS.md`): 0.01 keeps the images (31.85 dB full frame against 31.84) with
+    /// cameras nearer the truth (centre 0.98 → 0.76 cm RMS, the path's vertical scale 0.72 →
+    /// 0.81); 0.1 gives 0.67 cm and 0.93 but 31.47 dB
+    /// (`docs/notes/2026-12-07-camera-scale-prior.md`).
+    camera_scale_prior_weight: f32 = 0.0,
     /// Whether camera correction also learns each exposure's change of the camera (with
     /// `blur_model = exposure`); off: the sub-exposure cameras keep the interpolated path and only
     /// move with the mid-exposure twist (+0.10 dB full frame with estimated cameras on

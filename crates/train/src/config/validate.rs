@@ -209,6 +209,7 @@ impl TrainConfig {
                 "camera_tracker_prior_weight",
                 self.camera_tracker_prior_weight,
             ),
+            ("camera_scale_prior_weight", self.camera_scale_prior_weight),
             ("skinning_weight", self.skinning_weight),
             ("aiap_position_weight", self.aiap_position_weight),
             ("aiap_covariance_weight", self.aiap_covariance_weight),

@@ -10,6 +10,7 @@ use crate::pose::camera_correction::{
     correction_backward, smoothing_weights, tracker_prior_terms, twist_at, twist_backward,
     CAMERA_CORRECTION_VALUES, TWIST_VALUES,
 };
+use crate::pose::camera_scale::{centre_deviations, scale_prior_terms};
 use crate::pose::correction::{exposure_offset, knot_prior_terms, CorrectionPrior};
 use crate::TrainError;
 use rasterize_cpu::{camera_pose_gradient, Camera};
@@ -128,7 +129,12 @@ impl CameraGradient {
     /// The gradient of the frames `frames` (slot, ∂L/∂ its correction, then the clip-wide twist's
     /// share as [`CorrectedCameras::gradient_len`] lays it out), with the prior's terms of each
     /// (weights of `config`).
-    pub fn of(model: &Model, config: &TrainConfig, frames: &[(usize, Vec<f64>)]) -> Self {
+    pub fn of(
+        model: &Model,
+        config: &TrainConfig,
+        data: &TrainingData,
+        frames: &[(usize, Vec<f64>)],
+    ) -> Self {
         let n = CAMERA_CORRECTION_VALUES;
         let mut values = vec![0.0f32; model.camera_corrections.len()];
         let mut slots = Vec::new();
@@ -174,6 +180,9 @@ impl CameraGradient {
                 prior_value += tracker_prior_terms(own, tracker, row);
             }
         }
+        if config.camera_scale_prior_weight > 0.0 {
+            prior_value += scale_prior(model, config, data, &slots, &mut values);
+        }
         for row in values.chunks_mut(n) {
             if !config.camera_correction_change {
                 row[n / 2..].fill(0.0);
@@ -194,6 +203,44 @@ impl CameraGradient {
     pub fn all_finite(&self) -> bool {
         self.values.iter().chain(&self.gauge).all(|v| v.is_finite()) && self.prior.is_finite()
     }
+}
+
+/// The scale prior's value (`crate::pose::camera_scale`) on every training frame's stored
+/// correction, its gradient added to the rows of `slots` (the step's) in `values`.
+fn scale_prior(
+    model: &Model,
+    config: &TrainConfig,
+    data: &TrainingData,
+    slots: &[usize],
+    values: &mut [f32],
+) -> f32 {
+    let n = CAMERA_CORRECTION_VALUES;
+    let given: Vec<[[f64; 4]; 4]> = data
+        .frames
+        .iter()
+        .map(|f| f.camera.world_to_camera)
+        .collect();
+    let deviations = centre_deviations(&given);
+    let stored: Vec<f64> = model
+        .camera_corrections
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect();
+    let mut grad = vec![0.0f64; stored.len()];
+    let weights = (
+        f64::from(config.camera_scale_prior_weight),
+        f64::from(config.camera_tracker_error_cm) / 100.0,
+    );
+    let value = scale_prior_terms(&stored, &deviations, weights, &mut grad);
+    for &slot in slots {
+        for (r, g) in values[slot * n..(slot + 1) * n]
+            .iter_mut()
+            .zip(&grad[slot * n..(slot + 1) * n])
+        {
+            *r += *g as f32;
+        }
+    }
+    value as f32
 }
 
 /// The image-motion basis of the camera corrections' steps (`crate::pose::camera_basis`), from the

@@ -355,7 +355,7 @@ impl Trainer {
             means_2d: k.means_2d,
             pass_norms: k.pass_norms,
             corrections: corrections.map(|g| (g, knots)),
-            cameras: cameras.map(|_| CameraGradient::of(model, config, &camera_frames)),
+            cameras: cameras.map(|_| CameraGradient::of(model, config, data, &camera_frames)),
             next_latent,
             aiap: k.aiap,
             skinning,
