@@ -28,6 +28,14 @@ pub struct TrueCamera {
     pub world_to_camera: [[f64; 4]; 3],
 }
 
+impl TrueCamera {
+    /// The true `world_to_camera` as a row-major 4×4 rigid transform.
+    pub fn matrix(&self) -> [[f64; 4]; 4] {
+        let r = &self.world_to_camera;
+        [r[0], r[1], r[2], [0.0, 0.0, 0.0, 1.0]]
+    }
+}
+
 /// The whole `cameras_true.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -157,13 +165,7 @@ pub fn rms_error(estimates: &[[[f64; 4]; 4]], truth: &TrueCameras) -> (f64, f64)
     let n = estimates.len().min(truth.frames.len()).max(1) as f64;
     let (mut deg2, mut cm2) = (0.0, 0.0);
     for (e, t) in estimates.iter().zip(&truth.frames) {
-        let t4 = [
-            t.world_to_camera[0],
-            t.world_to_camera[1],
-            t.world_to_camera[2],
-            [0.0, 0.0, 0.0, 1.0],
-        ];
-        let ((re, ce), (rt, ct)) = (split(e), split(&t4));
+        let ((re, ce), (rt, ct)) = (split(e), split(&t.matrix()));
         deg2 += re.angle_between(rt).to_degrees().powi(2);
         cm2 += (100.0 * (ce - ct).length()).powi(2);
     }

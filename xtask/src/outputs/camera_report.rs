@@ -4,7 +4,7 @@
 
 use anyhow::{Context, Result};
 use scene::Split;
-use synth::camera_error::{rms_error, TrueCameras};
+use synth::camera_error::{rms_error, TrueCamera, TrueCameras};
 use train::data::Dataset;
 use train::model::Model;
 
@@ -80,7 +80,7 @@ pub fn camera_report(data: &Dataset, model: &Model) -> Result<Option<CameraRepor
                 centre_rms_cm,
             }
         };
-        let truth: Vec<_> = of_split.frames.iter().map(true_world_to_camera).collect();
+        let truth: Vec<_> = of_split.frames.iter().map(TrueCamera::matrix).collect();
         Ok((
             error(&given),
             error(&corrected),
@@ -97,12 +97,6 @@ pub fn camera_report(data: &Dataset, model: &Model) -> Result<Option<CameraRepor
         test_corrected: correcting.then_some(test_corrected),
         train_corrected_path_scale: correcting.then_some(train_scale),
     }))
-}
-
-/// A true camera's `world_to_camera` as a 4×4 rigid transform.
-fn true_world_to_camera(t: &synth::camera_error::TrueCamera) -> [[f64; 4]; 4] {
-    let r = &t.world_to_camera;
-    [r[0], r[1], r[2], [0.0, 0.0, 0.0, 1.0]]
 }
 
 /// The RMS error of the cameras `aligned` (frame index, world-to-camera; the held-out frames'
