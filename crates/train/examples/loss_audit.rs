@@ -23,7 +23,7 @@ use train::data::edi::span_events;
 use train::data::{load_dataset, Dataset, TrainingData};
 use train::loss::event::{event_residual, LUMA};
 use train::loss::image::ImageShape;
-use train::loss::photometric::{exposure_loss, ExposureEvents, RenderPairs};
+use train::loss::photometric::{exposure_loss, ExposureEvents, PhotometricWeights, RenderPairs};
 use train::model::{PassCamera, PassPlan, RENDER_CHANNELS};
 use train::pose::exposure::{subframe_times, TrackRules};
 use train::trainer::Trainer;
@@ -310,7 +310,10 @@ fn audit(
             &renders,
             image,
             shape,
-            config.ssim_weight,
+            PhotometricWeights {
+                ssim: config.ssim_weight,
+                image_gradient: config.image_gradient_weight,
+            },
             Some(events),
             RENDER_CHANNELS,
             false,

@@ -383,6 +383,35 @@ fn the_exposure_model_with_events_inside_exposures_trains_and_ignores_the_thread
     assert_ne!(bits(&plain), one);
 }
 
+/// The image-gradient term (`image_gradient_weight`) reaches the trainer: the same exposure run
+/// with it ends elsewhere, with the same bits on one and two threads.
+#[test]
+fn the_image_gradient_term_trains_and_ignores_the_thread_count() {
+    let config = TrainConfig {
+        image_gradient_weight: 0.5,
+        ..exposure_events_config(4)
+    };
+    let ctx = exposure_context(&config);
+    let run = |config: &TrainConfig, threads: usize| {
+        with_threads(threads, || {
+            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
+            t.run(&ctx, 4, |_, r| {
+                assert!(r.loss.is_finite());
+                Ok(())
+            })
+            .unwrap();
+            bits(&t)
+        })
+    };
+    let with_term = run(&config, 1);
+    assert_same_bits(&with_term, &run(&config, 2));
+    let without = TrainConfig {
+        image_gradient_weight: 0.0,
+        ..config.clone()
+    };
+    assert_ne!(run(&without, 1), with_term);
+}
+
 #[test]
 fn event_pairs_inside_exposures_need_the_exposure_model() {
     let config = TrainConfig {

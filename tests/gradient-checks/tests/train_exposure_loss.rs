@@ -21,7 +21,13 @@ use proptest::prelude::*;
 use rand::Rng;
 use train::loss::event::EventPenalty;
 use train::loss::image::ImageShape;
-use train::loss::photometric::{exposure_loss, ExposureEvents, RenderPairs};
+use train::loss::photometric::{exposure_loss, ExposureEvents, PhotometricWeights, RenderPairs};
+
+/// λ = 0.2, μ = 0 (the image-gradient term has its own check, `train_image_gradient.rs`).
+const WEIGHTS: PhotometricWeights<f64> = PhotometricWeights {
+    ssim: 0.2,
+    image_gradient: 0.0,
+};
 
 const TOL: Tolerance = Tolerance::new(1e-9, 1e-6);
 const H: f64 = 1e-6;
@@ -60,7 +66,7 @@ fn value(
         &renders,
         observed,
         shape,
-        0.2,
+        WEIGHTS,
         Some(ExposureEvents {
             expected,
             weight: event_weight,
@@ -105,7 +111,15 @@ fn clear_of_l1_kinks(
         reach: 0,
         modulation,
     };
-    let out = exposure_loss(&renders, observed, shape, 0.2, Some(events), PLANES, grey);
+    let out = exposure_loss(
+        &renders,
+        observed,
+        shape,
+        WEIGHTS,
+        Some(events),
+        PLANES,
+        grey,
+    );
     out.prediction
         .iter()
         .zip(observed)

@@ -152,6 +152,12 @@ training_options! {
     /// the last step (1, the default: constant). 0.1 at `full`: +0.05 dB, not kept
     /// (`docs/notes/2026-12-05-full-gap-and-new-default-reruns.md`).
     ssim_weight_final_fraction: f32 = 1.0,
+    /// Weight μ of the image-gradient term added to the photometric loss: the L1 distance between
+    /// the finite differences (right and down neighbours) of the frame's prediction and of the
+    /// observed frame (`train::loss::image_gradient`). The blur averages the sharp image's fine
+    /// structure along the motion, so the photometric residual in it is small; this term weighs
+    /// the residual by its differences. 0 = off (the default).
+    image_gradient_weight: f32 = 0.0,
     /// Weight of the perceptual loss: LPIPS (AlexNet, v0.1, on sRGB-encoded images) of the frame's
     /// prediction (the mean of its sub-exposure renders) against the observed frame
     /// (`train::loss::perceptual`; 3DGS-Avatar's third term). 0 = off (no LPIPS work at all).

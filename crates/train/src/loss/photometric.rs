@@ -1,5 +1,6 @@
 //! The exposure model's image terms on one training frame, generic over f32 / f64 (the trainer runs
-//! f32; the gradient checks run f64): the photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) — of the mean
+//! f32; the gradient checks run f64): the photometric loss — (1 − λ)·L1 + λ·(1 − SSIM) + μ·G, G the
+//! L1 of the image gradients' residual (`train::loss::image_gradient`; μ = 0 by default) — of the mean
 //! of the frame's S sub-exposure renders against the observed frame, and the event-generation loss
 //! between consecutive renders against the events between their times (`train::loss::event`).
 //!
@@ -17,6 +18,7 @@
 
 use crate::loss::event::{pair_event_loss_pooled, pair_event_loss_reach, EventPenalty};
 use crate::loss::image::{l1, ssim, ImageShape};
+use crate::loss::image_gradient::image_gradient_l1;
 use nn::Real;
 use rayon::prelude::*;
 
@@ -62,15 +64,26 @@ pub enum RenderPairs {
     SilentSpans,
 }
 
+/// The weights of the photometric loss's terms.
+#[derive(Clone, Copy, Debug)]
+pub struct PhotometricWeights<T> {
+    /// λ of D-SSIM in (1 − λ)·L1 + λ·(1 − SSIM).
+    pub ssim: T,
+    /// μ of the image-gradient term G, added to the above (0: not computed).
+    pub image_gradient: T,
+}
+
 /// The value of the terms and the cotangent of every render.
 #[derive(Clone, Debug)]
 pub struct ExposureLoss<T> {
-    /// (1 − λ)·L1 + λ·(1 − SSIM) of the mean render.
+    /// (1 − λ)·L1 + λ·(1 − SSIM) + μ·G of the mean render.
     pub photometric: T,
     /// The L1 part.
     pub l1: T,
     /// The SSIM of the mean render.
     pub ssim: T,
+    /// G, the image-gradient term, unweighted (0 when μ = 0).
+    pub image_gradient: T,
     /// The weighted event-generation loss summed over the pairs (0 without events).
     pub events: T,
     /// The mean of the renders, (3, H, W).
@@ -80,7 +93,7 @@ pub struct ExposureLoss<T> {
 }
 
 /// The terms of one frame: `renders` are S planar (3, H, W) linear RGB images (each may carry
-/// further planes, ignored), `observed` the frame (3, H, W), `ssim_weight` λ; the cotangents are
+/// further planes, ignored), `observed` the frame (3, H, W), `weights` λ and μ; the cotangents are
 /// laid out with `channels` ≥ 3 planes (the trainer's renders carry the human probability as a
 /// fourth). With `grey` the frame is a grey one (three equal planes) and the photometric terms
 /// compare the luminance of the mean render ([`crate::loss::image::luminance3`]); the prediction
@@ -89,7 +102,7 @@ pub fn exposure_loss<T: Real>(
     renders: &[&[T]],
     observed: &[T],
     shape: ImageShape,
-    ssim_weight: T,
+    weights: PhotometricWeights<T>,
     events: Option<ExposureEvents<'_, T>>,
     channels: usize,
     grey: bool,
@@ -115,13 +128,21 @@ pub fn exposure_loss<T: Real>(
     let mut d_ssim = vec![T::zero(); 3 * hw];
     let l1_value = l1(&prediction, observed, Some(&mut d_l1));
     let ssim_value = ssim(&prediction, observed, shape, Some(&mut d_ssim));
-    let w = ssim_weight;
-    let photometric = (T::one() - w) * l1_value + w * (T::one() - ssim_value);
+    let w = weights.ssim;
+    let mut photometric = (T::one() - w) * l1_value + w * (T::one() - ssim_value);
     let mut d_mean = vec![T::zero(); channels.max(3) * hw];
     d_mean
         .par_iter_mut()
         .zip(d_l1.par_iter().zip(&d_ssim))
         .for_each(|(o, (&a, &b))| *o = (T::one() - w) * a - w * b);
+    let mut gradient_value = T::zero();
+    if weights.image_gradient != T::zero() {
+        let mut d_gradient = vec![T::zero(); 3 * hw];
+        let planes = (3, shape.height, shape.width);
+        gradient_value = image_gradient_l1(&prediction, observed, planes, Some(&mut d_gradient));
+        photometric = photometric + weights.image_gradient * gradient_value;
+        add_scaled(&mut d_mean[..3 * hw], &d_gradient, weights.image_gradient);
+    }
     if grey {
         d_mean = crate::loss::image::luminance3_backward(&d_mean, hw);
     }
@@ -192,6 +213,7 @@ pub fn exposure_loss<T: Real>(
         photometric,
         l1: l1_value,
         ssim: ssim_value,
+        image_gradient: gradient_value,
         events: event_value,
         prediction,
         d_renders,

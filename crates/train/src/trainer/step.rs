@@ -17,7 +17,7 @@ use crate::density::{add_ndc_norms, StepStatistics};
 use crate::eval::psnr;
 use crate::loss::image::ImageShape;
 use crate::loss::perceptual::perceptual_term;
-use crate::loss::photometric::{exposure_loss, ExposureEvents};
+use crate::loss::photometric::{exposure_loss, ExposureEvents, PhotometricWeights};
 use crate::model::{
     ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
 };
@@ -634,7 +634,10 @@ fn frame_losses(
         &renders,
         target,
         shape,
-        config.ssim_weight,
+        PhotometricWeights {
+            ssim: config.ssim_weight,
+            image_gradient: config.image_gradient_weight,
+        },
         events,
         passes
             .first()
