@@ -6,21 +6,15 @@
 use super::camera::{CameraGradient, CorrectedCameras};
 use super::correction::{self, CorrectedPoses};
 use super::terms::{
-    add_aiap_canonical, aiap_terms, pair_terms, skinning_term, PairSupervision, PairTerms,
+    add_aiap_canonical, aiap_terms, frame_losses, pair_terms, skinning_term, PairSupervision,
+    PairTerms,
 };
 use super::{add_to, all_finite, StageTimes, StepReport, Trainer};
-use crate::config::{
-    BlurModel, DensityGradient, EventPairs, ExposureNetworks, FlowGradient, TrainConfig,
-};
+use crate::config::{BlurModel, DensityGradient, ExposureNetworks, FlowGradient, TrainConfig};
 use crate::data::TrainingData;
 use crate::density::{add_ndc_norms, StepStatistics};
 use crate::eval::psnr;
-use crate::loss::image::ImageShape;
-use crate::loss::perceptual::perceptual_term;
-use crate::loss::photometric::{exposure_loss, ExposureEvents, PhotometricWeights};
-use crate::model::{
-    ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients, RENDER_CHANNELS,
-};
+use crate::model::{ExposurePasses, FramePass, Model, PassCamera, PassPlan, PosedGradients};
 use crate::pose::posing::ModelGradients;
 use crate::schedule::{event_weight_at, ssim_weight_at};
 use crate::TrainError;
@@ -54,20 +48,6 @@ struct FramePasses<'a> {
     reposed: bool,
     /// The tiles the passes share, blended once by the mid pass (`share_static_tiles`).
     sharing: Option<TileSharing>,
-}
-
-/// Frame k's image losses: the photometric loss of the passes' mean (with the events between its
-/// renders) and the optional LPIPS term, and the cotangent of every pass's render.
-struct FrameLosses {
-    photometric: f32,
-    l1: f32,
-    ssim: f32,
-    /// The weighted event-generation loss inside the exposure.
-    exposure_events: f32,
-    lpips: f32,
-    /// The mean of the renders (the frame's prediction).
-    prediction: Vec<f32>,
-    d_images: Vec<Vec<f32>>,
 }
 
 /// Frame k+1's pass and the pair losses between it and frame k's mid pass.
@@ -584,93 +564,6 @@ fn frame_passes<'a>(
 fn joint_backward_only(config: &TrainConfig) -> bool {
     config.density_gradient != DensityGradient::PerPass
         && !(config.flow_loss && config.flow_gradient == FlowGradient::Geometry)
-}
-
-/// The photometric loss of the passes' mean (its cotangent reaches every pass scaled by 1/S) with
-/// the events between consecutive sub-exposure renders, and the perceptual loss of the same
-/// prediction (its cotangent scaled likewise).
-fn frame_losses(
-    data: &TrainingData,
-    config: &TrainConfig,
-    slot: usize,
-    target: &[f32],
-    passes: &[FramePass<'_>],
-    times: &mut StageTimes,
-) -> Result<FrameLosses, TrainError> {
-    let (height, width) = (data.camera.height as usize, data.camera.width as usize);
-    let t0 = Instant::now();
-    let shape = ImageShape {
-        channels: 3,
-        height,
-        width,
-    };
-    let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
-    let exposure_events =
-        config.event_loss && config.event_pairs == EventPairs::Exposure && passes.len() > 1;
-    let modulated = config.event_modulation && config.blur_model == BlurModel::Exposure;
-    let events = if exposure_events || modulated {
-        Some(ExposureEvents {
-            expected: if exposure_events {
-                data.exposure_event_counts(slot)?
-            } else {
-                &[]
-            },
-            weight: config.event_weight,
-            penalty: config.event_penalty(),
-            log_eps: config.event_log_eps,
-            pairs: config.exposure_pairs.render_pairs(),
-            pool: config.event_pool as usize,
-            reach: config.event_reach as usize,
-            modulation: if modulated {
-                data.exposure_modulation(slot)?
-            } else {
-                &[]
-            },
-        })
-    } else {
-        None
-    };
-    let photo = exposure_loss(
-        &renders,
-        target,
-        shape,
-        PhotometricWeights {
-            ssim: config.ssim_weight,
-            image_gradient: config.image_gradient_weight,
-        },
-        events,
-        passes
-            .first()
-            .map_or(RENDER_CHANNELS, FramePass::render_channels),
-        data.grey,
-    );
-    let mut d_images = photo.d_renders;
-    times.loss = t0.elapsed().as_secs_f64();
-    let t0 = Instant::now();
-    let lpips = if config.lpips_weight > 0.0 {
-        perceptual_term(
-            data.lpips_network()?,
-            &photo.prediction,
-            target,
-            height,
-            width,
-            config.lpips_weight,
-            &mut d_images,
-            data.grey,
-        )?
-    } else {
-        0.0
-    };
-    times.lpips = t0.elapsed().as_secs_f64();
-    Ok(FrameLosses {
-        photometric: photo.photometric,
-        l1: photo.l1,
-        ssim: photo.ssim,
-        exposure_events: photo.events,
-        lpips,
-        prediction: photo.prediction,
-        d_images,
-    })
 }
 
 /// Frame k+1's pass (at its corrected pose and camera when `corrected` and `camera` are given)

@@ -1,21 +1,126 @@
-//! The loss terms of one training step, each returning its value and its cotangents (the frame's
-//! own photometric and in-exposure event terms are `crate::loss::photometric`): the pair losses (flow, events) between the passes of frames k and k+1,
+//! The loss terms of one training step, each returning its value and its cotangents: frame k's
+//! image terms (`frame_losses`: the photometric and in-exposure event terms of
+//! `crate::loss::photometric`, and the optional LPIPS term), the pair losses (flow, events) between the passes of frames k and k+1,
 //! the AIAP regulariser on the human Gaussians and the skinning loss on canonical surface samples.
 
-use crate::config::{EventPairs, FlowGradient, FlowMeasure, TrainConfig};
+use super::StageTimes;
+use crate::config::{BlurModel, EventPairs, FlowGradient, FlowMeasure, TrainConfig};
 use crate::data::{EventPair, FlowPair, TrainingData};
 use crate::loss::aiap::{aiap_loss, upper_triangle, upper_triangle_backward, AIAP_NEIGHBOURS};
 use crate::loss::event::pair_event_loss_with;
+use crate::loss::image::ImageShape;
 use crate::loss::optical_flow::{pair_flow_loss, pair_warp_loss};
-use crate::loss::photometric::add_scaled;
+use crate::loss::perceptual::perceptual_term;
+use crate::loss::photometric::{add_scaled, exposure_loss, ExposureEvents, PhotometricWeights};
 use crate::loss::sharpness::{opacity_entropy, size_prior};
-use crate::model::{Model, PosedGradients};
+use crate::model::{FramePass, Model, PosedGradients, RENDER_CHANNELS};
 use crate::pose::posing::{ModelGradients, PosedFrame};
 use crate::TrainError;
 use flow::SpyNet;
 use gaussians::covariance::{covariance_3d, covariance_3d_backward};
 use smpl_deform::deform_net::{skinning_loss, SkinningField};
 use std::time::Instant;
+
+/// Frame k's image losses: the photometric loss of the passes' mean (with the events between its
+/// renders) and the optional LPIPS term, and the cotangent of every pass's render.
+pub(super) struct FrameLosses {
+    pub photometric: f32,
+    pub l1: f32,
+    pub ssim: f32,
+    /// The weighted event-generation loss inside the exposure.
+    pub exposure_events: f32,
+    pub lpips: f32,
+    /// The mean of the renders (the frame's prediction).
+    pub prediction: Vec<f32>,
+    pub d_images: Vec<Vec<f32>>,
+}
+
+/// The photometric loss of the passes' mean (its cotangent reaches every pass scaled by 1/S) with
+/// the events between consecutive sub-exposure renders, and the perceptual loss of the same
+/// prediction (its cotangent scaled likewise).
+pub(super) fn frame_losses(
+    data: &TrainingData,
+    config: &TrainConfig,
+    slot: usize,
+    target: &[f32],
+    passes: &[FramePass<'_>],
+    times: &mut StageTimes,
+) -> Result<FrameLosses, TrainError> {
+    let (height, width) = (data.camera.height as usize, data.camera.width as usize);
+    let t0 = Instant::now();
+    let shape = ImageShape {
+        channels: 3,
+        height,
+        width,
+    };
+    let renders: Vec<&[f32]> = passes.iter().map(FramePass::rgb).collect();
+    let exposure_events =
+        config.event_loss && config.event_pairs == EventPairs::Exposure && passes.len() > 1;
+    let modulated = config.event_modulation && config.blur_model == BlurModel::Exposure;
+    let events = if exposure_events || modulated {
+        Some(ExposureEvents {
+            expected: if exposure_events {
+                data.exposure_event_counts(slot)?
+            } else {
+                &[]
+            },
+            weight: config.event_weight,
+            penalty: config.event_penalty(),
+            log_eps: config.event_log_eps,
+            pairs: config.exposure_pairs.render_pairs(),
+            pool: config.event_pool as usize,
+            reach: config.event_reach as usize,
+            modulation: if modulated {
+                data.exposure_modulation(slot)?
+            } else {
+                &[]
+            },
+        })
+    } else {
+        None
+    };
+    let photo = exposure_loss(
+        &renders,
+        target,
+        shape,
+        PhotometricWeights {
+            ssim: config.ssim_weight,
+            image_gradient: config.image_gradient_weight,
+        },
+        events,
+        passes
+            .first()
+            .map_or(RENDER_CHANNELS, FramePass::render_channels),
+        data.grey,
+    );
+    let mut d_images = photo.d_renders;
+    times.loss = t0.elapsed().as_secs_f64();
+    let t0 = Instant::now();
+    let lpips = if config.lpips_weight > 0.0 {
+        perceptual_term(
+            data.lpips_network()?,
+            &photo.prediction,
+            target,
+            height,
+            width,
+            config.lpips_weight,
+            &mut d_images,
+            data.grey,
+        )?
+    } else {
+        0.0
+    };
+    times.lpips = t0.elapsed().as_secs_f64();
+    Ok(FrameLosses {
+        photometric: photo.photometric,
+        l1: photo.l1,
+        ssim: photo.ssim,
+        exposure_events: photo.events,
+        lpips,
+        prediction: photo.prediction,
+        d_images,
+    })
+}
 
 /// The supervision of the pair (k, k+1) that a step uses, if any.
 pub(super) struct PairSupervision<'a> {
