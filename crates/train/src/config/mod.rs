@@ -156,7 +156,8 @@ training_options! {
     /// the finite differences (right and down neighbours) of the frame's prediction and of the
     /// observed frame (`train::loss::image_gradient`). The blur averages the sharp image's fine
     /// structure along the motion, so the photometric residual in it is small; this term weighs
-    /// the residual by its differences. 0 = off (the default).
+    /// the residual by its differences. 0 = off (the default): 0.5 gives +0.07 dB in the human
+    /// box at `quick` and −0.21 at `full` (`docs/notes/2026-12-07-image-gradient-term.md`).
     image_gradient_weight: f32 = 0.0,
     /// Weight of the perceptual loss: LPIPS (AlexNet, v0.1, on sRGB-encoded images) of the frame's
     /// prediction (the mean of its sub-exposure renders) against the observed frame
