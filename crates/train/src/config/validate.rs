@@ -70,9 +70,7 @@ impl TrainConfig {
         if !(self.ssim_weight_final_fraction > 0.0 && self.ssim_weight_final_fraction <= 1.0) {
             return bad("ssim_weight_final_fraction", "must be in (0, 1]");
         }
-        if !(self.image_gradient_weight.is_finite() && self.image_gradient_weight >= 0.0) {
-            return bad("image_gradient_weight", "must be finite and ≥ 0");
-        }
+        non_negative("image_gradient_weight", self.image_gradient_weight)?;
         non_negative("lpips_weight", self.lpips_weight)?;
         non_negative("flow_weight", self.flow_weight)?;
         non_negative("flow_tau", self.flow_tau)?;

@@ -27,30 +27,31 @@ pub fn image_gradient_l1<T: Float>(
     }
     let per = T::one() / T::from(count).unwrap_or_else(T::one);
     let residual = |i: usize| pred[i] - target[i];
-    let sign = |d: T| {
-        if d > T::zero() {
-            per
-        } else if d < T::zero() {
-            -per
-        } else {
-            T::zero()
+    let mut sum = T::zero();
+    let mut step = |i: usize, j: usize| {
+        let d = residual(j) - residual(i);
+        sum = sum + d.abs();
+        if let Some(g) = grad.as_deref_mut() {
+            let s = if d > T::zero() {
+                per
+            } else if d < T::zero() {
+                -per
+            } else {
+                T::zero()
+            };
+            g[j] = g[j] + s;
+            g[i] = g[i] - s;
         }
     };
-    let mut sum = T::zero();
     for c in 0..channels {
         for y in 0..height {
             for x in 0..width {
                 let i = c * hw + y * width + x;
-                // The step to the right neighbour, then to the one below.
-                let steps = [(x + 1 < width, i + 1), (y + 1 < height, i + width)];
-                for (_, j) in steps.into_iter().filter(|&(inside, _)| inside) {
-                    let d = residual(j) - residual(i);
-                    sum = sum + d.abs();
-                    if let Some(g) = grad.as_deref_mut() {
-                        let s = sign(d);
-                        g[j] = g[j] + s;
-                        g[i] = g[i] - s;
-                    }
+                if x + 1 < width {
+                    step(i, i + 1);
+                }
+                if y + 1 < height {
+                    step(i, i + width);
                 }
             }
         }

@@ -1,9 +1,9 @@
 //! The method's losses, each with its backward: the photometric loss of a frame (the mean of its
 //! sub-exposure renders against the observation; one render with `blur_model = none`), the image
-//! terms it is made of (L1, SSIM, the optional image-gradient L1), the event-generation loss, the flow loss, the perceptual (LPIPS)
-//! loss, the as-isometric-as-possible regulariser of the human Gaussians and the priors on their
-//! size and opacity (`sharpness`). The trainer weights
-//! and sums them (`trainer::terms`).
+//! terms it is made of (L1, SSIM, the optional image-gradient L1), the event-generation loss, the
+//! flow loss, the perceptual (LPIPS) loss, the as-isometric-as-possible regulariser of the human
+//! Gaussians and the priors on their size and opacity (`sharpness`). The trainer weights and sums
+//! them (`trainer::terms`).
 
 pub mod aiap;
 pub mod event;

@@ -82,8 +82,6 @@ pub struct ExposureLoss<T> {
     pub l1: T,
     /// The SSIM of the mean render.
     pub ssim: T,
-    /// G, the image-gradient term, unweighted (0 when μ = 0).
-    pub image_gradient: T,
     /// The weighted event-generation loss summed over the pairs (0 without events).
     pub events: T,
     /// The mean of the renders, (3, H, W).
@@ -135,12 +133,11 @@ pub fn exposure_loss<T: Real>(
         .par_iter_mut()
         .zip(d_l1.par_iter().zip(&d_ssim))
         .for_each(|(o, (&a, &b))| *o = (T::one() - w) * a - w * b);
-    let mut gradient_value = T::zero();
     if weights.image_gradient != T::zero() {
         let mut d_gradient = vec![T::zero(); 3 * hw];
         let planes = (3, shape.height, shape.width);
-        gradient_value = image_gradient_l1(&prediction, observed, planes, Some(&mut d_gradient));
-        photometric = photometric + weights.image_gradient * gradient_value;
+        let g = image_gradient_l1(&prediction, observed, planes, Some(&mut d_gradient));
+        photometric = photometric + weights.image_gradient * g;
         add_scaled(&mut d_mean[..3 * hw], &d_gradient, weights.image_gradient);
     }
     if grey {
@@ -213,7 +210,6 @@ pub fn exposure_loss<T: Real>(
         photometric,
         l1: l1_value,
         ssim: ssim_value,
-        image_gradient: gradient_value,
         events: event_value,
         prediction,
         d_renders,
