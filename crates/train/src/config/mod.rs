@@ -223,7 +223,10 @@ training_options! {
     density_gradient: DensityGradient = DensityGradient::Summed,
     /// Gaussians with opacity below this are pruned (3DGS-Avatar: 0.05, 3DGS: 0.005).
     prune_min_opacity: f32 = 0.005,
-    /// Steps between opacity resets (0: never).
+    /// Steps between opacity resets (0: never). `full` resets at step 3000, which its default
+    /// needs: without it 38.73 / 34.09 dB (full frame / human box, −0.51 in the box); a reset at
+    /// `quick`'s step 600 costs its default 0.22 dB and its sharp-trained ceiling 0.51
+    /// (`docs/notes/2026-12-07-opacity-reset-and-decay-start.md`).
     opacity_reset_every: usize = 0,
     /// Steps between checkpoints (0: only at the end).
     checkpoint_every: usize = 500,
@@ -348,7 +351,9 @@ training_options! {
     /// `full` (34.03 → 34.60), +0.18 / +0.48 / +0.29 dB on seeds 0 / 1 / 2 at `quick` (LPIPS
     /// 3–5 % higher; 1 before; `docs/notes/2026-12-05-burst-reading-and-full-audit.md`).
     event_weight_final_fraction: f32 = 0.1,
-    /// The step where the event weight starts to decay (see `event_weight_final_fraction`).
+    /// The step where the event weight starts to decay (see `event_weight_final_fraction`). At
+    /// `full` from step 2000 instead of 4000: 38.53 / 33.89 dB (−0.71 in the human box;
+    /// `docs/notes/2026-12-07-opacity-reset-and-decay-start.md`).
     event_weight_decay_from: usize = 900,
     /// Contrast threshold C of the camera (log-intensity units): 0.2, the benchmark simulator's;
     /// `cargo xtask reconstruct` takes the one the scene's generator recorded
