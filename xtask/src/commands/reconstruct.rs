@@ -86,6 +86,8 @@ pub struct Args {
     /// Score the held-out frames every N steps (and at the end) while training: mean PSNR and
     /// SSIM, full frame and human box, and mask IoU, one JSON line per point in
     /// OUT/eval_curve.jsonl (no LPIPS). 0 = off. The model is only read: same bits either way.
+    /// A point on a step with a density-control pass or an opacity reset is scored right after
+    /// it, and reads low (freshly split or faded Gaussians).
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub eval_every: usize,
     /// In the final evaluation, align each held-out frame's camera to its observed (blurred)
