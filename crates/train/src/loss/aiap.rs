@@ -49,13 +49,7 @@ pub fn aiap_loss<T: Float, const D: usize>(
             let (dd, vd) = dist(&deformed[i], &deformed[j]);
             let diff = dc - dd;
             total = total + diff.abs();
-            let sign = if diff > T::zero() {
-                T::one()
-            } else if diff < T::zero() {
-                -T::one()
-            } else {
-                T::zero()
-            };
+            let sign = super::l1_slope(diff, T::one());
             if let Some(g) = d_canonical.as_deref_mut() {
                 if dc > T::zero() {
                     for a in 0..D {

@@ -106,13 +106,7 @@ pub fn l1<T: Float + Send + Sync>(pred: &[T], target: &[T], grad: Option<&mut [T
     if let Some(g) = grad {
         for ((g, &p), &t) in g.iter_mut().zip(pred).zip(target) {
             let d = p - t;
-            *g = if d > T::zero() {
-                T::one() / n
-            } else if d < T::zero() {
-                -T::one() / n
-            } else {
-                T::zero()
-            };
+            *g = super::l1_slope(d, T::one() / n);
         }
     }
     sum / n

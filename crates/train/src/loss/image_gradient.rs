@@ -32,13 +32,7 @@ pub fn image_gradient_l1<T: Float>(
         let d = residual(j) - residual(i);
         sum = sum + d.abs();
         if let Some(g) = grad.as_deref_mut() {
-            let s = if d > T::zero() {
-                per
-            } else if d < T::zero() {
-                -per
-            } else {
-                T::zero()
-            };
+            let s = super::l1_slope(d, per);
             g[j] = g[j] + s;
             g[i] = g[i] - s;
         }

@@ -13,3 +13,18 @@ pub mod optical_flow;
 pub mod perceptual;
 pub mod photometric;
 pub mod sharpness;
+
+/// The derivative of `slope·|d|` in `d`: `slope` where `d > 0`, `−slope` where `d < 0`, and 0 at
+/// `d = 0` (and for NaN), the subgradient every L1 term of the method takes.
+pub(crate) fn l1_slope<T>(d: T, slope: T) -> T
+where
+    T: Copy + PartialOrd + num_traits::Zero + std::ops::Neg<Output = T>,
+{
+    if d > T::zero() {
+        slope
+    } else if d < T::zero() {
+        -slope
+    } else {
+        T::zero()
+    }
+}

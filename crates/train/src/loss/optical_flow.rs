@@ -137,13 +137,7 @@ pub fn masked_l1<T: Real>(pred: &[T], target: &FlowTarget<T>, grad: Option<&mut 
             let d = pred[i] - target.flow[i];
             total = total + d.abs();
             if let Some(g) = grad.as_deref_mut() {
-                g[i] = if d > T::zero() {
-                    inv
-                } else if d < T::zero() {
-                    -inv
-                } else {
-                    T::zero()
-                };
+                g[i] = super::l1_slope(d, inv);
             }
         }
     }
@@ -300,13 +294,7 @@ pub fn pair_warp_loss<T: Real>(
                 let i = c * plane + p;
                 let r = small[0][i] - warped[i];
                 loss = loss + r.abs();
-                let g = if r > T::zero() {
-                    inv
-                } else if r < T::zero() {
-                    -inv
-                } else {
-                    T::zero()
-                };
+                let g = super::l1_slope(r, inv);
                 d_small_first[i] = g;
                 d_warped[i] = -g;
                 signature = fold_sign(signature, r > T::zero(), i);
