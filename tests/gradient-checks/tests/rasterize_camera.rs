@@ -1,10 +1,19 @@
 //! Checks of the camera's gradients through the rasterizer: `camera_pose_gradient` (a left twist
 //! of the camera) and the learned camera correction chained through it, against central
 //! differences of `render_cov`. Tolerances and probe validation as in `rasterize.rs`.
+//!
+//! Each check must be able to fail: the negated gradient fails every case with a numeric
+//! derivative above twice the tolerance, and one injected error per check (a missing term) fails
+//! at least 90 % of the cases over the run (a case can hold Gaussians for which that term is
+//! below the tolerance).
 
 mod raster_support;
 
+use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+
+use gradient_checks::compare;
 use proptest::prelude::*;
+use proptest::test_runner::TestCaseError;
 use rand::Rng;
 use raster_support::*;
 
@@ -12,6 +21,52 @@ use raster_support::*;
 /// check's absolute tolerance of zero (a scene, or subset, the camera does not see).
 fn seen(num: &[f64], kept: &[f64]) -> bool {
     kept.iter().any(|&a| a != 0.0) || num.iter().any(|&n| n.abs() > FD_TOL.abs)
+}
+
+/// Whether the comparison rejects `analytic` against `numeric` under `FD_TOL`.
+fn rejected(numeric: &[f64], analytic: &[f64]) -> bool {
+    !compare("injected", numeric, analytic, FD_TOL).passed()
+}
+
+/// Asserts that the negated `analytic` fails against `numeric` when some numeric derivative is
+/// beyond twice the tolerance (a wrong sign cannot pass).
+fn negation_fails(name: &str, numeric: &[f64], analytic: &[f64]) -> Result<(), TestCaseError> {
+    let negated: Vec<f64> = analytic.iter().map(|a| -a).collect();
+    let visible = numeric.iter().any(|n| n.abs() > 2.0 * FD_TOL.abs);
+    prop_assert!(
+        !visible || rejected(numeric, &negated),
+        "{name}: the negated gradient passes"
+    );
+    Ok(())
+}
+
+/// How often an injected error was caught over a property test's run: judged, once `min_cases`
+/// cases were counted, on every case so far (≥ 90 % caught).
+struct CatchTally {
+    min_cases: usize,
+    cases: AtomicUsize,
+    caught: AtomicUsize,
+}
+
+impl CatchTally {
+    const fn new(min_cases: usize) -> Self {
+        Self {
+            min_cases,
+            cases: AtomicUsize::new(0),
+            caught: AtomicUsize::new(0),
+        }
+    }
+
+    /// Counts one case; `Err` when over at least `min_cases` cases fewer than 90 % were caught.
+    fn add(&self, name: &str, caught: bool) -> Result<(), TestCaseError> {
+        let all = self.cases.fetch_add(1, Relaxed) + 1;
+        let hits = self.caught.fetch_add(usize::from(caught), Relaxed) + usize::from(caught);
+        prop_assert!(
+            all < self.min_cases || hits * 10 >= all * 9,
+            "{name}: the check caught the injected error in only {hits} of {all} cases"
+        );
+        Ok(())
+    }
 }
 
 proptest! {
@@ -33,7 +88,7 @@ proptest! {
             .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
         let base = oracle(&s, None).decisions;
         let (mut probes, mut valid) = (0usize, 0usize);
-        let (mut num, mut kept) = (Vec::new(), Vec::new());
+        let (mut num, mut kept, mut valid_axes) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..6 {
             probes += 1;
             let moved = |t: f64| {
@@ -49,6 +104,7 @@ proptest! {
                 continue;
             }
             valid += 1;
+            valid_axes.push(k);
             num.push(central_differences(|t| cov_loss(&moved(t[0]), &cot), &[0.0], FD_H)[0]);
             kept.push(ana[k]);
         }
@@ -57,6 +113,14 @@ proptest! {
         prop_assume!(seen(&num, &kept));
         let mut checker = GradientChecker::new();
         checker.check("camera twist (ω, v) vs FD", &num, &kept, FD_TOL);
+        negation_fails("camera twist", &num, &kept)?;
+        // Injected: the covariances' share dropped (a rotating camera turns every footprint).
+        let no_cov_terms = vec![[[0.0; 3]; 3]; s.n()];
+        let without = camera_pose_gradient(&s.cam, &s.means, &covs, &g.means, &no_cov_terms)
+            .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
+        let injected: Vec<f64> = valid_axes.iter().map(|&k| without[k]).collect();
+        static CAUGHT: CatchTally = CatchTally::new(10);
+        CAUGHT.add("camera twist without the covariance term", rejected(&num, &injected))?;
         static TALLY: ProbeTally = ProbeTally::new(30);
         let tally = TALLY.add(probes, valid);
         prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
@@ -101,7 +165,7 @@ proptest! {
         correction_backward(&twist_backward(&d_left, &twist(&correction)), offset as f32, &mut ana);
         let base_decisions = oracle(&s0, None).decisions;
         let (mut probes, mut valid) = (0usize, 0usize);
-        let (mut num, mut kept) = (Vec::new(), Vec::new());
+        let (mut num, mut kept, mut valid_values) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..12 {
             probes += 1;
             let moved = |t: f64| {
@@ -115,6 +179,7 @@ proptest! {
                 continue;
             }
             valid += 1;
+            valid_values.push(k);
             num.push(central_differences(|t| cov_loss(&moved(t[0]), &cot), &[0.0], FD_H)[0]);
             kept.push(ana[k]);
         }
@@ -123,6 +188,13 @@ proptest! {
         prop_assume!(seen(&num, &kept));
         let mut checker = GradientChecker::new();
         checker.check("camera correction (mid ω, v; change ω, v) vs FD", &num, &kept, FD_TOL);
+        negation_fails("camera correction", &num, &kept)?;
+        // Injected: the twist's backward skipped (the left Jacobian and the v × g_v term lost).
+        let mut without = vec![0.0; 12];
+        correction_backward(&d_left, offset as f32, &mut without);
+        let injected: Vec<f64> = valid_values.iter().map(|&k| without[k]).collect();
+        static CAUGHT: CatchTally = CatchTally::new(10);
+        CAUGHT.add("camera correction without the twist's Jacobian", rejected(&num, &injected))?;
         static TALLY: ProbeTally = ProbeTally::new(60);
         let tally = TALLY.add(probes, valid);
         prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
@@ -210,7 +282,7 @@ proptest! {
         };
         let base = oracle(&s, None).decisions;
         let (mut probes, mut valid) = (0usize, 0usize);
-        let (mut num, mut kept) = (Vec::new(), Vec::new());
+        let (mut num, mut kept, mut valid_axes) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..6 {
             probes += 1;
             if oracle(&moved(k, FD_H), None).decisions != base
@@ -219,6 +291,7 @@ proptest! {
                 continue;
             }
             valid += 1;
+            valid_axes.push(k);
             num.push(central_differences(|t| cov_loss(&moved(k, t[0]), &cot), &[0.0], FD_H)[0]);
             kept.push(ana[k]);
         }
@@ -227,6 +300,15 @@ proptest! {
         prop_assume!(seen(&num, &kept));
         let mut checker = GradientChecker::new();
         checker.check("a subset's camera twist (ω, v) vs FD", &num, &kept, FD_TOL);
+        negation_fails("a subset's camera twist", &num, &kept)?;
+        // Injected: every Gaussian's share (the others moved with the camera instead of staying).
+        let whole = camera_pose_gradient(&s.cam, &s.means, &covs, &g.means, &g.covariances)
+            .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
+        if subset.len() < n {
+            let injected: Vec<f64> = valid_axes.iter().map(|&k| whole[k]).collect();
+            static CAUGHT: CatchTally = CatchTally::new(10);
+            CAUGHT.add("a subset's camera twist from the whole set", rejected(&num, &injected))?;
+        }
         static TALLY: ProbeTally = ProbeTally::new(30);
         let tally = TALLY.add(probes, valid);
         prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
