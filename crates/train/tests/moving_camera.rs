@@ -1,7 +1,9 @@
 //! The exposure model with a moving camera (#46) on the tiny fixture, its frames' cameras moved
 //! along a path: every sub-exposure render is drawn from the camera interpolated at its time
 //! (`CameraTrack`), with the events between the renders and each frame's camera corrected; the
-//! run gives the same bits on one and two threads and resumes bit for bit.
+//! run gives the same bits on one and two threads and resumes bit for bit. And a scene of format
+//! 2 whose frames all give the scene camera's pose is a fixed camera: it trains the bits of the
+//! same scene in format 1.
 #![allow(clippy::unwrap_used)]
 
 use smpl_deform::BodyModel;
@@ -77,4 +79,58 @@ fn a_moving_camera_trains_alike_on_any_thread_count_and_resumes_bit_for_bit() {
     assert!(bits(&one).iter().all(|&b| f32::from_bits(b).is_finite()));
     assert!(one.model.camera_corrections.iter().any(|&v| v != 0.0));
     resume_is_bit_identical(&ctx, moving_config(16));
+}
+
+/// Trains `steps` steps of the exposure model with events on the scene at `dir` (fixed camera or
+/// not) and returns the bits.
+fn trained_bits(dir: &std::path::Path, steps: usize) -> Vec<u32> {
+    let config = exposure_events_config(steps);
+    let data = load_dataset(dir).unwrap();
+    let body = Body::new(
+        BodyModel::builtin_makehuman().unwrap(),
+        data.scene.body.betas.clone(),
+    )
+    .unwrap();
+    let mut ctx = TrainingData::new(&data, body, 0).unwrap();
+    ctx.enable_exposure(&data, config.subframes, TrackRules::of(&config))
+        .unwrap();
+    ctx.enable_exposure_events(&data, &config).unwrap();
+    let mut t = Trainer::new(&ctx, config).unwrap();
+    t.run(&ctx, steps, |_, _| Ok(())).unwrap();
+    bits(&t)
+}
+
+/// Copies the directory `from` to `to`, recursively.
+fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
+
+#[test]
+fn a_format_2_scene_whose_frames_keep_the_scene_camera_trains_the_format_1_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("tiny-v2");
+    copy_dir(&fixture(), &copy);
+    let path = copy.join("scene.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let pose = json["camera"]["world_to_camera"].clone();
+    json["format_version"] = serde_json::json!(scene::FORMAT_VERSION_MOVING_CAMERA);
+    for frame in json["frames"].as_array_mut().unwrap() {
+        frame["world_to_camera"] = pose.clone();
+    }
+    std::fs::write(&path, serde_json::to_string(&json).unwrap()).unwrap();
+    let v2 = load_dataset(&copy).unwrap();
+    assert_eq!(v2.scene.format_version, scene::FORMAT_VERSION_MOVING_CAMERA);
+    assert!(v2.scene.frames.iter().all(|f| f.world_to_camera.is_some()));
+    assert!(!v2.camera_moves);
+    assert_same_bits(&trained_bits(&fixture(), 8), &trained_bits(&copy, 8));
 }
