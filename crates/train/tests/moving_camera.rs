@@ -6,11 +6,8 @@
 //! same scene in format 1.
 #![allow(clippy::unwrap_used)]
 
-use smpl_deform::BodyModel;
 use train::config::TrainConfig;
 use train::data::{load_dataset, TrainingData};
-use train::pose::body::Body;
-use train::pose::exposure::TrackRules;
 use train::trainer::Trainer;
 
 mod common;
@@ -42,16 +39,7 @@ fn moving_context(config: &TrainConfig) -> TrainingData {
         m[1][3] += 0.003 * k as f64;
     }
     data.camera_moves = true;
-    let body = Body::new(
-        BodyModel::builtin_makehuman().unwrap(),
-        data.scene.body.betas.clone(),
-    )
-    .unwrap();
-    let mut ctx = TrainingData::new(&data, body, 0).unwrap();
-    ctx.enable_exposure(&data, config.subframes, TrackRules::of(config))
-        .unwrap();
-    ctx.enable_exposure_events(&data, config).unwrap();
-    ctx
+    exposure_data(&data, builtin_body(&data), config)
 }
 
 #[test]
@@ -86,32 +74,10 @@ fn a_moving_camera_trains_alike_on_any_thread_count_and_resumes_bit_for_bit() {
 fn trained_bits(dir: &std::path::Path, steps: usize) -> Vec<u32> {
     let config = exposure_events_config(steps);
     let data = load_dataset(dir).unwrap();
-    let body = Body::new(
-        BodyModel::builtin_makehuman().unwrap(),
-        data.scene.body.betas.clone(),
-    )
-    .unwrap();
-    let mut ctx = TrainingData::new(&data, body, 0).unwrap();
-    ctx.enable_exposure(&data, config.subframes, TrackRules::of(&config))
-        .unwrap();
-    ctx.enable_exposure_events(&data, &config).unwrap();
+    let ctx = exposure_data(&data, builtin_body(&data), &config);
     let mut t = Trainer::new(&ctx, config).unwrap();
     t.run(&ctx, steps, |_, _| Ok(())).unwrap();
     bits(&t)
-}
-
-/// Copies the directory `from` to `to`, recursively.
-fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), &target).unwrap();
-        }
-    }
 }
 
 #[test]

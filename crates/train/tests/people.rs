@@ -6,25 +6,10 @@
 
 use std::path::Path;
 use train::data::{load_dataset, TrainingData};
-use train::pose::exposure::TrackRules;
 use train::trainer::Trainer;
 
 mod common;
 use common::*;
-
-/// Copies the directory `from` into `to` (files and folders).
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
-}
 
 /// The fixture with a second person (id 7, other betas) beside the first in every frame.
 fn two_people_scene(dir: &Path) {
@@ -52,11 +37,7 @@ fn two_people_context(dir: &Path, config: &train::config::TrainConfig) -> Traini
     two_people_scene(dir);
     let data = load_dataset(dir).unwrap();
     assert_eq!(data.people(), 2);
-    let mut ctx = TrainingData::new(&data, data.body().unwrap(), 0).unwrap();
-    ctx.enable_exposure(&data, config.subframes, TrackRules::of(config))
-        .unwrap();
-    ctx.enable_exposure_events(&data, config).unwrap();
-    ctx
+    exposure_data(&data, data.body().unwrap(), config)
 }
 
 #[test]

@@ -5,8 +5,8 @@
 use smpl_deform::BodyModel;
 use std::path::PathBuf;
 use train::config::{Preset, TrainConfig};
-use train::data::load_dataset;
 use train::data::TrainingData;
+use train::data::{load_dataset, Dataset};
 use train::pose::body::Body;
 use train::pose::exposure::TrackRules;
 use train::trainer::Trainer;
@@ -19,12 +19,21 @@ pub fn fixture() -> PathBuf {
 /// The fixture's training data with the built-in body.
 pub fn context() -> TrainingData {
     let data = load_dataset(&fixture()).unwrap();
-    let body = Body::new(
-        BodyModel::builtin_makehuman().unwrap(),
-        data.scene.body.betas.clone(),
-    )
-    .unwrap();
-    TrainingData::new(&data, body, 0).unwrap()
+    TrainingData::new(&data, builtin_body(&data), 0).unwrap()
+}
+
+/// Copies the directory `from` into `to` (files and folders).
+pub fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
 }
 
 /// A configuration small enough for a test: `steps` steps of a few hundred Gaussians.
@@ -115,10 +124,25 @@ pub fn assert_same_bits(a: &[u32], b: &[u32]) {
 /// A context with sub-exposure poses and the events between them.
 pub fn exposure_context(config: &TrainConfig) -> TrainingData {
     let data = load_dataset(&fixture()).unwrap();
-    let mut ctx = context();
-    ctx.enable_exposure(&data, config.subframes, TrackRules::of(config))
+    exposure_data(&data, builtin_body(&data), config)
+}
+
+/// The built-in body with the scene's shape.
+pub fn builtin_body(data: &Dataset) -> Body {
+    Body::new(
+        BodyModel::builtin_makehuman().unwrap(),
+        data.scene.body.betas.clone(),
+    )
+    .unwrap()
+}
+
+/// The training data of `data` posed with `body`, with the sub-exposure poses (and cameras,
+/// when the camera moves) of `config`'s exposure model and the events between them.
+pub fn exposure_data(data: &Dataset, body: Body, config: &TrainConfig) -> TrainingData {
+    let mut ctx = TrainingData::new(data, body, 0).unwrap();
+    ctx.enable_exposure(data, config.subframes, TrackRules::of(config))
         .unwrap();
-    ctx.enable_exposure_events(&data, config).unwrap();
+    ctx.enable_exposure_events(data, config).unwrap();
     ctx
 }
 
