@@ -404,18 +404,11 @@ fn a_colmap_model_of_turned_cameras_imports_them_within_1e_9() {
     let s = scene::load(&out).unwrap();
     assert_eq!(s.frames.len(), names.len());
     for (f, (axis, angle, t)) in s.frames.iter().zip(&truth) {
-        let k = [
-            [0.0, -axis[2], axis[1]],
-            [axis[2], 0.0, -axis[0]],
-            [-axis[1], axis[0], 0.0],
-        ];
-        let k2 = |i: usize, j: usize| (0..3).map(|l| k[i][l] * k[l][j]).sum::<f64>();
+        let rotation = rodrigues(*axis, *angle);
         let got = f.world_to_camera.unwrap();
         for i in 0..3 {
             for j in 0..3 {
-                let want = f64::from(u8::from(i == j))
-                    + angle.sin() * k[i][j]
-                    + (1.0 - angle.cos()) * k2(i, j);
+                let want = rotation[i][j];
                 assert!(
                     (got[i][j] - want).abs() < 1e-9,
                     "frame {}: {got:?}",
@@ -431,49 +424,20 @@ fn a_colmap_model_of_turned_cameras_imports_them_within_1e_9() {
     }
 }
 
-/// The unit quaternion (w, x, y, z) of a rotation matrix, by the largest of its four squared
-/// components (Shepperd), so that no component is taken from a small difference.
-fn quaternion_of(r: &[[f64; 4]; 4]) -> [f64; 4] {
-    let trace = r[0][0] + r[1][1] + r[2][2];
-    let q = if trace >= r[0][0].max(r[1][1]).max(r[2][2]) {
-        let w = (1.0 + trace).sqrt() / 2.0;
-        let f = 0.25 / w;
-        [
-            w,
-            (r[2][1] - r[1][2]) * f,
-            (r[0][2] - r[2][0]) * f,
-            (r[1][0] - r[0][1]) * f,
-        ]
-    } else if r[0][0] >= r[1][1] && r[0][0] >= r[2][2] {
-        let x = (1.0 + r[0][0] - r[1][1] - r[2][2]).sqrt() / 2.0;
-        let f = 0.25 / x;
-        [
-            (r[2][1] - r[1][2]) * f,
-            x,
-            (r[0][1] + r[1][0]) * f,
-            (r[0][2] + r[2][0]) * f,
-        ]
-    } else if r[1][1] >= r[2][2] {
-        let y = (1.0 - r[0][0] + r[1][1] - r[2][2]).sqrt() / 2.0;
-        let f = 0.25 / y;
-        [
-            (r[0][2] - r[2][0]) * f,
-            (r[0][1] + r[1][0]) * f,
-            y,
-            (r[1][2] + r[2][1]) * f,
-        ]
-    } else {
-        let z = (1.0 - r[0][0] - r[1][1] + r[2][2]).sqrt() / 2.0;
-        let f = 0.25 / z;
-        [
-            (r[1][0] - r[0][1]) * f,
-            (r[0][2] + r[2][0]) * f,
-            (r[1][2] + r[2][1]) * f,
-            z,
-        ]
-    };
-    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    q.map(|v| v / n)
+/// The rotation by `angle` (radians) about the unit `axis`, by Rodrigues' formula
+/// I + sin θ K + (1 − cos θ) K² (an expansion independent of the importer's quaternion one).
+fn rodrigues(axis: [f64; 3], angle: f64) -> [[f64; 3]; 3] {
+    let k = [
+        [0.0, -axis[2], axis[1]],
+        [axis[2], 0.0, -axis[0]],
+        [-axis[1], axis[0], 0.0],
+    ];
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            let k2: f64 = (0..3).map(|l| k[i][l] * k[l][j]).sum();
+            f64::from(u8::from(i == j)) + angle.sin() * k[i][j] + (1.0 - angle.cos()) * k2
+        })
+    })
 }
 
 /// #46's COLMAP criterion end to end: the tiny benchmark filmed hand-held (`synth --camera-motion
@@ -518,8 +482,9 @@ fn a_colmap_model_of_a_handheld_benchmarks_true_cameras_imports_them_and_trains(
     let mut written = vec![[0.0; 4]; truth.frames.len()];
     for (k, f) in truth.frames.iter().enumerate().rev() {
         let m = truth.camera_of(k).world_to_camera;
-        let [w, x, y, z] = quaternion_of(&m);
-        written[k] = [w, x, y, z];
+        let rotation: [[f64; 3]; 3] = std::array::from_fn(|r| [m[r][0], m[r][1], m[r][2]]);
+        written[k] = gaussians::covariance::quat_from_rotation(&rotation);
+        let [w, x, y, z] = written[k];
         let name = Path::new(f.sharp.as_ref().unwrap()).file_name().unwrap();
         let t = [m[0][3], m[1][3], m[2][3]];
         images.push_str(&format!(
@@ -557,23 +522,11 @@ fn a_colmap_model_of_a_handheld_benchmarks_true_cameras_imports_them_and_trains(
             f.world_to_camera.unwrap(),
             truth.camera_of(k).world_to_camera,
         );
-        // The written quaternion's rotation by Rodrigues' formula of its axis and angle (not the
-        // importer's quaternion-to-matrix expansion).
+        // The written quaternion's rotation from its axis and angle.
         let [w, x, y, z] = written[k];
         let sine = (x * x + y * y + z * z).sqrt();
-        let angle = 2.0 * sine.atan2(w);
         let axis = [x, y, z].map(|v| v / sine.max(f64::MIN_POSITIVE));
-        let skew = [
-            [0.0, -axis[2], axis[1]],
-            [axis[2], 0.0, -axis[0]],
-            [-axis[1], axis[0], 0.0],
-        ];
-        let rotation: [[f64; 3]; 3] = std::array::from_fn(|i| {
-            std::array::from_fn(|j| {
-                let skew2: f64 = (0..3).map(|l| skew[i][l] * skew[l][j]).sum();
-                f64::from(u8::from(i == j)) + angle.sin() * skew[i][j] + (1.0 - angle.cos()) * skew2
-            })
-        });
+        let rotation = rodrigues(axis, 2.0 * sine.atan2(w));
         for r in 0..3 {
             for col in 0..3 {
                 let (g, q, t) = (got[r][col], rotation[r][col], truth[r][col]);

@@ -12,34 +12,6 @@ use train::trainer::Trainer;
 mod common;
 use common::*;
 
-/// Camera correction from step 2 on the exposure model's three renders per frame.
-fn camera_config(steps: usize) -> TrainConfig {
-    TrainConfig {
-        camera_correction: true,
-        camera_correction_from: 2,
-        ..exposure_events_config(steps)
-    }
-}
-
-/// A trainer run `steps` steps of `config` on one thread, after checking that two threads train
-/// the same bits.
-fn trained_alike_on_one_and_two_threads(
-    ctx: &train::data::TrainingData,
-    config: &TrainConfig,
-    steps: usize,
-) -> Trainer {
-    let run = |threads: usize| {
-        with_threads(threads, || {
-            let mut t = Trainer::new(ctx, config.clone()).unwrap();
-            t.run(ctx, steps, |_, _| Ok(())).unwrap();
-            t
-        })
-    };
-    let (one, two) = (run(1), run(2));
-    assert_same_bits(&bits(&one), &bits(&two));
-    one
-}
-
 #[test]
 fn a_correction_that_cannot_move_changes_no_bit() {
     let ctx = context();

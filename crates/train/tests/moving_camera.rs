@@ -13,15 +13,6 @@ use train::trainer::Trainer;
 mod common;
 use common::*;
 
-/// The exposure model's three renders per frame with its events, and camera correction from step 2.
-fn moving_config(steps: usize) -> TrainConfig {
-    TrainConfig {
-        camera_correction: true,
-        camera_correction_from: 2,
-        ..exposure_events_config(steps)
-    }
-}
-
 /// The fixture with its frames filmed along a path: each frame's camera shifted by a few
 /// centimetres (sideways on a sine, upwards steadily) and turned by a growing yaw.
 fn moving_context(config: &TrainConfig) -> TrainingData {
@@ -44,29 +35,21 @@ fn moving_context(config: &TrainConfig) -> TrainingData {
 
 #[test]
 fn a_moving_camera_trains_alike_on_any_thread_count_and_resumes_bit_for_bit() {
-    let config = moving_config(12);
+    let config = camera_config(12);
     let ctx = moving_context(&config);
-    // The sub-exposure renders of a frame have cameras of their own, between its neighbours'.
+    // The sub-exposure renders of a frame have cameras of their own (its first and last differ).
     let cameras = &ctx.exposure_cameras;
     assert_eq!(cameras.len(), ctx.frames.len());
     let pose = |slot: usize, s: usize| cameras[slot][s].world_to_camera;
     assert!(cameras.iter().all(|c| c.len() == config.subframes));
     assert!((0..cameras.len()).all(|slot| pose(slot, 0) != pose(slot, config.subframes - 1)));
-    let run = |threads: usize| {
-        with_threads(threads, || {
-            let mut t = Trainer::new(&ctx, config.clone()).unwrap();
-            t.run(&ctx, 12, |_, _| Ok(())).unwrap();
-            t
-        })
-    };
-    let one = run(1);
-    assert_same_bits(&bits(&one), &bits(&run(2)));
+    let one = trained_alike_on_one_and_two_threads(&ctx, &config, 12);
     // It learned: the parameters moved, none is NaN, and the cameras were corrected.
     let start = bits(&Trainer::new(&ctx, config.clone()).unwrap());
     assert_ne!(bits(&one), start);
     assert!(bits(&one).iter().all(|&b| f32::from_bits(b).is_finite()));
     assert!(one.model.camera_corrections.iter().any(|&v| v != 0.0));
-    resume_is_bit_identical(&ctx, moving_config(16));
+    resume_is_bit_identical(&ctx, camera_config(16));
 }
 
 /// Trains `steps` steps of the exposure model with events on the scene at `dir` (fixed camera or

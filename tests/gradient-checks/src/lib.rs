@@ -294,13 +294,19 @@ impl ProbeTally {
     /// Adds one case's `probes` and `valid` probes; `Err` names the run's counts when, over at
     /// least `min_probes` probes, fewer than 90 % were valid.
     pub fn add(&self, probes: usize, valid: usize) -> Result<(), String> {
+        self.add_counts(probes, valid).map_err(|(kept, all)| {
+            format!("over the run so far only {kept} of {all} probes avoided a hard step")
+        })
+    }
+
+    /// [`ProbeTally::add`] for any share a run must hold at 90 % (such as the cases in which a
+    /// check caught an injected error): `Err((hits, all))`, the run's counts so far.
+    pub fn add_counts(&self, all: usize, hits: usize) -> Result<(), (usize, usize)> {
         use std::sync::atomic::Ordering::Relaxed;
-        let all = self.probes.fetch_add(probes, Relaxed) + probes;
-        let kept = self.valid.fetch_add(valid, Relaxed) + valid;
-        if all >= self.min_probes && kept * 10 < all * 9 {
-            return Err(format!(
-                "over the run so far only {kept} of {all} probes avoided a hard step"
-            ));
+        let all = self.probes.fetch_add(all, Relaxed) + all;
+        let hits = self.valid.fetch_add(hits, Relaxed) + hits;
+        if all >= self.min_probes && hits * 10 < all * 9 {
+            return Err((hits, all));
         }
         Ok(())
     }

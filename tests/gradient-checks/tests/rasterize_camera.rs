@@ -9,8 +9,6 @@
 
 mod raster_support;
 
-use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
-
 use gradient_checks::compare;
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -40,32 +38,14 @@ fn negation_fails(name: &str, numeric: &[f64], analytic: &[f64]) -> Result<(), T
     Ok(())
 }
 
-/// How often an injected error was caught over a property test's run: judged, once `min_cases`
-/// cases were counted, on every case so far (≥ 90 % caught).
-struct CatchTally {
-    min_cases: usize,
-    cases: AtomicUsize,
-    caught: AtomicUsize,
-}
-
-impl CatchTally {
-    const fn new(min_cases: usize) -> Self {
-        Self {
-            min_cases,
-            cases: AtomicUsize::new(0),
-            caught: AtomicUsize::new(0),
-        }
-    }
-
-    /// Counts one case; `Err` when over at least `min_cases` cases fewer than 90 % were caught.
-    fn add(&self, name: &str, caught: bool) -> Result<(), TestCaseError> {
-        let all = self.cases.fetch_add(1, Relaxed) + 1;
-        let hits = self.caught.fetch_add(usize::from(caught), Relaxed) + usize::from(caught);
-        prop_assert!(
-            all < self.min_cases || hits * 10 >= all * 9,
+/// Counts one case of an injected error in `tally` (one per check, judged from 10 cases on):
+/// fails the case when, over the run so far, fewer than 90 % of the cases caught it.
+fn tally_catch(tally: &ProbeTally, name: &str, caught: bool) -> Result<(), TestCaseError> {
+    match tally.add_counts(1, usize::from(caught)) {
+        Ok(()) => Ok(()),
+        Err((hits, all)) => Err(TestCaseError::fail(format!(
             "{name}: the check caught the injected error in only {hits} of {all} cases"
-        );
-        Ok(())
+        ))),
     }
 }
 
@@ -119,8 +99,9 @@ proptest! {
         let without = camera_pose_gradient(&s.cam, &s.means, &covs, &g.means, &no_cov_terms)
             .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
         let injected: Vec<f64> = valid_axes.iter().map(|&k| without[k]).collect();
-        static CAUGHT: CatchTally = CatchTally::new(10);
-        CAUGHT.add("camera twist without the covariance term", rejected(&num, &injected))?;
+        static CAUGHT: ProbeTally = ProbeTally::new(10);
+        let caught = rejected(&num, &injected);
+        tally_catch(&CAUGHT, "camera twist without the covariance term", caught)?;
         static TALLY: ProbeTally = ProbeTally::new(30);
         let tally = TALLY.add(probes, valid);
         prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
@@ -193,8 +174,9 @@ proptest! {
         let mut without = vec![0.0; 12];
         correction_backward(&d_left, offset as f32, &mut without);
         let injected: Vec<f64> = valid_values.iter().map(|&k| without[k]).collect();
-        static CAUGHT: CatchTally = CatchTally::new(10);
-        CAUGHT.add("camera correction without the twist's Jacobian", rejected(&num, &injected))?;
+        static CAUGHT: ProbeTally = ProbeTally::new(10);
+        let caught = rejected(&num, &injected);
+        tally_catch(&CAUGHT, "camera correction without the twist's Jacobian", caught)?;
         static TALLY: ProbeTally = ProbeTally::new(60);
         let tally = TALLY.add(probes, valid);
         prop_assert!(tally.is_ok(), "{}", tally.unwrap_err());
@@ -306,8 +288,9 @@ proptest! {
             .unwrap_or_else(|e| panic!("camera_pose_gradient: {e}"));
         if subset.len() < n {
             let injected: Vec<f64> = valid_axes.iter().map(|&k| whole[k]).collect();
-            static CAUGHT: CatchTally = CatchTally::new(10);
-            CAUGHT.add("a subset's camera twist from the whole set", rejected(&num, &injected))?;
+            static CAUGHT: ProbeTally = ProbeTally::new(10);
+            let caught = rejected(&num, &injected);
+            tally_catch(&CAUGHT, "a subset's camera twist from the whole set", caught)?;
         }
         static TALLY: ProbeTally = ProbeTally::new(30);
         let tally = TALLY.add(probes, valid);
