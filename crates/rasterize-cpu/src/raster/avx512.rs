@@ -223,7 +223,7 @@ fn backward_tile(
             } else {
                 zero
             };
-            for (j, acc) in s.acc_channels.chunks_exact_mut(TILE_SIZE).enumerate() {
+            for &j in &s.live_channels {
                 let (value, b) = (v(ch[j]), v(bg[j]));
                 let o = j * TILE_PIXELS + at;
                 let pre = add(load(&s.pre[o..]), mul(w, value));
@@ -231,6 +231,7 @@ fn backward_tile(
                 let behind = add(sub(load(&c_final[o..]), pre), mul(tn, b));
                 let gi = load(&s.g_img[o..]);
                 d_alpha = add(d_alpha, mul(gi, sub(mul(t_old, value), mul(behind, inv))));
+                let acc = &mut s.acc_channels[j * TILE_SIZE..];
                 store(add(load(acc), mul(w, gi)), acc);
             }
             if has_depth {
@@ -410,12 +411,17 @@ mod tests {
                     d_image[j * hw..][row.clone()].fill(0.0);
                 }
             }
+            // Channel 1 has no cotangent left of column 24 (as the human-probability channel,
+            // which no loss reads), so the kernels' zero-channel skip is exercised.
+            for y in 0..height {
+                d_image[hw + y * width..][..24].fill(0.0);
+            }
             let cot = Cotangents {
                 image: &d_image,
                 alpha: Some(&d_alpha),
                 depth: Some(&d_depth),
             };
-            let (mut checked_pairs, mut skipped_rows) = (0, 0);
+            let (mut checked_pairs, mut skipped_rows, mut skipped_channels) = (0, 0, 0);
             for tile in 0..st.used.len() {
                 let range = st.tile_offsets[tile]..st.tile_offsets[tile + 1];
                 let origin = [(tile % gx) * TILE_SIZE, (tile / gx) * TILE_SIZE];
@@ -469,10 +475,11 @@ mod tests {
                 let same_bits =
                     |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
                 assert!(same_bits(&out_p, &out_v), "tile {tile}");
-                // Skipping the rows without a cotangent gives the bits of replaying every row.
+                // Skipping the rows and channels without a cotangent gives the bits of replaying
+                // every row and channel.
                 let mut out_all = vec![0.0f32; slots];
                 let mut s_all = BackwardScratch::new(c);
-                s_all.skip_zero_rows = false;
+                s_all.skip_zero_cotangents = false;
                 backward_tile(
                     list,
                     channels,
@@ -489,9 +496,10 @@ mod tests {
                 );
                 assert!(
                     same_bits(&out_p, &out_all),
-                    "tile {tile}: skipping zero rows changed the gradients"
+                    "tile {tile}: skipping zero rows and channels changed the gradients"
                 );
                 skipped_rows += s_p.live_rows[..size[1]].iter().filter(|&&l| !l).count();
+                skipped_channels += c - s_p.live_channels.len();
                 checked_pairs += out_p
                     .chunks(7 + c)
                     .filter(|g| g.iter().any(|&v| v != 0.0))
@@ -503,6 +511,7 @@ mod tests {
                 "{checked_pairs} pairs with gradients"
             );
             assert!(skipped_rows > 0, "no row was skipped");
+            assert!(skipped_channels > 0, "no channel was skipped");
         }
     }
 }

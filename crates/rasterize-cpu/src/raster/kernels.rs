@@ -328,8 +328,13 @@ pub(super) struct BackwardScratch<T: Real> {
     /// zero adds only exact zeros to every gradient, so the kernels skip it: same bits, less work
     /// when a loss reads a subset of the pixels (the flow loss's 1/4 resize reads half the rows).
     pub(super) live_rows: [bool; TILE_SIZE],
-    /// `false` only in tests, to compare with the kernels that replay every row.
-    pub(super) skip_zero_rows: bool,
+    /// The channels, in order, with a non-zero image cotangent somewhere in the tile. A channel
+    /// without one adds only exact zeros (its colour gradient stays +0 and its share of dL/dα is
+    /// ±0 added to a sum that is never −0), so the kernels skip it: same bits, a quarter less
+    /// channel work when a caller supervises RGB and renders a fourth channel it does not.
+    pub(super) live_channels: Vec<usize>,
+    /// `false` only in tests, to compare with the kernels that replay every row and channel.
+    pub(super) skip_zero_cotangents: bool,
 }
 
 impl<T: Real> BackwardScratch<T> {
@@ -343,7 +348,8 @@ impl<T: Real> BackwardScratch<T> {
             g_depth: vec![T::zero(); TILE_PIXELS],
             acc_channels: vec![T::zero(); c * TILE_SIZE],
             live_rows: [false; TILE_SIZE],
-            skip_zero_rows: true,
+            live_channels: Vec::with_capacity(c),
+            skip_zero_cotangents: true,
         }
     }
 
@@ -380,11 +386,18 @@ impl<T: Real> BackwardScratch<T> {
         for (y, live) in self.live_rows.iter_mut().enumerate() {
             let row = y * TILE_SIZE..(y + 1) * TILE_SIZE;
             let nonzero = |v: &[T]| v.iter().any(|&x| x != T::zero());
-            *live = !self.skip_zero_rows
+            *live = !self.skip_zero_cotangents
                 || nonzero(&self.g_alpha[row.clone()])
                 || nonzero(&self.g_depth[row.clone()])
                 || (0..c).any(|j| nonzero(&self.g_img[j * TILE_PIXELS..][row.clone()]));
         }
+        self.live_channels.clear();
+        self.live_channels.extend((0..c).filter(|&j| {
+            !self.skip_zero_cotangents
+                || self.g_img[j * TILE_PIXELS..(j + 1) * TILE_PIXELS]
+                    .iter()
+                    .any(|&x| x != T::zero())
+        }));
     }
 }
 
@@ -474,7 +487,7 @@ pub(super) fn backward_tile<T: Real>(
                 } else {
                     k.zero
                 };
-                for (j, acc) in s.acc_channels.chunks_exact_mut(TILE_SIZE).enumerate() {
+                for &j in &s.live_channels {
                     let (value, b) = (v(ch[j]), v(bg[j]));
                     let o = j * TILE_PIXELS + at;
                     let pre = T::V4::load(&s.pre[o..]) + w * value;
@@ -482,7 +495,7 @@ pub(super) fn backward_tile<T: Real>(
                     let behind = T::V4::load(&c_final[o..]) - pre + tn * b;
                     let gi = T::V4::load(&s.g_img[o..]);
                     d_alpha = d_alpha + gi * (t_old * value - behind * inv);
-                    let acc = &mut acc[q * QUAD..];
+                    let acc = &mut s.acc_channels[j * TILE_SIZE + q * QUAD..];
                     (T::V4::load(acc) + w * gi).store(acc);
                 }
                 // Without a depth cotangent the depth terms are exact zeros: skip them.
