@@ -22,24 +22,8 @@
 use std::path::PathBuf;
 
 use scene::Split;
-use train::eval::{mask_bbox, psnr};
+use train::eval::{box_psnr, mask_bbox, psnr};
 use train::pose::exposure::{subframe_times, PoseTrack};
-
-/// The pixels of (3, H, W) `image` inside the box, planar.
-fn crop_box(
-    image: &[f32],
-    w: usize,
-    h: usize,
-    (x0, y0, x1, y1): (usize, usize, usize, usize),
-) -> Vec<f32> {
-    let mut out = Vec::with_capacity(3 * (x1 - x0) * (y1 - y0));
-    for c in 0..3 {
-        for y in y0..y1 {
-            out.extend_from_slice(&image[c * w * h + y * w + x0..c * w * h + y * w + x1]);
-        }
-    }
-    out
-}
 
 /// Per-frame PSNR (dB) summed, full frame and box, and the number of frames.
 #[derive(Default)]
@@ -59,7 +43,7 @@ impl Scores {
         bbox: (usize, usize, usize, usize),
     ) {
         self.full += psnr(a, b);
-        self.in_box += psnr(&crop_box(a, w, h, bbox), &crop_box(b, w, h, bbox));
+        self.in_box += box_psnr(a, b, w, h, bbox);
         self.frames += 1;
     }
 

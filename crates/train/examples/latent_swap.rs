@@ -13,23 +13,7 @@
 //! `DATA` a synthetic scene with sharp references and masks; each `MODEL_DIR` a run's `model/`.
 
 use std::path::PathBuf;
-use train::eval::{mask_bbox, psnr};
-
-/// The pixels of (3, H, W) `image` inside the box, planar.
-fn crop_box(
-    image: &[f32],
-    w: usize,
-    h: usize,
-    (x0, y0, x1, y1): (usize, usize, usize, usize),
-) -> Vec<f32> {
-    let mut out = Vec::with_capacity(3 * (x1 - x0) * (y1 - y0));
-    for c in 0..3 {
-        for y in y0..y1 {
-            out.extend_from_slice(&image[c * w * h + y * w + x0..c * w * h + y * w + x1]);
-        }
-    }
-    out
-}
+use train::eval::{box_psnr, mask_bbox};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -62,7 +46,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let Some(b) = mask_bbox(mask, w, h) else {
                 continue;
             };
-            let p = psnr(&crop_box(&f.image, w, h, b), &crop_box(sharp, w, h, b));
+            let p = box_psnr(&f.image, sharp, w, h, b);
             if p > sharpest.0 {
                 sharpest = (p, s);
             }
@@ -88,9 +72,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let pose = cast.prepare(&model.corrected_params(f.index, &f.smpl), &f.others)?;
                 let latent = latent.unwrap_or_else(|| model.latent_for(f.index));
                 let r = model.render_frame(f.index, &f.camera, &pose, latent)?;
-                let (a, s) = (crop_box(&r.rgb, w, h, b), crop_box(sharp, w, h, b));
                 // Per-frame PSNR averaged, as the evaluation does.
-                se += psnr(&a, &s);
+                se += box_psnr(&r.rgb, sharp, w, h, b);
                 n += 1;
             }
             print!("  {name} {:.2}", se / n.max(1) as f64);

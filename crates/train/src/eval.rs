@@ -239,6 +239,26 @@ struct BoxFigures {
     blurred_lpips: f64,
 }
 
+/// PSNR (dB) of planar (3, H, W) images `a` and `b` of `width` × `height` inside `bbox` = (x0,
+/// y0, x1, y1), as the box figures score it.
+pub fn box_psnr(
+    a: &[f32],
+    b: &[f32],
+    width: usize,
+    height: usize,
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+) -> f64 {
+    let shape = ImageShape {
+        channels: 3,
+        height,
+        width,
+    };
+    psnr(
+        &crop(a, shape, x0, y0, x1, y1),
+        &crop(b, shape, x0, y0, x1, y1),
+    )
+}
+
 /// [`BoxFigures`] of `f` inside `bbox` `(x0, y0, x1, y1)` (exclusive ends); LPIPS (NaN without
 /// `lpips`) in the box grown to the network's minimum size.
 fn box_figures(
@@ -542,6 +562,19 @@ mod tests {
             1.0 / 3.0
         );
         assert_eq!(mask_iou(&[0.0; 3], &[0.0; 3]), 1.0);
+    }
+
+    /// `box_psnr` scores the box's pixels of every plane and nothing outside it: an error outside
+    /// the box does not count, one inside counts over the box's 3 × 2 × 2 values.
+    #[test]
+    fn box_psnr_reads_only_the_box() {
+        let (w, h) = (5, 4);
+        let a = vec![0.5f32; 3 * w * h];
+        let mut b = a.clone();
+        b[w * h] = 0.9; // plane 1, pixel (0, 0): outside the box (1, 1)–(3, 3)
+        b[2 * w * h + 2 * w + 2] = 0.6; // plane 2, pixel (2, 2): inside
+        let expected = -10.0 * (0.1f64.powi(2) / 12.0).log10();
+        assert!((box_psnr(&a, &b, w, h, (1, 1, 3, 3)) - expected).abs() < 1e-4);
     }
 
     #[test]
