@@ -31,15 +31,17 @@ pub enum RasterError {
         /// Field name.
         field: &'static str,
     },
-    /// A Gaussian's 3D covariance is not symmetric: |Σ_row,col − Σ_col,row| exceeds
+    /// A Gaussian's 3D covariance (or smear) is not symmetric: |Σ_row,col − Σ_col,row| exceeds
     /// [`crate::raster::COVARIANCE_SYMMETRY_TOLERANCE`] times its largest |diagonal| entry.
     #[error(
-        "Gaussian {index}: covariance is not symmetric: |S[{row}][{col}] - S[{col}][{row}]| = {asymmetry:e} \
+        "Gaussian {index}: {field} is not symmetric: |S[{row}][{col}] - S[{col}][{row}]| = {asymmetry:e} \
          exceeds 1e-4 x max|diag| = {scale:e}"
     )]
     NonSymmetricCovariance {
         /// Index of the Gaussian.
         index: usize,
+        /// The input field (`covariances` or `smears`).
+        field: &'static str,
         /// Row of the offending upper-triangle entry.
         row: usize,
         /// Column of the offending upper-triangle entry.

@@ -132,16 +132,9 @@ fn ewa<T: Real>(cam: &CameraParams<T>, mean: [T; 3], sigma: Mat3<T>) -> Ewa<T> {
         jr[0][k] = j00 * r[0][k] + j02 * r[2][k];
         jr[1][k] = j11 * r[1][k] + j12 * r[2][k];
     }
-    let mut s0 = [T::zero(); 3];
-    let mut s1 = [T::zero(); 3];
-    for k in 0..3 {
-        s0[k] = sigma[k][0] * jr[0][0] + sigma[k][1] * jr[0][1] + sigma[k][2] * jr[0][2];
-        s1[k] = sigma[k][0] * jr[1][0] + sigma[k][1] * jr[1][1] + sigma[k][2] * jr[1][2];
-    }
     let dil: T = lit(0.3);
-    let a = jr[0][0] * s0[0] + jr[0][1] * s0[1] + jr[0][2] * s0[2] + dil;
-    let b = jr[0][0] * s1[0] + jr[0][1] * s1[1] + jr[0][2] * s1[2];
-    let c = jr[1][0] * s1[0] + jr[1][1] * s1[1] + jr[1][2] * s1[2] + dil;
+    let [a, b, c] = quadratic_2d(&jr, &sigma);
+    let (a, c) = (a + dil, c + dil);
     Ewa {
         p_cam: p,
         tx,
@@ -151,6 +144,23 @@ fn ewa<T: Real>(cam: &CameraParams<T>, mean: [T; 3], sigma: Mat3<T>) -> Ewa<T> {
         sigma,
         cov: [a, b, c],
     }
+}
+
+/// JR M JRᵀ of a 3×3 matrix `m` as (xx, xy, yy) — the screen-space covariance of the world
+/// covariance `m` (without the dilation); xy is row 0 of JR against row 1.
+#[inline(always)]
+fn quadratic_2d<T: Real>(jr: &[[T; 3]; 2], m: &Mat3<T>) -> [T; 3] {
+    let mut s0 = [T::zero(); 3];
+    let mut s1 = [T::zero(); 3];
+    for k in 0..3 {
+        s0[k] = m[k][0] * jr[0][0] + m[k][1] * jr[0][1] + m[k][2] * jr[0][2];
+        s1[k] = m[k][0] * jr[1][0] + m[k][1] * jr[1][1] + m[k][2] * jr[1][2];
+    }
+    [
+        jr[0][0] * s0[0] + jr[0][1] * s0[1] + jr[0][2] * s0[2],
+        jr[0][0] * s1[0] + jr[0][1] * s1[1] + jr[0][2] * s1[2],
+        jr[1][0] * s1[0] + jr[1][1] * s1[1] + jr[1][2] * s1[2],
+    ]
 }
 
 /// Projects one Gaussian given by log-scales and a quaternion; `None` when it is culled (behind the
@@ -164,7 +174,13 @@ pub fn project<T: Real>(
     quat: [T; 4],
     opacity_logit: T,
 ) -> Option<Projected<T>> {
-    project_with(cam, mean, opacity_logit, || covariance_3d(log_scale, quat))
+    project_with(
+        cam,
+        mean,
+        opacity_logit,
+        || covariance_3d(log_scale, quat),
+        None,
+    )
 }
 
 /// Projects one Gaussian given by its world-frame 3D covariance `sigma` (m², row-major, all nine
@@ -176,7 +192,24 @@ pub fn project_cov<T: Real>(
     sigma: &Mat3<T>,
     opacity_logit: T,
 ) -> Option<Projected<T>> {
-    project_with(cam, mean, opacity_logit, || *sigma)
+    project_with(cam, mean, opacity_logit, || *sigma, None)
+}
+
+/// [`project_cov`] of a Gaussian that moves during the render's time slice, rendered as its time
+/// average: `smear` is the world covariance of its positions over the slice (m²; a displacement u
+/// at constant speed gives u uᵀ/12). The screen covariance gains J W smear Wᵀ Jᵀ and the opacity is
+/// scaled by √(det cov2d / det cov2d′) (both dilated), so that the splat's screen-space mass is
+/// kept — a Gaussian blurred by its motion, as a box-filtered moving Gaussian is to second order.
+/// A zero `smear` gives [`project_cov`]'s bits.
+#[inline]
+pub fn project_cov_smeared<T: Real>(
+    cam: &CameraParams<T>,
+    mean: [T; 3],
+    sigma: &Mat3<T>,
+    smear: &Mat3<T>,
+    opacity_logit: T,
+) -> Option<Projected<T>> {
+    project_with(cam, mean, opacity_logit, || *sigma, Some(smear))
 }
 
 /// Shared body of [`project`] and [`project_cov`]; `sigma` is evaluated after the depth and opacity
@@ -187,6 +220,7 @@ fn project_with<T: Real>(
     mean: [T; 3],
     opacity_logit: T,
     sigma: impl FnOnce() -> Mat3<T>,
+    smear: Option<&Mat3<T>>,
 ) -> Option<Projected<T>> {
     let p = to_camera(cam, mean);
     if !(p[2] > cam.near) {
@@ -198,7 +232,10 @@ fn project_with<T: Real>(
         return None;
     }
     let e = ewa(cam, mean, sigma());
-    let [a, b, c] = e.cov;
+    let ([a, b, c], opacity) = match smear {
+        None => (e.cov, opacity),
+        Some(smear) => smeared(&e, smear, opacity)?,
+    };
     let det = a * c - b * b;
     if !(det > T::zero()) {
         return None;
@@ -256,6 +293,21 @@ fn project_with<T: Real>(
     })
 }
 
+/// The smeared screen covariance and opacity of [`project_cov_smeared`]; `None` (culled) when
+/// either covariance is degenerate.
+#[inline(always)]
+fn smeared<T: Real>(e: &Ewa<T>, smear: &Mat3<T>, opacity: T) -> Option<([T; 3], T)> {
+    let [a, b, c] = e.cov;
+    let [sa, sb, sc] = quadratic_2d(&e.jr, smear);
+    let cov = [a + sa, b + sb, c + sc];
+    let det = a * c - b * b;
+    let det_smeared = cov[0] * cov[2] - cov[1] * cov[1];
+    if !(det > T::zero() && det_smeared > T::zero()) {
+        return None;
+    }
+    Some((cov, opacity * (det / det_smeared).sqrt()))
+}
+
 /// Gradients arriving at one projected Gaussian from the tile kernels.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ProjectedGrad<T> {
@@ -298,36 +350,134 @@ pub fn project_cov_backward<T: Real>(
     g: &ProjectedGrad<T>,
 ) -> ([T; 3], Mat3<T>, T) {
     let e = ewa(cam, mean, *sigma);
+    let d_cov = conic_backward(e.cov, g.conic);
+    let (d_mean, d_sigma) = covariance_backward(cam, &e, d_cov, None, g);
+    let o = T::one() / (T::one() + (-opacity_logit).exp());
+    let d_logit = g.opacity * o * (T::one() - o);
+    (d_mean, d_sigma, d_logit)
+}
+
+/// Backward of [`project_cov_smeared`] for a visible Gaussian: returns dL/d(mean, Σ, smear,
+/// opacity logit), Σ's and the smear's nine entries independent (as [`project_cov_backward`]).
+#[inline]
+pub fn project_cov_smeared_backward<T: Real>(
+    cam: &CameraParams<T>,
+    mean: [T; 3],
+    sigma: &Mat3<T>,
+    smear: &Mat3<T>,
+    opacity_logit: T,
+    g: &ProjectedGrad<T>,
+) -> ([T; 3], Mat3<T>, Mat3<T>, T) {
+    let e = ewa(cam, mean, *sigma);
     let [a, b, c] = e.cov;
+    let o = T::one() / (T::one() + (-opacity_logit).exp());
+    let half: T = lit(0.5);
+    let two: T = lit(2.0);
+    if smear.iter().flatten().all(|&v| v == T::zero()) {
+        // cov′ = cov and o′ = o: [`project_cov_backward`]'s bits, and dL/d smear from dL/dcov′,
+        // which adds to dL/dcov the opacity's share through det′ (−o / (2 det) ∂det′).
+        let (d_mean, d_sigma, d_logit) = project_cov_backward(cam, mean, sigma, opacity_logit, g);
+        let [ca, cb, cc] = conic_backward(e.cov, g.conic);
+        let g_det = g.opacity * o * half / (a * c - b * b);
+        let d_smeared = [ca - c * g_det, cb + two * b * g_det, cc - a * g_det];
+        let d_smear = quadratic_2d_backward_matrix(&e.jr, d_smeared);
+        return (d_mean, d_sigma, d_smear, d_logit);
+    }
+    let [sa, sb, sc] = quadratic_2d(&e.jr, smear);
+    let cov = [a + sa, b + sb, c + sc];
+    let det = a * c - b * b;
+    let det_smeared = cov[0] * cov[2] - cov[1] * cov[1];
+    let scale = (det / det_smeared).sqrt();
+    // o′ = o √(det / det′): ∂o′/∂det = o′ / (2 det), ∂o′/∂det′ = −o′ / (2 det′); det = a c − b².
+    let g_det = g.opacity * o * scale * half / det;
+    let g_det_smeared = -(g.opacity * o * scale * half / det_smeared);
+    let [ca, cb, cc] = conic_backward(cov, g.conic);
+    let d_smeared = [
+        ca + cov[2] * g_det_smeared,
+        cb - two * cov[1] * g_det_smeared,
+        cc + cov[0] * g_det_smeared,
+    ];
+    let d_cov = [
+        d_smeared[0] + c * g_det,
+        d_smeared[1] - two * b * g_det,
+        d_smeared[2] + a * g_det,
+    ];
+    let d_smear = quadratic_2d_backward_matrix(&e.jr, d_smeared);
+    let d_jr = quadratic_2d_backward_jr(&e.jr, smear, d_smeared);
+    let (d_mean, d_sigma) = covariance_backward(cam, &e, d_cov, Some(d_jr), g);
+    let d_logit = g.opacity * scale * o * (T::one() - o);
+    (d_mean, d_sigma, d_smear, d_logit)
+}
+
+/// dL/d(a, b, c) of the screen covariance from dL/d its conic (c, −b, a)/det.
+#[inline(always)]
+fn conic_backward<T: Real>([a, b, c]: [T; 3], [ga, gb, gc]: [T; 3]) -> [T; 3] {
     let det = a * c - b * b;
     let det2 = det * det;
-    let [ga, gb, gc] = g.conic;
     let two: T = lit(2.0);
-    // conic = (c, −b, a)/det.
-    let da = (-ga * c * c + gb * b * c - gc * b * b) / det2;
-    let db = (ga * two * b * c - gb * (a * c + b * b) + gc * two * a * b) / det2;
-    let dc = (-ga * b * b + gb * a * b - gc * a * a) / det2;
-    // cov = JR Σ JRᵀ: dΣ_kl = da JR0k JR0l + db JR0k JR1l + dc JR1k JR1l (entries independent).
-    let jr = &e.jr;
-    let mut d_sigma = [[T::zero(); 3]; 3];
+    [
+        (-ga * c * c + gb * b * c - gc * b * b) / det2,
+        (ga * two * b * c - gb * (a * c + b * b) + gc * two * a * b) / det2,
+        (-ga * b * b + gb * a * b - gc * a * a) / det2,
+    ]
+}
+
+/// dL/dM of [`quadratic_2d`] (JR M JRᵀ) from dL/d(xx, xy, yy), M's entries independent:
+/// dM_kl = d_xx JR0k JR0l + d_xy JR0k JR1l + d_yy JR1k JR1l.
+#[inline(always)]
+fn quadratic_2d_backward_matrix<T: Real>(jr: &[[T; 3]; 2], [da, db, dc]: [T; 3]) -> Mat3<T> {
+    let mut d = [[T::zero(); 3]; 3];
     for k in 0..3 {
         for l in 0..3 {
-            d_sigma[k][l] =
+            d[k][l] =
                 da * jr[0][k] * jr[0][l] + db * jr[0][k] * jr[1][l] + dc * jr[1][k] * jr[1][l];
         }
     }
-    // dJR0 = 2 da Σ JR0 + db Σ JR1, dJR1 = db Σ JR0 + 2 dc Σ JR1.
-    let s = &e.sigma;
-    let mut sj0 = [T::zero(); 3];
-    let mut sj1 = [T::zero(); 3];
+    d
+}
+
+/// dL/dJR of [`quadratic_2d`] for a symmetric M: dJR0 = 2 d_xx M JR0 + d_xy M JR1,
+/// dJR1 = d_xy M JR0 + 2 d_yy M JR1.
+#[inline(always)]
+fn quadratic_2d_backward_jr<T: Real>(
+    jr: &[[T; 3]; 2],
+    m: &Mat3<T>,
+    [da, db, dc]: [T; 3],
+) -> [[T; 3]; 2] {
+    let two: T = lit(2.0);
+    let mut mj0 = [T::zero(); 3];
+    let mut mj1 = [T::zero(); 3];
     for k in 0..3 {
-        sj0[k] = s[k][0] * jr[0][0] + s[k][1] * jr[0][1] + s[k][2] * jr[0][2];
-        sj1[k] = s[k][0] * jr[1][0] + s[k][1] * jr[1][1] + s[k][2] * jr[1][2];
+        mj0[k] = m[k][0] * jr[0][0] + m[k][1] * jr[0][1] + m[k][2] * jr[0][2];
+        mj1[k] = m[k][0] * jr[1][0] + m[k][1] * jr[1][1] + m[k][2] * jr[1][2];
     }
     let mut djr = [[T::zero(); 3]; 2];
     for k in 0..3 {
-        djr[0][k] = two * da * sj0[k] + db * sj1[k];
-        djr[1][k] = db * sj0[k] + two * dc * sj1[k];
+        djr[0][k] = two * da * mj0[k] + db * mj1[k];
+        djr[1][k] = db * mj0[k] + two * dc * mj1[k];
+    }
+    djr
+}
+
+/// The projection's backward from dL/d(a, b, c) of the screen covariance JR Σ JRᵀ + dilation
+/// (plus `extra_jr`, a further dL/dJR, when given) and `g`'s screen mean and depth: dL/d(mean, Σ).
+#[inline(always)]
+fn covariance_backward<T: Real>(
+    cam: &CameraParams<T>,
+    e: &Ewa<T>,
+    d_cov: [T; 3],
+    extra_jr: Option<[[T; 3]; 2]>,
+    g: &ProjectedGrad<T>,
+) -> ([T; 3], Mat3<T>) {
+    let two: T = lit(2.0);
+    let d_sigma = quadratic_2d_backward_matrix(&e.jr, d_cov);
+    let mut djr = quadratic_2d_backward_jr(&e.jr, &e.sigma, d_cov);
+    if let Some(extra) = extra_jr {
+        for (row, extra_row) in djr.iter_mut().zip(extra) {
+            for (d, x) in row.iter_mut().zip(extra_row) {
+                *d = *d + x;
+            }
+        }
     }
     // JR_rk = Σ_m J_rm R_mk  ⇒  dJ_rm = Σ_k dJR_rk R_mk; J has entries (0,0), (0,2), (1,1), (1,2).
     let r = &cam.r;
@@ -370,7 +520,5 @@ pub fn project_cov_backward<T: Real>(
         r[0][1] * dx + r[1][1] * dy + r[2][1] * dz,
         r[0][2] * dx + r[1][2] * dy + r[2][2] * dz,
     ];
-    let o = T::one() / (T::one() + (-opacity_logit).exp());
-    let d_logit = g.opacity * o * (T::one() - o);
-    (d_mean, d_sigma, d_logit)
+    (d_mean, d_sigma)
 }

@@ -113,6 +113,7 @@ fn render_cov_of_scale_rotation_covariances_equals_render_bit_for_bit() {
         opacity_logits: &op,
         channels: &ch,
         num_channels: 3,
+        smears: None,
     };
     let settings = RenderSettings {
         near_plane: 0.2,
@@ -196,6 +197,7 @@ fn bad_covariances_give_typed_errors() {
             opacity_logits: &[0.0, 0.0],
             channels: &[],
             num_channels: 0,
+            smears: None,
         };
         render_cov(&cam, &splats, &settings).map(|o| o.alpha)
     };
@@ -240,6 +242,7 @@ fn bad_covariances_give_typed_errors() {
         opacity_logits: &[0.0, 0.0],
         channels: &[],
         num_channels: 0,
+        smears: None,
     };
     assert!(matches!(
         render_cov(&cam, &short, &settings),

@@ -4,6 +4,7 @@
 //! through Σ = R S Sᵀ Rᵀ into log-scales and quaternions). The fixed order makes the gradients
 //! bit-identical for any thread count.
 
+use rayon::iter::Either;
 use rayon::prelude::*;
 
 use gaussians::covariance::{covariance_3d_backward, Mat3};
@@ -13,7 +14,9 @@ use super::inputs::{Inputs, Shapes};
 use super::kernels::{backward_tile, BackwardScratch, BUF_T};
 use super::layer::StaticLayer;
 use super::{Cotangents, CovSplats, Gradients, RenderOutput, RenderSettings, Splats};
-use crate::project::{project_cov_backward, CameraParams, ProjectedGrad};
+use crate::project::{
+    project_cov_backward, project_cov_smeared_backward, CameraParams, ProjectedGrad,
+};
 use crate::{Camera, RasterError, Real, TILE_PIXELS, TILE_SIZE};
 
 #[cfg(target_arch = "x86_64")]
@@ -267,56 +270,76 @@ pub(super) fn backward_inputs<'a, T: Real>(
     let mut per_gaussian: Vec<GaussianGrad<T>> =
         vec![(zero3, zero33, T::zero(), [T::zero(); 2]); st.n];
     let mut d_channels = vec![T::zero(); st.n * c];
-    let reduce = |i: usize, out: &mut GaussianGrad<T>, d_ch: &mut [T]| {
-        let ci = compact[i];
-        if ci == u32::MAX {
-            return;
-        }
-        let ci = ci as usize;
-        let mut acc = [T::zero(); 7];
-        for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
-            let s = &pair_grads[pos as usize * slot..(pos as usize + 1) * slot];
-            for j in 0..7 {
-                acc[j] = acc[j] + s[j];
+    let mut d_smears = vec![zero33; if splats.smears.is_some() { st.n } else { 0 }];
+    let reduce =
+        |i: usize, out: &mut GaussianGrad<T>, d_ch: &mut [T], d_smear: Option<&mut Mat3<T>>| {
+            let ci = compact[i];
+            if ci == u32::MAX {
+                return;
             }
-            for (d, &g) in d_ch.iter_mut().zip(&s[7..]) {
-                *d = *d + g;
+            let ci = ci as usize;
+            let mut acc = [T::zero(); 7];
+            for &pos in &positions[offsets[ci]..offsets[ci + 1]] {
+                let s = &pair_grads[pos as usize * slot..(pos as usize + 1) * slot];
+                for j in 0..7 {
+                    acc[j] = acc[j] + s[j];
+                }
+                for (d, &g) in d_ch.iter_mut().zip(&s[7..]) {
+                    *d = *d + g;
+                }
             }
-        }
-        // A zero screen-space gradient (a Gaussian without pairs in this render, such as a static
-        // one whose tiles another render of its exposure owns, or whose pairs all lie in such
-        // tiles) leaves its zeros standing, without the projection's backward: the same values,
-        // whether or not the render binned the tiles it does not own.
-        if acc.iter().all(|&v| v == T::zero()) {
-            return;
-        }
-        let g = ProjectedGrad {
-            mean2d: [acc[0], acc[1]],
-            conic: [acc[2], acc[3], acc[4]],
-            opacity: acc[5],
-            depth: acc[6],
+            // A zero screen-space gradient (a Gaussian without pairs in this render, such as a static
+            // one whose tiles another render of its exposure owns, or whose pairs all lie in such
+            // tiles) leaves its zeros standing, without the projection's backward: the same values,
+            // whether or not the render binned the tiles it does not own.
+            if acc.iter().all(|&v| v == T::zero()) {
+                return;
+            }
+            let g = ProjectedGrad {
+                mean2d: [acc[0], acc[1]],
+                conic: [acc[2], acc[3], acc[4]],
+                opacity: acc[5],
+                depth: acc[6],
+            };
+            let sigma = match splats.shapes {
+                Shapes::ScaleRot { log_scales, quats } => {
+                    gaussians::covariance::covariance_3d(log_scales[i], quats[i])
+                }
+                Shapes::Cov(covs) => covs[i],
+            };
+            let (mean, logit) = (splats.means[i], splats.opacity_logits[i]);
+            match (splats.smears, d_smear) {
+                (Some(smears), Some(d_smear)) => {
+                    let (dm, d_sigma, ds, dl) =
+                        project_cov_smeared_backward(&cam, mean, &sigma, &smears[i], logit, &g);
+                    *out = (dm, d_sigma, dl, g.mean2d);
+                    *d_smear = ds;
+                }
+                _ => {
+                    let (dm, d_sigma, dl) = project_cov_backward(&cam, mean, &sigma, logit, &g);
+                    *out = (dm, d_sigma, dl, g.mean2d);
+                }
+            }
         };
-        let sigma = match splats.shapes {
-            Shapes::ScaleRot { log_scales, quats } => {
-                gaussians::covariance::covariance_3d(log_scales[i], quats[i])
-            }
-            Shapes::Cov(covs) => covs[i],
-        };
-        let (dm, d_sigma, dl) =
-            project_cov_backward(&cam, splats.means[i], &sigma, splats.opacity_logits[i], &g);
-        *out = (dm, d_sigma, dl, g.mean2d);
+    // Each Gaussian's smear gradient slot, or `None` for every Gaussian without smears.
+    let smear_slots = if d_smears.is_empty() {
+        Either::Right((0..st.n).into_par_iter().map(|_| None))
+    } else {
+        Either::Left(d_smears.par_iter_mut().map(Some))
     };
     if c > 0 {
         per_gaussian
             .par_iter_mut()
             .zip(d_channels.par_chunks_mut(c))
+            .zip(smear_slots)
             .enumerate()
-            .for_each(|(i, (out, d_ch))| reduce(i, out, d_ch));
+            .for_each(|(i, ((out, d_ch), d_smear))| reduce(i, out, d_ch, d_smear));
     } else {
         per_gaussian
             .par_iter_mut()
+            .zip(smear_slots)
             .enumerate()
-            .for_each(|(i, out)| reduce(i, out, &mut []));
+            .for_each(|(i, (out, d_smear))| reduce(i, out, &mut [], d_smear));
     }
     // dL/d background_c = Σ_pixels dL/dimage_c · T_final, rows in order.
     let mut d_bg = vec![T::zero(); c];
@@ -340,6 +363,7 @@ pub(super) fn backward_inputs<'a, T: Real>(
         log_scales: Vec::new(),
         quats: Vec::new(),
         covariances: Vec::new(),
+        smears: d_smears,
         opacity_logits: Vec::with_capacity(st.n),
         channels: d_channels,
         means_2d: Vec::with_capacity(st.n),

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use gaussians::covariance::Mat3;
 
 use super::forward::ForwardState;
-use crate::project::{project, project_cov, CameraParams, Projected};
+use crate::project::{project, project_cov, project_cov_smeared, CameraParams, Projected};
 use crate::{lit, RasterError, Real};
 
 /// Gaussians to splat, as structure-of-arrays slices of equal length N.
@@ -63,6 +63,12 @@ pub struct CovSplats<'a, T> {
     pub channels: &'a [T],
     /// Number of channels C (may be 0).
     pub num_channels: usize,
+    /// Per-Gaussian motion within the render's time slice, or `None`: the world covariance of
+    /// each Gaussian's positions over the slice (m², symmetric like `covariances`; u uᵀ/12 for a
+    /// displacement u at constant speed). The render is then the slice's time average, each
+    /// Gaussian blurred along its motion with its screen-space mass kept
+    /// ([`crate::project::project_cov_smeared`]); a zero smear renders as without one.
+    pub smears: Option<&'a [[[T; 3]; 3]]>,
 }
 
 impl<T> CovSplats<'_, T> {
@@ -105,6 +111,7 @@ pub(super) struct Inputs<'a, T> {
     pub(super) opacity_logits: &'a [T],
     pub(super) channels: &'a [T],
     pub(super) num_channels: usize,
+    pub(super) smears: Option<&'a [Mat3<T>]>,
 }
 
 impl<'a, T: Real> Inputs<'a, T> {
@@ -122,7 +129,16 @@ impl<'a, T: Real> Inputs<'a, T> {
                 quats[i],
                 self.opacity_logits[i],
             ),
-            Shapes::Cov(covs) => project_cov(cam, self.means[i], &covs[i], self.opacity_logits[i]),
+            Shapes::Cov(covs) => match self.smears {
+                None => project_cov(cam, self.means[i], &covs[i], self.opacity_logits[i]),
+                Some(smears) => project_cov_smeared(
+                    cam,
+                    self.means[i],
+                    &covs[i],
+                    &smears[i],
+                    self.opacity_logits[i],
+                ),
+            },
         }
     }
 }
@@ -138,6 +154,7 @@ impl<'a, T> From<&Splats<'a, T>> for Inputs<'a, T> {
             opacity_logits: s.opacity_logits,
             channels: s.channels,
             num_channels: s.num_channels,
+            smears: None,
         }
     }
 }
@@ -150,6 +167,7 @@ impl<'a, T> From<&CovSplats<'a, T>> for Inputs<'a, T> {
             opacity_logits: s.opacity_logits,
             channels: s.channels,
             num_channels: s.num_channels,
+            smears: s.smears,
         }
     }
 }
@@ -231,6 +249,8 @@ pub struct Gradients<T> {
     /// cov2d = J W Σ Wᵀ Jᵀ (not symmetrised: chain entry by entry). [`super::render_cov_backward`]
     /// only; empty from [`super::render_backward`].
     pub covariances: Vec<Mat3<T>>,
+    /// dL/d smears, N × 3 × 3, entries independent like `covariances`; empty without smears.
+    pub smears: Vec<Mat3<T>>,
     /// dL/d opacity logits.
     pub opacity_logits: Vec<T>,
     /// dL/d channels, N × C.
@@ -263,6 +283,9 @@ pub(super) fn validate<T: Real>(splats: &Inputs<'_, T>) -> Result<(), RasterErro
         Shapes::Cov(covs) => check_len("covariances", covs.len())?,
     }
     check_len("opacity_logits", splats.opacity_logits.len())?;
+    if let Some(smears) = splats.smears {
+        check_len("smears", smears.len())?;
+    }
     let expected = n * splats.num_channels;
     if splats.channels.len() != expected {
         return Err(RasterError::LengthMismatch {
@@ -308,6 +331,12 @@ fn check_gaussian<T: Real>(splats: &Inputs<'_, T>, i: usize) -> Result<(), Raste
             if !covs[i].iter().all(|row| finite(row)) {
                 return bad("covariances");
             }
+            if !splats
+                .smears
+                .is_none_or(|m| m[i].iter().all(|row| finite(row)))
+            {
+                return bad("smears");
+            }
         }
     }
     if !splats.opacity_logits[i].is_finite() {
@@ -324,21 +353,34 @@ fn check_gaussian<T: Real>(splats: &Inputs<'_, T>, i: usize) -> Result<(), Raste
             }
         }
         Shapes::Cov(covs) => {
-            let m = &covs[i];
-            let scale = m[0][0].abs().max(m[1][1].abs()).max(m[2][2].abs());
-            let tol = scale * lit(COVARIANCE_SYMMETRY_TOLERANCE);
-            for (r, col) in [(0, 1), (0, 2), (1, 2)] {
-                let diff = (m[r][col] - m[col][r]).abs();
-                if !(diff <= tol) {
-                    return Err(RasterError::NonSymmetricCovariance {
-                        index: i,
-                        row: r,
-                        col,
-                        asymmetry: diff.to_f64().unwrap_or(f64::NAN),
-                        scale: scale.to_f64().unwrap_or(f64::NAN),
-                    });
-                }
+            check_symmetric(&covs[i], i, "covariances")?;
+            if let Some(smears) = splats.smears {
+                check_symmetric(&smears[i], i, "smears")?;
             }
+        }
+    }
+    Ok(())
+}
+
+/// Checks that Gaussian `index`'s matrix `m` of `field` is symmetric up to rounding.
+fn check_symmetric<T: Real>(
+    m: &Mat3<T>,
+    index: usize,
+    field: &'static str,
+) -> Result<(), RasterError> {
+    let scale = m[0][0].abs().max(m[1][1].abs()).max(m[2][2].abs());
+    let tol = scale * lit(COVARIANCE_SYMMETRY_TOLERANCE);
+    for (r, col) in [(0, 1), (0, 2), (1, 2)] {
+        let diff = (m[r][col] - m[col][r]).abs();
+        if !(diff <= tol) {
+            return Err(RasterError::NonSymmetricCovariance {
+                index,
+                field,
+                row: r,
+                col,
+                asymmetry: diff.to_f64().unwrap_or(f64::NAN),
+                scale: scale.to_f64().unwrap_or(f64::NAN),
+            });
         }
     }
     Ok(())

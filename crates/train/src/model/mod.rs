@@ -486,6 +486,7 @@ fn splats<'a>(
         opacity_logits: &model.set.opacity_logits,
         channels,
         num_channels: model.render_channels(),
+        smears: None,
     }
 }
 

@@ -9,6 +9,7 @@ pub fn cov_splats<'a>(s: &'a Scene, covs: &'a [Mat3<f64>]) -> CovSplats<'a, f64>
         opacity_logits: &s.logits,
         channels: &s.channels,
         num_channels: s.c,
+        smears: s.smears.as_deref(),
     }
 }
 
@@ -275,6 +276,7 @@ impl F32Renders {
                 opacity_logits: &self.opacity_logits,
                 channels: &self.channels,
                 num_channels: 3,
+                smears: None,
             })
             .collect()
     }

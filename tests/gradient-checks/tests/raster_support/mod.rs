@@ -43,6 +43,9 @@ pub struct Scene {
     /// Precomputed covariances overriding (log_scales, quats) in the oracle; rendered with
     /// `render_cov` by [`cov_loss`].
     pub covs: Option<Vec<Mat3<f64>>>,
+    /// Smears (world covariances of each Gaussian's motion over the render's time slice), with
+    /// `covs` only: the oracle blurs each Gaussian by them; rendered with `render_cov`'s `smears`.
+    pub smears: Option<Vec<Mat3<f64>>>,
 }
 
 impl Scene {
@@ -154,6 +157,7 @@ pub fn random_scene(seed: u64, kinds: &[usize], c: usize) -> Scene {
         c,
         background: (0..c).map(|_| rng.gen_range(0.0..1.0)).collect(),
         covs: None,
+        smears: None,
     };
     let mut prev_uvz = (w * 0.5, h * 0.5, 2.0);
     // Kind 8 = an anchor: an ordinary Gaussian in the middle of the image, so every scene has
@@ -263,6 +267,18 @@ pub struct OracleGauss {
 /// INRIA `preprocess` written out plainly for one Gaussian; `cov` overrides Σ from the log-scales
 /// and quaternion in `p`.
 pub fn oracle_project(cam: &Camera, p: &[f64], cov: Option<&Mat3<f64>>) -> OracleGauss {
+    oracle_project_smeared(cam, p, cov, None)
+}
+
+/// [`oracle_project`] of a Gaussian blurred by its motion: `smear` (a world covariance) is added to
+/// Σ before the projection, and the opacity scaled by √(det cov2d / det cov2d′), the dilated screen
+/// covariances without and with it, so that the splat's screen mass is kept.
+pub fn oracle_project_smeared(
+    cam: &Camera,
+    p: &[f64],
+    cov: Option<&Mat3<f64>>,
+    smear: Option<&Mat3<f64>>,
+) -> OracleGauss {
     let m = &cam.world_to_camera;
     let pc: [f64; 3] =
         [0, 1, 2].map(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3]);
@@ -319,6 +335,24 @@ pub fn oracle_project(cam: &Camera, p: &[f64], cov: Option<&Mat3<f64>>) -> Oracl
         }
     }
     let (a, b, c) = (cov[0][0] + 0.3, cov[0][1], cov[1][1] + 0.3);
+    let mut opacity = 1.0 / (1.0 + (-p[10]).exp());
+    let (a, b, c) = match smear {
+        None => (a, b, c),
+        Some(smear) => {
+            let project = |x: usize, y: usize| -> f64 {
+                let mut acc = 0.0;
+                for k in 0..3 {
+                    for l in 0..3 {
+                        acc += t[x][k] * (sigma[k][l] + smear[k][l]) * t[y][l];
+                    }
+                }
+                acc
+            };
+            let (a2, b2, c2) = (project(0, 0) + 0.3, project(0, 1), project(1, 1) + 0.3);
+            opacity *= ((a * c - b * b) / (a2 * c2 - b2 * b2)).sqrt();
+            (a2, b2, c2)
+        }
+    };
     let det = a * c - b * b;
     if det == 0.0 {
         return invisible;
@@ -344,7 +378,7 @@ pub fn oracle_project(cam: &Camera, p: &[f64], cov: Option<&Mat3<f64>>) -> Oracl
         visible: true,
         uv: [u, v],
         conic: [c / det, -b / det, a / det],
-        opacity: 1.0 / (1.0 + (-p[10]).exp()),
+        opacity,
         depth: z,
         rect,
         jac_clamp: [txz != xz, tyz != yz],
@@ -367,7 +401,10 @@ pub fn oracle(s: &Scene, cot: Option<(&[f64], &[f64], &[f64])>) -> OracleOut {
     let (w, h) = (s.cam.width as usize, s.cam.height as usize);
     let c = s.c;
     let gs: Vec<OracleGauss> = (0..s.n())
-        .map(|i| oracle_project(&s.cam, &s.params(i), s.covs.as_ref().map(|c| &c[i])))
+        .map(|i| {
+            let smear = s.smears.as_ref().map(|m| &m[i]);
+            oracle_project_smeared(&s.cam, &s.params(i), s.covs.as_ref().map(|c| &c[i]), smear)
+        })
         .collect();
     let mut out = OracleOut {
         image: vec![0.0; c * w * h],
