@@ -284,6 +284,7 @@ fn audit(
             share_static_tiles: false,
             joint_backward_only: false,
             static_layer: false,
+            smear: config.exposure_smear,
         };
         let passes =
             model.forward_passes(&cameras, &poses, poses.len() / 2, model.latent(slot), plan)?;

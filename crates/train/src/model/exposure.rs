@@ -4,6 +4,7 @@
 //! collected and summed in pass order, so the bits do not depend on the threads.
 
 use super::*;
+use crate::pose::smear::{exposure_smears, exposure_smears_backward};
 
 /// One re-posed pass's backward: the reference's internal cotangents and ∂L/∂bones.
 type ReposedBackward = (ReposeCotangents<f32>, Vec<Affine<f32>>);
@@ -61,6 +62,7 @@ impl Model {
                         latent,
                         cache: PassCache::Reposed(cache),
                         channels: interleave_channels(&frame),
+                        smears: None,
                         posed: frame,
                         pose_seconds: 0.0,
                     })
@@ -82,6 +84,15 @@ impl Model {
         // Tiles are shared only between renders from one camera (a moving camera moves every
         // Gaussian on the image).
         let one_camera = cameras.iter().all(|c| c.raster == camera.raster);
+        // Smears follow the Gaussians' world motion: with one camera that is their motion on the
+        // image.
+        if plan.smear && one_camera {
+            let means: Vec<_> = posed.iter().map(|p| &p.posed.means[..]).collect();
+            let smears = exposure_smears(&means);
+            for (pass, smears) in posed.iter_mut().zip(smears) {
+                pass.smears = Some(smears);
+            }
+        }
         if plan.share_static_tiles && posed.len() > 1 && one_camera {
             let outputs = if plan.joint_backward_only && plan.static_layer {
                 SharedOutputs::Layered
@@ -121,7 +132,7 @@ impl Model {
         }
         let splats: Vec<_> = posed
             .iter()
-            .map(|p| splats(self, &p.posed, &p.channels))
+            .map(|p| splats(self, &p.posed, &p.channels, p.smears.as_deref()))
             .collect();
         let settings = self.render_settings();
         let renders = render_cov_shared(camera, &splats, &moving, owner, &settings, outputs)?;
@@ -208,5 +219,25 @@ impl Model {
         )?;
         pass_bones[reference] = grads.bones.clone();
         Ok((grads, pass_bones))
+    }
+
+    /// Adds to the passes' mean gradients `grads` (one per pass of `passes`, same order) the share
+    /// of their smears' gradients (`crate::pose::smear`): each smear is read from the neighbouring
+    /// passes' means. Nothing to do for passes rendered without smears.
+    pub fn add_smear_gradients(&self, passes: &[FramePass<'_>], grads: &mut [PosedGradients]) {
+        if passes.len() != grads.len()
+            || passes.iter().any(|p| p.smears.is_none())
+            || grads.iter().any(|g| g.smears.len() != g.means.len())
+        {
+            return;
+        }
+        let means: Vec<_> = passes.iter().map(|p| &p.posed.means[..]).collect();
+        let d_smears: Vec<Vec<Mat3<f32>>> = grads
+            .iter_mut()
+            .map(|g| std::mem::take(&mut g.smears))
+            .collect();
+        let d_smears: Vec<_> = d_smears.iter().map(|d| &d[..]).collect();
+        let mut d_means: Vec<_> = grads.iter_mut().map(|g| &mut g.means[..]).collect();
+        exposure_smears_backward(&means, &d_smears, &mut d_means);
     }
 }

@@ -29,6 +29,7 @@ mod networks;
 mod pass;
 pub use camera::{corrected_camera, PassCamera};
 pub use config::ModelConfig;
+use gaussians::covariance::Mat3;
 use gaussians::GaussianSet;
 pub use networks::{CAMERA_CORRECTIONS_TENSOR, CAMERA_GAUGE_TENSOR, NETWORK_GROUPS};
 use rasterize_cpu::{
@@ -112,6 +113,8 @@ pub struct FramePass<'a> {
     latent: &'a [f32],
     cache: PassCache,
     channels: Vec<f32>,
+    /// Each Gaussian's smear over the pass's time slice (`crate::pose::smear`), or `None`.
+    smears: Option<Vec<Mat3<f32>>>,
     /// The posed per-Gaussian attributes (the rasterizer's inputs).
     pub posed: PosedFrame<f32>,
     /// The rasterizer's output: (RGB, human probability) planes and per-Gaussian screen data.
@@ -134,6 +137,10 @@ pub struct PassPlan {
     /// With `joint_backward_only`: the static Gaussians behind every moving one are blended once,
     /// as a layer behind each pass (`rasterize_cpu::SharedOutputs::Layered`).
     pub static_layer: bool,
+    /// With several passes from one camera: each pass renders its time slice's average, every
+    /// Gaussian smeared by its motion (`crate::pose::smear`; differentiate the passes' smears
+    /// with [`Model::add_smear_gradients`]).
+    pub smear: bool,
 }
 
 /// One frame's passes, and the tiles they share when rendered together.
@@ -151,6 +158,7 @@ struct PosedPass<'a> {
     latent: &'a [f32],
     cache: PassCache,
     channels: Vec<f32>,
+    smears: Option<Vec<Mat3<f32>>>,
     posed: PosedFrame<f32>,
     pose_seconds: f64,
 }
@@ -171,6 +179,7 @@ impl<'a> PosedPass<'a> {
             latent: self.latent,
             cache: self.cache,
             channels: self.channels,
+            smears: self.smears,
             posed: self.posed,
             out,
             timing: PassTiming {
@@ -211,6 +220,9 @@ pub struct PosedGradients {
     pub opacity_logits: Vec<f32>,
     /// dL/d screen-space means (pixels), for density control.
     pub means_2d: Vec<[f32; 2]>,
+    /// dL/d the pass's smears (entries independent; empty without smears), which
+    /// [`Model::add_smear_gradients`] sends to the passes' means.
+    pub smears: Vec<Mat3<f32>>,
 }
 
 impl Model {
@@ -407,6 +419,7 @@ impl Model {
             latent,
             cache: PassCache::Frame(Box::new(cache)),
             channels: interleave_channels(&posed),
+            smears: None,
             posed,
             pose_seconds: t0.elapsed().as_secs_f64(),
         })
@@ -421,7 +434,7 @@ impl Model {
         let t0 = Instant::now();
         let out = render_cov(
             camera,
-            &splats(self, &posed.posed, &posed.channels),
+            &splats(self, &posed.posed, &posed.channels, posed.smears.as_deref()),
             &self.render_settings(),
         )?;
         Ok(posed.rendered(self, camera, out, t0.elapsed().as_secs_f64()))
@@ -473,12 +486,13 @@ fn view_centre(camera: &Camera) -> [f32; 3] {
     camera.center_world().map(|v| v as f32)
 }
 
-/// The rasterizer's view of a posed frame: its means and covariances with the set's opacities and
-/// the interleaved render channels.
+/// The rasterizer's view of a posed frame: its means and covariances with the set's opacities,
+/// the interleaved render channels and the pass's smears, if any.
 fn splats<'a>(
     model: &'a Model,
     posed: &'a PosedFrame<f32>,
     channels: &'a [f32],
+    smears: Option<&'a [Mat3<f32>]>,
 ) -> CovSplats<'a, f32> {
     CovSplats {
         means: &posed.means,
@@ -486,7 +500,7 @@ fn splats<'a>(
         opacity_logits: &model.set.opacity_logits,
         channels,
         num_channels: model.render_channels(),
-        smears: None,
+        smears,
     }
 }
 

@@ -19,6 +19,11 @@ impl FramePass<'_> {
         &self.out.image[3 * hw..4 * hw]
     }
 
+    /// Each Gaussian's smear over the pass's time slice (m²; `crate::pose::smear`), or `None`.
+    pub fn smears(&self) -> Option<&[Mat3<f32>]> {
+        self.smears.as_deref()
+    }
+
     /// The number of rendered channels ([`Model::render_channels`]).
     pub fn render_channels(&self) -> usize {
         self.model.render_channels()
@@ -36,7 +41,12 @@ impl FramePass<'_> {
     /// This pass's posed Gaussians rasterized from `camera` instead of its own (colours as posed,
     /// i.e. viewed from this pass's view centre; [`PassCamera`]): the render output, (C, H, W).
     pub fn render_from(&self, camera: &Camera) -> Result<RenderOutput<f32>, TrainError> {
-        let splats = splats(self.model, &self.posed, &self.channels);
+        let splats = splats(
+            self.model,
+            &self.posed,
+            &self.channels,
+            self.smears.as_deref(),
+        );
         Ok(render_cov(camera, &splats, &self.model.render_settings())?)
     }
 
@@ -49,7 +59,12 @@ impl FramePass<'_> {
         out: &RenderOutput<f32>,
         d_image: &[f32],
     ) -> Result<[f64; 6], TrainError> {
-        let splats = splats(self.model, &self.posed, &self.channels);
+        let splats = splats(
+            self.model,
+            &self.posed,
+            &self.channels,
+            self.smears.as_deref(),
+        );
         let cotangents = Cotangents {
             image: d_image,
             alpha: None,
@@ -62,13 +77,20 @@ impl FramePass<'_> {
             out,
             &cotangents,
         )?;
-        Ok(camera_pose_gradient(
+        let mut twist = camera_pose_gradient(
             camera,
             &self.posed.means,
             &self.posed.covariances,
             &g.means,
             &g.covariances,
-        )?)
+        )?;
+        // A smear turns with the world like a covariance: its share, with no mean gradient.
+        if let Some(smears) = &self.smears {
+            let still = vec![[0.0f32; 3]; smears.len()];
+            let share = camera_pose_gradient(camera, &self.posed.means, smears, &still, &g.smears)?;
+            twist.iter_mut().zip(share).for_each(|(t, s)| *t += s);
+        }
+        Ok(twist)
     }
 
     /// Rasterizer backward of the image cotangent `d_image` ((C, H, W), C =
@@ -91,7 +113,12 @@ impl FramePass<'_> {
         d_image: &[f32],
         d_geometric: Option<&[f32]>,
     ) -> Result<Gradients<f32>, TrainError> {
-        let splats = splats(self.model, &self.posed, &self.channels);
+        let splats = splats(
+            self.model,
+            &self.posed,
+            &self.channels,
+            self.smears.as_deref(),
+        );
         let settings = self.model.render_settings();
         let backward = |image: &[f32]| {
             render_cov_backward(
@@ -200,7 +227,7 @@ impl Model {
         };
         let splats: Vec<_> = passes
             .iter()
-            .map(|p| splats(self, &p.posed, &p.channels))
+            .map(|p| splats(self, &p.posed, &p.channels, p.smears.as_deref()))
             .collect();
         let outputs: Vec<_> = passes.iter().map(|p| &p.out).collect();
         let cotangents: Vec<_> = d_images
@@ -245,6 +272,7 @@ impl PosedGradients {
             person_probability,
             opacity_logits: g.opacity_logits,
             means_2d: g.means_2d,
+            smears: g.smears,
         }
     }
 

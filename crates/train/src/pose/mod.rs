@@ -19,3 +19,4 @@ pub mod correction;
 pub mod exposure;
 pub mod posing;
 pub mod reposing;
+pub mod smear;

@@ -379,6 +379,19 @@ impl Trainer {
                 .collect(),
             _ => passes.iter().map(|_| None).collect(),
         };
+        // Smears read the neighbouring passes' means: every pass's rasterizer backward first, so
+        // that each pass's mean gradients are complete before its model backward.
+        if passes.iter().any(|p| p.smears().is_some()) {
+            let mut all = Vec::with_capacity(passes.len());
+            for (s, (pass, done)) in passes.iter().zip(shared).enumerate() {
+                all.push(match done {
+                    Some(g) => g,
+                    None => pass.render_backward(&d_images[s], d_geometric.filter(|_| s == mid))?,
+                });
+            }
+            model.add_smear_gradients(passes, &mut all);
+            shared = all.into_iter().map(Some).collect();
+        }
         let mut posed = match shared[mid].take() {
             Some(posed) => posed,
             None => first.render_backward(&d_images[mid], d_geometric)?,
@@ -543,6 +556,7 @@ fn frame_passes<'a>(
         share_static_tiles: config.share_static_tiles && !config.camera_correction,
         joint_backward_only: joint_backward_only(config),
         static_layer: config.static_layer,
+        smear: config.exposure_smear && !config.camera_correction,
     };
     let ExposurePasses { passes, sharing } =
         model.forward_passes(&cameras, &poses, mid, model.latent(slot), plan)?;
