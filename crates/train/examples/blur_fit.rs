@@ -10,10 +10,15 @@
 //! sub-frame count the forward model is the generator's, up to its supersampling. With `POSES` =
 //! `given` the sub-exposure poses are instead interpolated between the frames' given poses (the
 //! model's `body_interpolation`): the operator a run with `--exposure-motion given` trains through,
-//! without its modulation.
+//! without its modulation. `SUBFRAMES` with an `s` (`9s`) smears each render over its time slice
+//! (`train::pose::smear`, the renders of `--exposure-smear on`). With `--against-own N` the
+//! prediction is scored against the model's own mean of N renders at the same poses instead of
+//! the observed frames: the time quadrature's own error, whatever the model (N = 64 stands for a
+//! continuous exposure).
 //!
 //! ```text
-//! cargo run --release -p train --example blur_fit -- DATA SUBFRAMES truth|given MODEL_DIR...
+//! cargo run --release -p train --example blur_fit -- DATA SUBFRAMES[s] truth|given \
+//!     [--against-own N] MODEL_DIR...
 //! ```
 //!
 //! `DATA` a one-person synthetic benchmark (its generator config in `scene.json`, sharp references
@@ -23,6 +28,7 @@ use std::path::PathBuf;
 
 use scene::Split;
 use train::eval::{box_psnr, mask_bbox, psnr};
+use train::model::{PassCamera, PassPlan};
 use train::pose::exposure::{subframe_times, PoseTrack};
 
 /// Per-frame PSNR (dB) summed, full frame and box, and the number of frames.
@@ -56,14 +62,21 @@ impl Scores {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [dir, subframes, poses, models @ ..] = &args[..] else {
-        return Err("usage: blur_fit DATA SUBFRAMES truth|given MODEL_DIR...".into());
+        return Err(
+            "usage: blur_fit DATA SUBFRAMES[s] truth|given [--against-own N] MODEL_DIR...".into(),
+        );
     };
     let given = match poses.as_str() {
         "truth" => false,
         "given" => true,
         other => return Err(format!("POSES: `{other}`, expected truth or given").into()),
     };
-    let subframes: usize = subframes.parse()?;
+    let (against_own, models) = match models {
+        [flag, n, rest @ ..] if flag == "--against-own" => (Some(n.parse::<usize>()?), rest),
+        _ => (None, models),
+    };
+    let smear = subframes.ends_with('s');
+    let subframes: usize = subframes.trim_end_matches('s').parse()?;
     let data = train::data::load_dataset(&PathBuf::from(dir))?;
     let motion = synth::generate::recorded_motion(
         &data.dir.join("scene.json"),
@@ -95,25 +108,64 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             };
             let latent = model.latent_for(f.index);
             let mut mean = vec![0.0f32; 3 * w * h];
-            for t in subframe_times(f.time_s, f.exposure_s, subframes) {
-                let pose = cast.prepare(&pose_at(t), &f.others)?;
-                let r = model.render_frame(f.index, &f.camera, &pose, latent)?;
-                for (m, &v) in mean.iter_mut().zip(&r.rgb) {
+            let poses = subframe_times(f.time_s, f.exposure_s, subframes)
+                .into_iter()
+                .map(|t| cast.prepare(&pose_at(t), &f.others))
+                .collect::<Result<Vec<_>, _>>()?;
+            let mut add = |rgb: &[f32]| {
+                for (m, &v) in mean.iter_mut().zip(rgb) {
                     *m += v / subframes as f32;
                 }
+            };
+            if smear {
+                let plan = PassPlan {
+                    reposed: false,
+                    share_static_tiles: false,
+                    joint_backward_only: false,
+                    static_layer: false,
+                    smear: true,
+                };
+                let cameras = vec![PassCamera::of(&f.camera); subframes];
+                let pose_refs: Vec<_> = poses.iter().collect();
+                let passes =
+                    model.forward_passes(&cameras, &pose_refs, subframes / 2, latent, plan)?;
+                passes.passes.iter().for_each(|p| add(p.rgb()));
+            } else {
+                for pose in &poses {
+                    add(&model.render_frame(f.index, &f.camera, pose, latent)?.rgb);
+                }
             }
-            blurred.add(&mean, &f.image, w, h, bbox);
+            match against_own {
+                Some(n) => {
+                    let mut own = vec![0.0f32; 3 * w * h];
+                    for t in subframe_times(f.time_s, f.exposure_s, n) {
+                        let pose = cast.prepare(&pose_at(t), &f.others)?;
+                        let r = model.render_frame(f.index, &f.camera, &pose, latent)?;
+                        for (m, &v) in own.iter_mut().zip(&r.rgb) {
+                            *m += v / n as f32;
+                        }
+                    }
+                    blurred.add(&mean, &own, w, h, bbox);
+                }
+                None => blurred.add(&mean, &f.image, w, h, bbox),
+            }
             let pose = cast.prepare(&truth_at(f.time_s), &f.others)?;
             let mid = model.render_frame(f.index, &f.camera, &pose, latent)?;
             sharp.add(&mid.rgb, reference, w, h, bbox);
         }
         let ((bf, bb), (sf, sb)) = (blurred.mean(), sharp.mean());
         println!(
-            "{model_dir}: {} training frames; blurred frames from {subframes} renders at {poses} \
+            "{model_dir}: {} training frames; blurred frames from {subframes} renders{} at {poses} \
              {bf:.2} / {bb:.2} dB; mid render against the sharp frames {sf:.2} / {sb:.2} dB \
              (full / box)",
-            blurred.frames
+            blurred.frames,
+            if smear { " (smeared)" } else { "" }
         );
+        if let Some(n) = against_own {
+            println!(
+                "  (scored against the model's own mean of {n} renders, not the observed frames)"
+            );
+        }
     }
     Ok(())
 }
