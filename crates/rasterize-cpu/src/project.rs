@@ -146,16 +146,17 @@ fn ewa<T: Real>(cam: &CameraParams<T>, mean: [T; 3], sigma: Mat3<T>) -> Ewa<T> {
     }
 }
 
+/// M JR0 and M JR1, the products [`quadratic_2d`] and its backward share.
+#[inline(always)]
+fn times_rows<T: Real>(m: &Mat3<T>, jr: &[[T; 3]; 2]) -> [[T; 3]; 2] {
+    jr.map(|row| [0, 1, 2].map(|k| m[k][0] * row[0] + m[k][1] * row[1] + m[k][2] * row[2]))
+}
+
 /// JR M JRᵀ of a 3×3 matrix `m` as (xx, xy, yy) — the screen-space covariance of the world
 /// covariance `m` (without the dilation); xy is row 0 of JR against row 1.
 #[inline(always)]
 fn quadratic_2d<T: Real>(jr: &[[T; 3]; 2], m: &Mat3<T>) -> [T; 3] {
-    let mut s0 = [T::zero(); 3];
-    let mut s1 = [T::zero(); 3];
-    for k in 0..3 {
-        s0[k] = m[k][0] * jr[0][0] + m[k][1] * jr[0][1] + m[k][2] * jr[0][2];
-        s1[k] = m[k][0] * jr[1][0] + m[k][1] * jr[1][1] + m[k][2] * jr[1][2];
-    }
+    let [s0, s1] = times_rows(m, jr);
     [
         jr[0][0] * s0[0] + jr[0][1] * s0[1] + jr[0][2] * s0[2],
         jr[0][0] * s1[0] + jr[0][1] * s1[1] + jr[0][2] * s1[2],
@@ -445,12 +446,7 @@ fn quadratic_2d_backward_jr<T: Real>(
     [da, db, dc]: [T; 3],
 ) -> [[T; 3]; 2] {
     let two: T = lit(2.0);
-    let mut mj0 = [T::zero(); 3];
-    let mut mj1 = [T::zero(); 3];
-    for k in 0..3 {
-        mj0[k] = m[k][0] * jr[0][0] + m[k][1] * jr[0][1] + m[k][2] * jr[0][2];
-        mj1[k] = m[k][0] * jr[1][0] + m[k][1] * jr[1][1] + m[k][2] * jr[1][2];
-    }
+    let [mj0, mj1] = times_rows(m, jr);
     let mut djr = [[T::zero(); 3]; 2];
     for k in 0..3 {
         djr[0][k] = two * da * mj0[k] + db * mj1[k];

@@ -254,12 +254,9 @@ training_options! {
     /// (AMD Zen 5, 2 cores; `docs/BENCHMARKS.md`). `full` takes 9 too since 2026-12-05 (with 5 and
     /// twice the network width it scored 37.18 / 32.54 dB in 92 min; 9 gave 38.25 / 33.62).
     subframes: usize = 9,
-    /// With `blur_model = exposure`, a camera that does not move within the exposure and no
-    /// camera correction: each sub-exposure render stands for its whole time slice, every Gaussian
-    /// smeared by its motion over the slice (u uᵀ/12 added to its covariance, u from the
-    /// neighbouring renders' means, its screen mass kept; `train::pose::smear`), so that S renders
-    /// draw one continuous streak instead of S copies a render's spacing apart. `off`: S
-    /// point-in-time renders (the default and the only rule before 2026-12-08).
+    /// With `blur_model = exposure`, one camera per exposure and no camera correction: each
+    /// sub-exposure render stands for its time slice, every Gaussian smeared by its motion over
+    /// it (`train::pose::smear`), S streaks instead of S copies. `off`: point-in-time renders.
     #[arg(value_parser = parse_on_off, value_name = "on|off")]
     exposure_smear: bool = false,
     /// Network evaluations per exposure with `blur_model = exposure`: `once` (the non-rigid offsets,

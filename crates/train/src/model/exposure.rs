@@ -223,13 +223,29 @@ impl Model {
 
     /// Adds to the passes' mean gradients `grads` (one per pass of `passes`, same order) the share
     /// of their smears' gradients (`crate::pose::smear`): each smear is read from the neighbouring
-    /// passes' means. Nothing to do for passes rendered without smears.
-    pub fn add_smear_gradients(&self, passes: &[FramePass<'_>], grads: &mut [PosedGradients]) {
-        if passes.len() != grads.len()
-            || passes.iter().any(|p| p.smears.is_none())
-            || grads.iter().any(|g| g.smears.len() != g.means.len())
-        {
-            return;
+    /// passes' means. Nothing to do for passes rendered without smears; gradients without a smear
+    /// gradient per Gaussian are refused.
+    pub fn add_smear_gradients(
+        &self,
+        passes: &[FramePass<'_>],
+        grads: &mut [PosedGradients],
+    ) -> Result<(), TrainError> {
+        if passes.iter().any(|p| p.smears.is_none()) {
+            return Ok(());
+        }
+        if passes.len() != grads.len() {
+            return Err(TrainError::Shape {
+                what: "smear gradients of an exposure's passes".into(),
+                expected: passes.len(),
+                found: grads.len(),
+            });
+        }
+        if let Some(g) = grads.iter().find(|g| g.smears.len() != g.means.len()) {
+            return Err(TrainError::Shape {
+                what: "smear gradients of a pass's Gaussians".into(),
+                expected: g.means.len(),
+                found: g.smears.len(),
+            });
         }
         let means: Vec<_> = passes.iter().map(|p| &p.posed.means[..]).collect();
         let d_smears: Vec<Vec<Mat3<f32>>> = grads
@@ -239,5 +255,6 @@ impl Model {
         let d_smears: Vec<_> = d_smears.iter().map(|d| &d[..]).collect();
         let mut d_means: Vec<_> = grads.iter_mut().map(|g| &mut g.means[..]).collect();
         exposure_smears_backward(&means, &d_smears, &mut d_means);
+        Ok(())
     }
 }

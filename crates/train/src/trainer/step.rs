@@ -389,7 +389,7 @@ impl Trainer {
                     None => pass.render_backward(&d_images[s], d_geometric.filter(|_| s == mid))?,
                 });
             }
-            model.add_smear_gradients(passes, &mut all);
+            model.add_smear_gradients(passes, &mut all)?;
             shared = all.into_iter().map(Some).collect();
         }
         let mut posed = match shared[mid].take() {
